@@ -1,0 +1,16 @@
+//! The Vulkan backend: device, memory, pipelines and the embedded shaders.
+
+pub mod device;
+pub mod error;
+pub mod pipeline;
+pub mod resources;
+
+pub use device::{list_devices, DeviceInfo, Gpu, GpuOptions, ValidationLog};
+pub use error::{GpuError, GpuResult, VkCall};
+pub use pipeline::{Binding, GraphicsDesc, Pipeline};
+pub use resources::{aspect_of, Buffer, Image, ImageInfo, Sampler};
+
+/// SPIR-V of every shader in `glsl/`, compiled by `build.rs`.
+pub mod shaders {
+    include!(concat!(env!("OUT_DIR"), "/shaders.rs"));
+}

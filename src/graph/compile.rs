@@ -1,0 +1,545 @@
+//! Graph compilation: pass ordering and barrier derivation. Pure code, no GPU.
+//!
+//! Semantics of a frame graph here:
+//! - Passes that write a resource run in the order they were declared.
+//! - A pass that only reads a resource runs after every pass that writes it: readers see the
+//!   resource's final contents for the frame. (Ping-pong within a frame uses two resources.)
+//! - Among passes free to run, the one declared first runs first.
+//! - A transient resource read by a pass must be written by some pass of the graph.
+//! - Barriers follow from each resource's previous access in the schedule: read-after-write
+//!   and write-after-write get a memory dependency, write-after-read an execution dependency,
+//!   and every image layout change a transition. Reads that a previous barrier already made
+//!   the write visible to need none.
+
+use super::access::{Access, AccessInfo};
+use ash::vk;
+use std::collections::BTreeSet;
+
+/// Index of a resource in the graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ResourceId(pub usize);
+
+/// Image or buffer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResourceKind {
+    /// A 2D image (possibly layered).
+    Image,
+    /// A buffer.
+    Buffer,
+}
+
+/// What compilation needs to know of a resource.
+#[derive(Debug, Clone)]
+pub struct ResourceDecl {
+    /// Name (for messages and debug labels).
+    pub name: String,
+    /// Image or buffer.
+    pub kind: ResourceKind,
+    /// Imported resources live outside the graph and hold data before the frame starts;
+    /// transient ones are created by the graph and start each frame undefined.
+    pub imported: bool,
+    /// Layout an imported image is in when the frame starts.
+    pub initial_layout: vk::ImageLayout,
+    /// Access the resource must be ready for after the frame (e.g. host reads).
+    pub export: Option<Access>,
+}
+
+/// What compilation needs to know of a pass.
+#[derive(Debug, Clone)]
+pub struct PassDecl {
+    /// Name: debug label, timing scope and report key.
+    pub name: String,
+    /// Every resource the pass touches, once each, with how.
+    pub accesses: Vec<(ResourceId, Access)>,
+}
+
+/// One derived barrier.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Barrier {
+    /// The resource it guards.
+    pub resource: ResourceId,
+    /// Stages that must finish first.
+    pub src_stages: vk::PipelineStageFlags2,
+    /// Writes to make available.
+    pub src_access: vk::AccessFlags2,
+    /// Stages that wait.
+    pub dst_stages: vk::PipelineStageFlags2,
+    /// Accesses the data is made visible to.
+    pub dst_access: vk::AccessFlags2,
+    /// Layout before (images).
+    pub old_layout: vk::ImageLayout,
+    /// Layout after (images).
+    pub new_layout: vk::ImageLayout,
+}
+
+/// The result of compilation.
+#[derive(Debug, Clone)]
+pub struct Schedule {
+    /// Pass indices (declaration order numbers) in execution order.
+    pub order: Vec<usize>,
+    /// Barriers to issue before each scheduled pass, parallel to `order`.
+    pub barriers: Vec<Vec<Barrier>>,
+    /// Barriers after the last pass, for exported resources.
+    pub final_barriers: Vec<Barrier>,
+}
+
+/// Why a graph cannot be compiled.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum GraphError {
+    /// A pass lists the same resource twice.
+    #[error("pass '{pass}' declares resource '{resource}' more than once; use one combined access")]
+    DuplicateAccess {
+        /// The pass.
+        pass: String,
+        /// The resource.
+        resource: String,
+    },
+    /// An access type that does not apply to the resource's kind.
+    #[error("pass '{pass}' declares {access:?} on {kind:?} '{resource}', which does not apply")]
+    InvalidAccess {
+        /// The pass.
+        pass: String,
+        /// The resource.
+        resource: String,
+        /// The access.
+        access: Access,
+        /// The resource kind.
+        kind: ResourceKind,
+    },
+    /// A transient resource is read but nothing writes it.
+    #[error("pass '{pass}' reads transient resource '{resource}', which no pass writes")]
+    ReadWithoutWriter {
+        /// The pass.
+        pass: String,
+        /// The resource.
+        resource: String,
+    },
+    /// The passes' dependencies form a cycle.
+    #[error("passes depend on each other in a cycle: {0:?}")]
+    Cycle(Vec<String>),
+    /// Two passes share a name.
+    #[error("two passes are named '{0}'; pass names key the timing report and must be unique")]
+    DuplicatePassName(String),
+    /// A resource id outside the graph.
+    #[error("pass '{pass}' uses a resource id {id} that the graph does not have")]
+    UnknownResource {
+        /// The pass.
+        pass: String,
+        /// The bad id.
+        id: usize,
+    },
+}
+
+fn validate(resources: &[ResourceDecl], passes: &[PassDecl]) -> Result<(), GraphError> {
+    let mut names = BTreeSet::new();
+    for p in passes {
+        if !names.insert(p.name.as_str()) {
+            return Err(GraphError::DuplicatePassName(p.name.clone()));
+        }
+        let mut seen = BTreeSet::new();
+        for (r, a) in &p.accesses {
+            let Some(res) = resources.get(r.0) else {
+                return Err(GraphError::UnknownResource {
+                    pass: p.name.clone(),
+                    id: r.0,
+                });
+            };
+            if !seen.insert(*r) {
+                return Err(GraphError::DuplicateAccess {
+                    pass: p.name.clone(),
+                    resource: res.name.clone(),
+                });
+            }
+            let ok = match res.kind {
+                ResourceKind::Image => a.valid_for_image(),
+                ResourceKind::Buffer => a.valid_for_buffer(),
+            };
+            if !ok {
+                return Err(GraphError::InvalidAccess {
+                    pass: p.name.clone(),
+                    resource: res.name.clone(),
+                    access: *a,
+                    kind: res.kind,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Orders the passes (see the module documentation for the rules).
+pub fn order_passes(resources: &[ResourceDecl], passes: &[PassDecl]) -> Result<Vec<usize>, GraphError> {
+    validate(resources, passes)?;
+    let n = passes.len();
+    let mut edges: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); n];
+    for (rid, res) in resources.iter().enumerate() {
+        let mut writers = Vec::new();
+        let mut readers = Vec::new();
+        for (pi, p) in passes.iter().enumerate() {
+            for (r, a) in &p.accesses {
+                if r.0 == rid {
+                    if a.info().writes {
+                        writers.push(pi);
+                    } else {
+                        readers.push(pi);
+                    }
+                }
+            }
+        }
+        if writers.is_empty() && !res.imported {
+            if let Some(&reader) = readers.first() {
+                return Err(GraphError::ReadWithoutWriter {
+                    pass: passes[reader].name.clone(),
+                    resource: res.name.clone(),
+                });
+            }
+        }
+        for w in writers.windows(2) {
+            edges[w[0]].insert(w[1]);
+        }
+        for &w in &writers {
+            for &r in &readers {
+                edges[w].insert(r);
+            }
+        }
+    }
+    let mut indegree = vec![0usize; n];
+    for e in &edges {
+        for &t in e {
+            indegree[t] += 1;
+        }
+    }
+    let mut ready: BTreeSet<usize> = (0..n).filter(|&i| indegree[i] == 0).collect();
+    let mut order = Vec::with_capacity(n);
+    while let Some(&next) = ready.iter().next() {
+        ready.remove(&next);
+        order.push(next);
+        for &t in &edges[next] {
+            indegree[t] -= 1;
+            if indegree[t] == 0 {
+                ready.insert(t);
+            }
+        }
+    }
+    if order.len() != n {
+        let stuck = (0..n)
+            .filter(|i| !order.contains(i))
+            .map(|i| passes[i].name.clone())
+            .collect();
+        return Err(GraphError::Cycle(stuck));
+    }
+    Ok(order)
+}
+
+#[derive(Clone, Copy)]
+struct State {
+    layout: vk::ImageLayout,
+    last_write: Option<AccessInfo>,
+    visible_stages: vk::PipelineStageFlags2,
+    visible_access: vk::AccessFlags2,
+    read_stages: vk::PipelineStageFlags2,
+}
+
+impl State {
+    fn new(decl: &ResourceDecl) -> State {
+        State {
+            layout: if decl.imported {
+                decl.initial_layout
+            } else {
+                vk::ImageLayout::UNDEFINED
+            },
+            last_write: None,
+            visible_stages: vk::PipelineStageFlags2::empty(),
+            visible_access: vk::AccessFlags2::empty(),
+            read_stages: vk::PipelineStageFlags2::empty(),
+        }
+    }
+
+    /// The barrier (if any) needed before `next`, and the state after it.
+    fn transition(&mut self, resource: ResourceId, kind: ResourceKind, next: AccessInfo) -> Option<Barrier> {
+        let is_image = kind == ResourceKind::Image;
+        let layout_change = is_image && self.layout != next.layout;
+        let new_layout = if is_image { next.layout } else { vk::ImageLayout::UNDEFINED };
+        let old_layout = if is_image { self.layout } else { vk::ImageLayout::UNDEFINED };
+        let barrier = if next.writes || layout_change {
+            // The write (or the layout transition, itself a write) must wait for everything
+            // that touched the resource since its last write.
+            let (src_stages, src_access) = if !self.read_stages.is_empty() {
+                (self.read_stages, vk::AccessFlags2::NONE)
+            } else if let Some(w) = self.last_write {
+                (w.stages, w.access & WRITE_BITS)
+            } else {
+                (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE)
+            };
+            let needed = layout_change
+                || src_stages != vk::PipelineStageFlags2::NONE;
+            needed.then_some(Barrier {
+                resource,
+                src_stages,
+                src_access,
+                dst_stages: next.stages,
+                dst_access: next.access,
+                old_layout,
+                new_layout,
+            })
+        } else if let Some(w) = self.last_write {
+            let covered = self.visible_stages.contains(next.stages)
+                && self.visible_access.contains(next.access);
+            (!covered).then_some(Barrier {
+                resource,
+                src_stages: w.stages,
+                src_access: w.access & WRITE_BITS,
+                dst_stages: next.stages,
+                dst_access: next.access,
+                old_layout,
+                new_layout,
+            })
+        } else {
+            None
+        };
+        if next.writes {
+            self.last_write = Some(next);
+            self.visible_stages = vk::PipelineStageFlags2::empty();
+            self.visible_access = vk::AccessFlags2::empty();
+            self.read_stages = vk::PipelineStageFlags2::empty();
+        } else {
+            if barrier.is_some() {
+                self.visible_stages |= next.stages;
+                self.visible_access |= next.access;
+            }
+            self.read_stages |= next.stages;
+        }
+        if is_image {
+            self.layout = next.layout;
+        }
+        barrier
+    }
+}
+
+const WRITE_BITS: vk::AccessFlags2 = vk::AccessFlags2::from_raw(
+    vk::AccessFlags2::SHADER_STORAGE_WRITE.as_raw()
+        | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE.as_raw()
+        | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw()
+        | vk::AccessFlags2::TRANSFER_WRITE.as_raw()
+        | vk::AccessFlags2::HOST_WRITE.as_raw()
+        | vk::AccessFlags2::MEMORY_WRITE.as_raw(),
+);
+
+/// Orders the passes and derives every barrier and layout transition.
+pub fn compile(resources: &[ResourceDecl], passes: &[PassDecl]) -> Result<Schedule, GraphError> {
+    let order = order_passes(resources, passes)?;
+    let mut states: Vec<State> = resources.iter().map(State::new).collect();
+    let mut barriers = Vec::with_capacity(order.len());
+    for &pi in &order {
+        let mut pass_barriers = Vec::new();
+        for (r, a) in &passes[pi].accesses {
+            if let Some(b) = states[r.0].transition(*r, resources[r.0].kind, a.info()) {
+                pass_barriers.push(b);
+            }
+        }
+        barriers.push(pass_barriers);
+    }
+    let mut final_barriers = Vec::new();
+    for (i, res) in resources.iter().enumerate() {
+        if let Some(export) = res.export {
+            if let Some(b) = states[i].transition(ResourceId(i), res.kind, export.info()) {
+                final_barriers.push(b);
+            }
+        }
+    }
+    Ok(Schedule {
+        order,
+        barriers,
+        final_barriers,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::access::Stage;
+    use super::*;
+    use vk::AccessFlags2 as A;
+    use vk::ImageLayout as L;
+    use vk::PipelineStageFlags2 as S;
+
+    fn image(name: &str) -> ResourceDecl {
+        ResourceDecl {
+            name: name.into(),
+            kind: ResourceKind::Image,
+            imported: false,
+            initial_layout: L::UNDEFINED,
+            export: None,
+        }
+    }
+
+    fn buffer(name: &str, imported: bool) -> ResourceDecl {
+        ResourceDecl {
+            name: name.into(),
+            kind: ResourceKind::Buffer,
+            imported,
+            initial_layout: L::UNDEFINED,
+            export: None,
+        }
+    }
+
+    fn pass(name: &str, accesses: &[(usize, Access)]) -> PassDecl {
+        PassDecl {
+            name: name.into(),
+            accesses: accesses.iter().map(|(r, a)| (ResourceId(*r), *a)).collect(),
+        }
+    }
+
+    #[test]
+    fn orders_readers_after_writers_whatever_the_declaration_order() {
+        let res = [image("shadow"), image("hdr"), image("ldr")];
+        let passes = [
+            pass("tonemap", &[(1, Access::StorageRead(Stage::Compute)), (2, Access::StorageWrite(Stage::Compute))]),
+            pass("shade", &[(0, Access::Sampled(Stage::Fragment)), (1, Access::ColorAttachment)]),
+            pass("shadow", &[(0, Access::DepthAttachment)]),
+        ];
+        let order = order_passes(&res, &passes).unwrap();
+        assert_eq!(order, vec![2, 1, 0]);
+    }
+
+    #[test]
+    fn independent_passes_keep_declaration_order() {
+        let res = [image("a"), image("b")];
+        let passes = [
+            pass("first", &[(0, Access::ColorAttachment)]),
+            pass("second", &[(1, Access::ColorAttachment)]),
+        ];
+        assert_eq!(order_passes(&res, &passes).unwrap(), vec![0, 1]);
+    }
+
+    #[test]
+    fn detects_cycles_and_bad_declarations() {
+        let res = [image("a"), image("b")];
+        let passes = [
+            pass("p", &[(0, Access::StorageWrite(Stage::Compute)), (1, Access::Sampled(Stage::Compute))]),
+            pass("q", &[(1, Access::StorageWrite(Stage::Compute)), (0, Access::Sampled(Stage::Compute))]),
+        ];
+        assert!(matches!(compile(&res, &passes), Err(GraphError::Cycle(_))));
+        let dup = [pass("p", &[(0, Access::ColorAttachment), (0, Access::Sampled(Stage::Fragment))])];
+        assert!(matches!(compile(&res, &dup), Err(GraphError::DuplicateAccess { .. })));
+        let bad = [pass("p", &[(0, Access::VertexBuffer)])];
+        assert!(matches!(compile(&res, &bad), Err(GraphError::InvalidAccess { .. })));
+        let orphan = [pass("p", &[(0, Access::Sampled(Stage::Fragment))])];
+        assert!(matches!(compile(&res, &orphan), Err(GraphError::ReadWithoutWriter { .. })));
+        let twice = [pass("p", &[(0, Access::ColorAttachment)]), pass("p", &[(1, Access::ColorAttachment)])];
+        assert!(matches!(compile(&res, &twice), Err(GraphError::DuplicatePassName(_))));
+        let unknown = [pass("p", &[(9, Access::ColorAttachment)])];
+        assert!(matches!(compile(&res, &unknown), Err(GraphError::UnknownResource { .. })));
+    }
+
+    #[test]
+    fn depth_write_then_sample_transitions_layout_with_memory_dependency() {
+        let res = [image("shadow"), image("hdr")];
+        let passes = [
+            pass("shadow", &[(0, Access::DepthAttachment)]),
+            pass("shade", &[(0, Access::Sampled(Stage::Fragment)), (1, Access::ColorAttachment)]),
+        ];
+        let s = compile(&res, &passes).unwrap();
+        // First use: UNDEFINED -> DEPTH_ATTACHMENT_OPTIMAL, nothing to wait for.
+        assert_eq!(s.barriers[0].len(), 1);
+        let b = s.barriers[0][0];
+        assert_eq!((b.old_layout, b.new_layout), (L::UNDEFINED, L::DEPTH_ATTACHMENT_OPTIMAL));
+        assert_eq!(b.src_stages, S::NONE);
+        // Read after write: the depth writes are made visible to fragment sampling.
+        let b = s.barriers[1].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        assert_eq!((b.old_layout, b.new_layout), (L::DEPTH_ATTACHMENT_OPTIMAL, L::SHADER_READ_ONLY_OPTIMAL));
+        assert_eq!(b.src_stages, S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS);
+        assert_eq!(b.src_access, A::DEPTH_STENCIL_ATTACHMENT_WRITE);
+        assert_eq!(b.dst_stages, S::FRAGMENT_SHADER);
+        assert_eq!(b.dst_access, A::SHADER_SAMPLED_READ);
+    }
+
+    #[test]
+    fn write_after_read_needs_only_an_execution_dependency() {
+        // An imported buffer is read by one pass and then overwritten by another.
+        let res = [buffer("data", true), buffer("out", false)];
+        let passes = [
+            pass("read", &[(0, Access::TexelRead(Stage::Compute)), (1, Access::StorageWrite(Stage::Compute))]),
+            pass("overwrite", &[(1, Access::StorageRead(Stage::Compute)), (0, Access::TransferWrite)]),
+        ];
+        let s = compile(&res, &passes).unwrap();
+        assert_eq!(s.order, vec![0, 1]);
+        // The imported buffer's first read needs no barrier: uploads complete before the frame.
+        assert!(s.barriers[0].is_empty());
+        let war = s.barriers[1].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        assert_eq!(war.src_stages, S::COMPUTE_SHADER);
+        assert_eq!(war.src_access, A::NONE);
+        assert_eq!(war.dst_stages, S::COPY | S::CLEAR);
+        assert_eq!(war.dst_access, A::TRANSFER_WRITE);
+        // Buffers have no layouts.
+        assert_eq!((war.old_layout, war.new_layout), (L::UNDEFINED, L::UNDEFINED));
+        let raw = s.barriers[1].iter().find(|b| b.resource == ResourceId(1)).unwrap();
+        assert_eq!(raw.src_access, A::SHADER_STORAGE_WRITE);
+        assert_eq!(raw.dst_access, A::SHADER_STORAGE_READ);
+    }
+
+    #[test]
+    fn repeated_reads_share_one_barrier_and_new_stages_get_their_own() {
+        let res = [image("hdr"), image("x"), image("y"), image("z")];
+        let passes = [
+            pass("draw", &[(0, Access::ColorAttachment)]),
+            pass("a", &[(0, Access::Sampled(Stage::Fragment)), (1, Access::ColorAttachment)]),
+            pass("b", &[(0, Access::Sampled(Stage::Fragment)), (2, Access::ColorAttachment)]),
+            pass("c", &[(0, Access::Sampled(Stage::Compute)), (3, Access::StorageWrite(Stage::Compute))]),
+        ];
+        let s = compile(&res, &passes).unwrap();
+        let on_hdr = |i: usize| s.barriers[i].iter().filter(|b| b.resource == ResourceId(0)).count();
+        assert_eq!(on_hdr(1), 1);
+        assert_eq!(on_hdr(2), 0, "already visible to fragment sampling");
+        assert_eq!(on_hdr(3), 1, "compute sampling needs its own visibility");
+        let b = s.barriers[3].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        assert_eq!(b.src_access, A::COLOR_ATTACHMENT_WRITE);
+        assert_eq!(b.old_layout, b.new_layout);
+    }
+
+    #[test]
+    fn layout_change_between_reads_waits_for_the_readers() {
+        let res = [image("hdr"), image("x"), buffer("readback", true)];
+        let passes = [
+            pass("draw", &[(0, Access::ColorAttachment)]),
+            pass("sample", &[(0, Access::Sampled(Stage::Compute)), (1, Access::StorageWrite(Stage::Compute))]),
+            pass("copy", &[(0, Access::TransferRead), (2, Access::TransferWrite)]),
+        ];
+        let s = compile(&res, &passes).unwrap();
+        let b = s.barriers[2].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        assert_eq!(b.src_stages, S::COMPUTE_SHADER);
+        assert_eq!((b.old_layout, b.new_layout), (L::SHADER_READ_ONLY_OPTIMAL, L::TRANSFER_SRC_OPTIMAL));
+    }
+
+    #[test]
+    fn exported_buffer_gets_a_host_read_barrier() {
+        let mut rb = buffer("readback", true);
+        rb.export = Some(Access::HostRead);
+        let res = [image("hdr"), rb];
+        let passes = [
+            pass("draw", &[(0, Access::ColorAttachment)]),
+            pass("copy", &[(0, Access::TransferRead), (1, Access::TransferWrite)]),
+        ];
+        let s = compile(&res, &passes).unwrap();
+        assert_eq!(s.final_barriers.len(), 1);
+        let b = s.final_barriers[0];
+        assert_eq!(b.resource, ResourceId(1));
+        assert_eq!((b.src_access, b.dst_stages, b.dst_access), (A::TRANSFER_WRITE, S::HOST, A::HOST_READ));
+    }
+
+    #[test]
+    fn writers_run_in_declaration_order_with_waw_barriers() {
+        let res = [image("acc"), buffer("out", true)];
+        let passes = [
+            pass("clear", &[(0, Access::TransferWrite)]),
+            pass("accumulate", &[(0, Access::StorageReadWrite(Stage::Compute))]),
+            pass("copy", &[(0, Access::TransferRead), (1, Access::TransferWrite)]),
+        ];
+        let s = compile(&res, &passes).unwrap();
+        assert_eq!(s.order, vec![0, 1, 2]);
+        let b = s.barriers[1][0];
+        assert_eq!(b.src_access, A::TRANSFER_WRITE);
+        assert_eq!((b.old_layout, b.new_layout), (L::TRANSFER_DST_OPTIMAL, L::GENERAL));
+        let b = s.barriers[2].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        assert_eq!(b.src_access, A::SHADER_STORAGE_WRITE);
+    }
+}

@@ -1,0 +1,17 @@
+//! translucent: interactive rendering of translucent objects after Lensch et al., "Interactive
+//! Rendering of Translucent Objects" (2002), on Vulkan.
+//!
+//! The modules follow the data: [`scene`] (input) -> [`physics`] (dipole, materials) ->
+//! [`graph`] (render graph) with [`passes`] on the [`gpu`] backend -> [`output`] (files).
+//! [`renderer`] assembles the graph for a scene; [`cli`] is the command line.
+
+#![warn(missing_docs)]
+
+pub mod cli;
+pub mod gpu;
+pub mod graph;
+pub mod output;
+pub mod passes;
+pub mod physics;
+pub mod renderer;
+pub mod scene;

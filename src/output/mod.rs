@@ -1,0 +1,140 @@
+//! Files the renderer writes: images (PNG, EXR), `timings.json`, `trace.json`.
+//! Every file is written to a temporary name in the same folder and renamed into place, so an
+//! interrupted run never leaves a partial file under the final name.
+
+use crate::graph::timing::{FrameTiming, TimingReport};
+use anyhow::{Context, Result};
+use std::path::{Path, PathBuf};
+
+fn temporary(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+/// Writes a file through a temporary name and a rename.
+pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let tmp = temporary(path);
+    let result = write(&tmp).and_then(|_| {
+        std::fs::rename(&tmp, path).with_context(|| format!("cannot move {} into place", path.display()))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.with_context(|| format!("cannot write '{}'", path.display()))
+}
+
+/// Writes tightly packed RGBA8 pixels as PNG.
+pub fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
+    write_atomic(path, |tmp| {
+        image::save_buffer_with_format(tmp, rgba, width, height, image::ColorType::Rgba8, image::ImageFormat::Png)?;
+        Ok(())
+    })
+}
+
+/// Writes linear RGBA f32 pixels (row-major, top row first) as an OpenEXR file.
+pub fn write_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<()> {
+    write_atomic(path, |tmp| {
+        let w = width as usize;
+        exr::prelude::write_rgba_file(tmp, w, height as usize, |x, y| {
+            let i = 4 * (y * w + x);
+            (rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3])
+        })?;
+        Ok(())
+    })
+}
+
+/// Reads an RGBA EXR written by [`write_exr`] (for tests and comparisons).
+pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
+    use exr::prelude::*;
+    let image = read_first_rgba_layer_from_file(
+        path,
+        |resolution, _| (resolution.width(), vec![0f32; resolution.width() * resolution.height() * 4]),
+        |(w, px), pos, (r, g, b, a): (f32, f32, f32, f32)| {
+            let i = 4 * (pos.y() * *w + pos.x());
+            px[i..i + 4].copy_from_slice(&[r, g, b, a]);
+        },
+    )
+    .with_context(|| format!("cannot read '{}'", path.display()))?;
+    let size = image.layer_data.size;
+    Ok((size.width() as u32, size.height() as u32, image.layer_data.channel_data.pixels.1))
+}
+
+/// Writes `timings.json`.
+pub fn write_timings(path: &Path, report: &TimingReport) -> Result<()> {
+    write_atomic(path, |tmp| {
+        std::fs::write(tmp, serde_json::to_string_pretty(report)?)?;
+        Ok(())
+    })
+}
+
+/// Writes `trace.json` in Chrome trace-event format: one track for the GPU passes, one for
+/// the host's frame wall time. Frames are laid end to end on the host clock.
+pub fn write_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) -> Result<()> {
+    let mut events = Vec::new();
+    events.push(serde_json::json!({"name": "thread_name", "ph": "M", "pid": 1, "tid": 1, "args": {"name": "GPU passes"}}));
+    events.push(serde_json::json!({"name": "thread_name", "ph": "M", "pid": 1, "tid": 2, "args": {"name": "host frame (wall)"}}));
+    let mut t0_us = 0.0;
+    for (f, frame) in frames.iter().enumerate() {
+        events.push(serde_json::json!({
+            "name": format!("frame {f}"), "cat": "frame", "ph": "X", "pid": 1, "tid": 2,
+            "ts": t0_us, "dur": frame.wall_ms * 1e3,
+        }));
+        for (i, name) in pass_names.iter().enumerate() {
+            events.push(serde_json::json!({
+                "name": name, "cat": "pass", "ph": "X", "pid": 1, "tid": 1,
+                "ts": t0_us + frame.pass_start_ms[i] * 1e3, "dur": frame.pass_ms[i] * 1e3,
+                "args": {"frame": f},
+            }));
+        }
+        t0_us += frame.wall_ms * 1e3;
+    }
+    let trace = serde_json::json!({"traceEvents": events, "displayTimeUnit": "ms"});
+    write_atomic(path, |tmp| {
+        std::fs::write(tmp, serde_json::to_string(&trace)?)?;
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exr_round_trip_and_no_temporaries_left() {
+        let dir = std::env::temp_dir().join(format!("translucent-out-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let px: Vec<f32> = (0..2 * 3 * 4).map(|i| i as f32 * 0.25).collect();
+        let path = dir.join("x.exr");
+        write_exr(&path, 2, 3, &px).unwrap();
+        let (w, h, back) = read_exr(&path).unwrap();
+        assert_eq!((w, h), (2, 3));
+        assert_eq!(back, px);
+        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+        // A failed write leaves nothing behind under the final name.
+        let bad = dir.join("missing-dir").join("y.png");
+        assert!(write_png(&bad, 1, 1, &[0, 0, 0, 255]).is_err());
+        assert!(!bad.exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn trace_has_one_event_per_pass_and_frame() {
+        let dir = std::env::temp_dir().join(format!("translucent-trace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let frames = vec![
+            FrameTiming { pass_ms: vec![1.0, 2.0], pass_start_ms: vec![0.0, 1.0], gpu_ms: 3.0, wall_ms: 4.0 };
+            3
+        ];
+        let names = vec!["a".to_string(), "b".to_string()];
+        let path = dir.join("trace.json");
+        write_trace(&path, &names, &frames).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let events = v["traceEvents"].as_array().unwrap();
+        let passes = events.iter().filter(|e| e["cat"] == "pass").count();
+        assert_eq!(passes, 6);
+        let last_b = events.iter().filter(|e| e["name"] == "b").last().unwrap();
+        assert_eq!(last_b["ts"].as_f64().unwrap(), 8000.0 + 1000.0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,170 @@
+//! Homogeneous scattering materials: the measured presets and validated custom coefficients.
+//!
+//! Presets: reduced scattering and absorption coefficients measured by Jensen et al.,
+//! SIGGRAPH 2001, Figure 5 (in 1/mm, RGB); relative index of refraction 1.3 except marble (1.5).
+
+use super::dipole::Dipole;
+use serde::Serialize;
+
+/// A homogeneous medium, per RGB channel.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Material {
+    /// Reduced scattering coefficient sigma_s' (1/mm).
+    pub sigma_s_prime: [f64; 3],
+    /// Absorption coefficient sigma_a (1/mm).
+    pub sigma_a: [f64; 3],
+    /// Relative index of refraction of the medium.
+    pub eta: f64,
+}
+
+/// (name, sigma_s', sigma_a, eta) of every preset.
+pub const PRESETS: &[(&str, [f64; 3], [f64; 3], f64)] = &[
+    ("apple", [2.29, 2.39, 1.97], [0.0030, 0.0034, 0.046], 1.3),
+    ("chicken1", [0.15, 0.21, 0.38], [0.015, 0.077, 0.19], 1.3),
+    ("chicken2", [0.19, 0.25, 0.32], [0.018, 0.088, 0.20], 1.3),
+    ("cream", [7.38, 5.47, 3.15], [0.0002, 0.0028, 0.0163], 1.3),
+    ("ketchup", [0.18, 0.07, 0.03], [0.061, 0.97, 1.45], 1.3),
+    ("marble", [2.19, 2.62, 3.00], [0.0021, 0.0041, 0.0071], 1.5),
+    ("potato", [0.68, 0.70, 0.55], [0.0024, 0.0090, 0.12], 1.3),
+    ("skimmilk", [0.70, 1.22, 1.90], [0.0014, 0.0025, 0.0142], 1.3),
+    ("skin1", [0.74, 0.88, 1.01], [0.032, 0.17, 0.48], 1.3),
+    ("skin2", [1.09, 1.59, 1.79], [0.013, 0.070, 0.145], 1.3),
+    ("wholemilk", [2.55, 3.21, 3.77], [0.0011, 0.0024, 0.014], 1.3),
+];
+
+/// Published total diffuse reflectance of each preset (Jensen 2001), for tests.
+pub const PRESET_TOTALS: &[(&str, [f64; 3])] = &[
+    ("apple", [0.846, 0.841, 0.528]),
+    ("chicken1", [0.314, 0.156, 0.126]),
+    ("chicken2", [0.321, 0.160, 0.108]),
+    ("cream", [0.976, 0.900, 0.725]),
+    ("ketchup", [0.164, 0.006, 0.002]),
+    ("marble", [0.830, 0.791, 0.753]),
+    ("potato", [0.764, 0.613, 0.213]),
+    ("skimmilk", [0.815, 0.813, 0.682]),
+    ("skin1", [0.436, 0.227, 0.131]),
+    ("skin2", [0.623, 0.433, 0.343]),
+    ("wholemilk", [0.908, 0.881, 0.759]),
+];
+
+/// Why material parameters were refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MaterialError {
+    /// The preset name is not known.
+    #[error("unknown material preset '{0}'; presets: {1}")]
+    UnknownPreset(String, String),
+    /// A coefficient is negative, NaN or infinite.
+    #[error("{name}[{channel}] = {value} is not a finite non-negative number (1/mm)")]
+    BadCoefficient {
+        /// Which coefficient.
+        name: &'static str,
+        /// 0, 1, 2 for R, G, B.
+        channel: usize,
+        /// The value given.
+        value: f64,
+    },
+    /// sigma_s' + sigma_a = 0: no extinction, the dipole is undefined.
+    #[error("channel {0} has sigma_s' + sigma_a = 0: the medium does not interact with light")]
+    NoExtinction(usize),
+    /// eta out of the physical range the model supports.
+    #[error("index of refraction eta = {0} is outside the supported range [1.0, 3.0]")]
+    BadEta(f64),
+}
+
+/// Normalises a preset name: lower case, without spaces, dashes or underscores.
+fn normalise(name: &str) -> String {
+    name.chars()
+        .filter(|c| !matches!(c, ' ' | '-' | '_'))
+        .flat_map(char::to_lowercase)
+        .collect()
+}
+
+impl Material {
+    /// A preset by name ("skim milk", "skimmilk" and "skim_milk" all work).
+    pub fn preset(name: &str) -> Result<Material, MaterialError> {
+        let key = normalise(name);
+        PRESETS
+            .iter()
+            .find(|(n, ..)| *n == key)
+            .map(|(_, s, a, eta)| Material {
+                sigma_s_prime: *s,
+                sigma_a: *a,
+                eta: *eta,
+            })
+            .ok_or_else(|| {
+                MaterialError::UnknownPreset(
+                    name.into(),
+                    PRESETS.iter().map(|p| p.0).collect::<Vec<_>>().join(", "),
+                )
+            })
+    }
+
+    /// Custom coefficients, validated.
+    pub fn custom(sigma_s_prime: [f64; 3], sigma_a: [f64; 3], eta: f64) -> Result<Material, MaterialError> {
+        for (name, values) in [("sigma_s_prime", sigma_s_prime), ("sigma_a", sigma_a)] {
+            for (channel, &value) in values.iter().enumerate() {
+                if !value.is_finite() || value < 0.0 {
+                    return Err(MaterialError::BadCoefficient { name, channel, value });
+                }
+            }
+        }
+        for c in 0..3 {
+            if sigma_s_prime[c] + sigma_a[c] <= 0.0 {
+                return Err(MaterialError::NoExtinction(c));
+            }
+        }
+        // eta < 1 would need total internal reflection handling on entry; above 3 no
+        // everyday translucent material exists and the F_dr fit is untested there.
+        if !eta.is_finite() || !(1.0..=3.0).contains(&eta) {
+            return Err(MaterialError::BadEta(eta));
+        }
+        Ok(Material {
+            sigma_s_prime,
+            sigma_a,
+            eta,
+        })
+    }
+
+    /// The dipole of each channel.
+    pub fn dipoles(&self) -> [Dipole; 3] {
+        [Dipole::new(self, 0), Dipole::new(self, 1), Dipole::new(self, 2)]
+    }
+
+    /// Total diffuse reflectance per channel.
+    pub fn total_reflectance(&self) -> [f64; 3] {
+        self.dipoles().map(|d| d.total_reflectance())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_by_loose_name() {
+        assert_eq!(Material::preset("Skim Milk").unwrap(), Material::preset("skim_milk").unwrap());
+        assert_eq!(Material::preset("marble").unwrap().eta, 1.5);
+        let e = Material::preset("jelly").unwrap_err().to_string();
+        assert!(e.contains("jelly") && e.contains("ketchup"), "{e}");
+        assert_eq!(PRESETS.len(), 11);
+        assert_eq!(PRESET_TOTALS.len(), 11);
+    }
+
+    #[test]
+    fn rejects_impossible_parameters() {
+        let ok = [1.0; 3];
+        assert!(matches!(
+            Material::custom([1.0, -1.0, 1.0], ok, 1.3),
+            Err(MaterialError::BadCoefficient { name: "sigma_s_prime", channel: 1, .. })
+        ));
+        assert!(matches!(
+            Material::custom(ok, [f64::NAN, 0.0, 0.0], 1.3),
+            Err(MaterialError::BadCoefficient { name: "sigma_a", channel: 0, .. })
+        ));
+        assert!(matches!(Material::custom([0.0; 3], [0.0; 3], 1.3), Err(MaterialError::NoExtinction(0))));
+        for eta in [0.0, -1.0, 0.5, f64::INFINITY, 10.0] {
+            assert!(matches!(Material::custom(ok, ok, eta), Err(MaterialError::BadEta(_))));
+        }
+        assert!(Material::custom(ok, [0.0; 3], 1.0).is_ok());
+    }
+}

@@ -1,0 +1,7 @@
+//! Physics of diffuse subsurface scattering: the dipole profile, Fresnel terms, materials.
+
+pub mod dipole;
+pub mod material;
+
+pub use dipole::{fresnel_diffuse_reflectance, fresnel_transmittance, Dipole};
+pub use material::{Material, MaterialError};

@@ -1,0 +1,243 @@
+//! The scene file (TOML): every field optional, unknown keys refused.
+//!
+//! ```toml
+//! [mesh]
+//! builtin = "bunny"          # or: obj = "model.obj"; builtin "sphere" and "box" take sizes
+//! units = "mm"               # units of the OBJ: mm, cm, m, in
+//! texture = "albedo.png"     # optional diffuse texture (needs texture coordinates)
+//!
+//! [transform]
+//! translate = [0, 0, 0]      # mm, applied after scale and rotation
+//! rotate_deg = [0, 0, 0]     # Euler angles X, Y, Z
+//! scale = 1.0
+//!
+//! [camera]                   # position and target default to a framing of the object
+//! position = [0, 40, 160]
+//! target = [0, 25, 0]
+//! up = [0, 1, 0]
+//! fov_deg = 30
+//!
+//! [[lights]]                 # directional | point | spot; default: one directional light
+//! kind = "directional"
+//! direction = [-1, -1, -1]   # the direction the light travels
+//! color = [1, 1, 1]
+//! intensity = 1.0            # irradiance at normal incidence (point/spot: at 1 mm)
+//!
+//! [material]
+//! preset = "skimmilk"        # or sigma_s_prime / sigma_a (1/mm, RGB) and eta
+//!
+//! [output]
+//! width = 512
+//! height = 512
+//! ```
+
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Length unit of an input mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Units {
+    /// Millimetres (the renderer's unit).
+    #[default]
+    Mm,
+    /// Centimetres.
+    Cm,
+    /// Metres.
+    M,
+    /// Inches.
+    In,
+}
+
+impl Units {
+    /// Millimetres per unit.
+    pub fn to_mm(self) -> f64 {
+        match self {
+            Units::Mm => 1.0,
+            Units::Cm => 10.0,
+            Units::M => 1000.0,
+            Units::In => 25.4,
+        }
+    }
+}
+
+/// `[mesh]`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct MeshDesc {
+    /// A built-in mesh: "bunny" (default), "sphere" or "box".
+    pub builtin: Option<String>,
+    /// Path of an OBJ file, relative to the scene file.
+    pub obj: Option<PathBuf>,
+    /// Units of the mesh's coordinates.
+    pub units: Option<Units>,
+    /// Diffuse texture (PNG or JPEG), relative to the scene file.
+    pub texture: Option<PathBuf>,
+    /// Sphere radius in mm (builtin "sphere").
+    pub radius: Option<f64>,
+    /// Box edge lengths in mm (builtin "box").
+    pub size: Option<[f64; 3]>,
+    /// Subdivisions along the longest edge (sphere: along the equator), built-ins only.
+    pub segments: Option<u32>,
+}
+
+/// `[transform]`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct TransformDesc {
+    /// Translation in mm.
+    pub translate: Option<[f64; 3]>,
+    /// Rotation, Euler X then Y then Z, degrees.
+    pub rotate_deg: Option<[f64; 3]>,
+    /// Uniform scale.
+    pub scale: Option<f64>,
+}
+
+/// `[camera]`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDesc {
+    /// Eye position in mm.
+    pub position: Option<[f64; 3]>,
+    /// Point looked at, mm.
+    pub target: Option<[f64; 3]>,
+    /// Up direction.
+    pub up: Option<[f64; 3]>,
+    /// Vertical field of view in degrees.
+    pub fov_deg: Option<f64>,
+}
+
+/// Kind of light.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightKind {
+    /// Parallel light from infinitely far away.
+    Directional,
+    /// Isotropic point light.
+    Point,
+    /// Point light restricted to a cone.
+    Spot,
+}
+
+/// One `[[lights]]` entry.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightDesc {
+    /// Directional, point or spot.
+    pub kind: LightKind,
+    /// Position in mm (point, spot).
+    pub position: Option<[f64; 3]>,
+    /// Direction the light travels (directional; spot axis).
+    pub direction: Option<[f64; 3]>,
+    /// Linear RGB colour.
+    pub color: Option<[f64; 3]>,
+    /// Scale of the colour: irradiance at normal incidence for directional lights, radiant
+    /// intensity (irradiance at 1 mm) for point and spot lights.
+    pub intensity: Option<f64>,
+    /// Spot cone half-angle in degrees.
+    pub cone_deg: Option<f64>,
+}
+
+/// `[material]`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialDesc {
+    /// A measured preset (Jensen 2001), e.g. "skimmilk", "marble", "ketchup".
+    pub preset: Option<String>,
+    /// Reduced scattering coefficient, 1/mm, RGB.
+    pub sigma_s_prime: Option<[f64; 3]>,
+    /// Absorption coefficient, 1/mm, RGB.
+    pub sigma_a: Option<[f64; 3]>,
+    /// Relative index of refraction.
+    pub eta: Option<f64>,
+}
+
+/// `[output]`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct OutputDesc {
+    /// Image width in pixels.
+    pub width: Option<u32>,
+    /// Image height in pixels.
+    pub height: Option<u32>,
+    /// Multiplier from radiance to display value before the sRGB curve.
+    pub exposure: Option<f64>,
+    /// Shadow-map edge length in texels.
+    pub shadow_map: Option<u32>,
+}
+
+/// A whole scene file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDesc {
+    /// The object.
+    #[serde(default)]
+    pub mesh: MeshDesc,
+    /// Its placement.
+    #[serde(default)]
+    pub transform: TransformDesc,
+    /// The view.
+    #[serde(default)]
+    pub camera: CameraDesc,
+    /// The lights.
+    pub lights: Option<Vec<LightDesc>>,
+    /// The medium.
+    #[serde(default)]
+    pub material: MaterialDesc,
+    /// The image.
+    #[serde(default)]
+    pub output: OutputDesc,
+}
+
+impl SceneDesc {
+    /// Parses TOML; errors name the offending key and line.
+    pub fn parse(text: &str) -> Result<SceneDesc, toml::de::Error> {
+        toml::from_str(text)
+    }
+
+    /// TOML text of this description.
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# (cannot print scene: {e})"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_file_is_the_default_scene() {
+        assert_eq!(SceneDesc::parse("").unwrap(), SceneDesc::default());
+    }
+
+    #[test]
+    fn unknown_keys_and_wrong_types_are_named() {
+        let e = SceneDesc::parse("[camera]\nfov = 30\n").unwrap_err().to_string();
+        assert!(e.contains("fov"), "{e}");
+        let e = SceneDesc::parse("[output]\nwidth = \"big\"\n").unwrap_err().to_string();
+        assert!(e.contains("width") || e.contains("line 2"), "{e}");
+        let e = SceneDesc::parse("colour = 1\n").unwrap_err().to_string();
+        assert!(e.contains("colour"), "{e}");
+        let e = SceneDesc::parse("[[lights]]\nkind = \"laser\"\n").unwrap_err().to_string();
+        assert!(e.contains("laser"), "{e}");
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        let text = r#"
+            [mesh]
+            builtin = "sphere"
+            radius = 20.0
+            [[lights]]
+            kind = "spot"
+            position = [0.0, 100.0, 0.0]
+            direction = [0.0, -1.0, 0.0]
+            cone_deg = 20.0
+            [material]
+            preset = "marble"
+        "#;
+        let d = SceneDesc::parse(text).unwrap();
+        assert_eq!(SceneDesc::parse(&d.to_toml()).unwrap(), d);
+        assert_eq!(d.lights.as_ref().unwrap()[0].kind, LightKind::Spot);
+    }
+}

@@ -1,0 +1,462 @@
+//! Scene input: the TOML description, meshes, and the resolved scene with every default filled.
+
+pub mod desc;
+pub mod mesh;
+
+use crate::physics::Material;
+use anyhow::{bail, Context, Result};
+use desc::{LightKind, SceneDesc, Units};
+use glam::{DVec3, Mat4, Vec3};
+use mesh::Mesh;
+use std::path::{Path, PathBuf};
+
+/// The Stanford bunny, about 50 mm tall (see the header of `assets/bunny.obj`).
+pub const BUNNY_OBJ: &str = include_str!("../../assets/bunny.obj");
+
+/// The most lights a scene may have (the size of the light array in `glsl/frame.glsl`).
+pub const MAX_LIGHTS: usize = 8;
+
+/// Command-line values that replace the scene file's.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    /// `--mesh`: an OBJ file instead of the scene's mesh.
+    pub mesh: Option<PathBuf>,
+    /// `--material`: a preset name.
+    pub material: Option<String>,
+    /// `--width`.
+    pub width: Option<u32>,
+    /// `--height`.
+    pub height: Option<u32>,
+}
+
+/// A light, resolved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Light {
+    /// Directional, point or spot.
+    pub kind: LightKind,
+    /// Position, mm (point, spot).
+    pub position: Vec3,
+    /// Unit direction of travel (directional, spot axis).
+    pub direction: Vec3,
+    /// colour * intensity.
+    pub radiance: Vec3,
+    /// cos of the spot half-angle (-1 for other kinds).
+    pub cos_cone: f32,
+}
+
+/// The camera, resolved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// Eye, mm.
+    pub position: Vec3,
+    /// Look-at point, mm.
+    pub target: Vec3,
+    /// Up vector.
+    pub up: Vec3,
+    /// Vertical field of view, radians.
+    pub fov_y: f32,
+}
+
+impl Camera {
+    /// World -> Vulkan clip space (y down, depth 0..1) for an image of `aspect` = w / h,
+    /// with near and far planes that enclose the bounding sphere (`center`, `radius`).
+    pub fn view_proj(&self, aspect: f32, center: Vec3, radius: f32) -> Mat4 {
+        let view = Mat4::look_at_rh(self.position, self.target, self.up);
+        let dist = (center - self.position).length();
+        let far = dist + 1.5 * radius;
+        let near = (dist - 1.5 * radius).max(far * 1e-3);
+        let mut proj = Mat4::perspective_rh(self.fov_y, aspect, near, far);
+        proj.y_axis.y = -proj.y_axis.y;
+        proj * view
+    }
+}
+
+/// A scene ready to render: world-space mesh in mm, camera, lights, material, image size.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The object, transformed to world space, in mm.
+    pub mesh: Mesh,
+    /// Optional diffuse texture, RGBA8.
+    pub texture: Option<image::RgbaImage>,
+    /// The view.
+    pub camera: Camera,
+    /// The lights (1 to [`MAX_LIGHTS`]).
+    pub lights: Vec<Light>,
+    /// The medium.
+    pub material: Material,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Radiance -> display multiplier.
+    pub exposure: f32,
+    /// Shadow-map edge length, texels.
+    pub shadow_map_size: u32,
+    /// The description with every default made explicit (what `render` prints).
+    pub resolved: SceneDesc,
+}
+
+fn vec3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)
+}
+
+fn finite(name: &str, v: &[f64]) -> Result<()> {
+    if v.iter().any(|x| !x.is_finite()) {
+        bail!("{name} = {v:?} must be finite");
+    }
+    Ok(())
+}
+
+fn unit(name: &str, v: [f64; 3]) -> Result<Vec3> {
+    finite(name, &v)?;
+    let d = DVec3::from_array(v);
+    if d.length() < 1e-9 {
+        bail!("{name} = {v:?} must not be the zero vector");
+    }
+    Ok(d.normalize().as_vec3())
+}
+
+impl Scene {
+    /// Reads a scene file (or the default scene for `None`) and applies `overrides`.
+    pub fn load(path: Option<&Path>, overrides: &Overrides) -> Result<Scene> {
+        let (desc, base) = match path {
+            Some(p) => {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("cannot read scene file '{}'", p.display()))?;
+                let desc = SceneDesc::parse(&text)
+                    .map_err(|e| anyhow::anyhow!("scene file '{}': {e}", p.display()))?;
+                (desc, p.parent().map(Path::to_path_buf).unwrap_or_default())
+            }
+            None => (SceneDesc::default(), PathBuf::new()),
+        };
+        Scene::from_desc(desc, &base, overrides)
+    }
+
+    /// Resolves a description; relative paths are taken from `base`.
+    pub fn from_desc(mut desc: SceneDesc, base: &Path, overrides: &Overrides) -> Result<Scene> {
+        if let Some(obj) = &overrides.mesh {
+            desc.mesh.obj = Some(obj.clone());
+            desc.mesh.builtin = None;
+        }
+        if let Some(m) = &overrides.material {
+            desc.material = desc::MaterialDesc {
+                preset: Some(m.clone()),
+                ..Default::default()
+            };
+        }
+        if let Some(w) = overrides.width {
+            desc.output.width = Some(w);
+        }
+        if let Some(h) = overrides.height {
+            desc.output.height = Some(h);
+        }
+
+        // Mesh.
+        let md = &mut desc.mesh;
+        let units = *md.units.get_or_insert(Units::Mm);
+        let mut mesh = match (&md.obj, &md.builtin) {
+            (Some(_), Some(b)) => bail!("[mesh] gives both obj and builtin = {b:?}; choose one"),
+            (Some(obj), None) => {
+                let p = base.join(obj);
+                if !p.exists() {
+                    bail!("mesh file '{}' does not exist", p.display());
+                }
+                Mesh::load_obj(&p)?
+            }
+            (None, builtin) => {
+                let name = builtin.clone().unwrap_or_else(|| "bunny".into());
+                md.builtin = Some(name.clone());
+                match name.as_str() {
+                    "bunny" => Mesh::parse_obj("builtin bunny", BUNNY_OBJ)?,
+                    "sphere" => {
+                        let r = *md.radius.get_or_insert(25.0);
+                        let s = *md.segments.get_or_insert(64);
+                        if !(r.is_finite() && r > 0.0) {
+                            bail!("[mesh] radius = {r} must be positive");
+                        }
+                        Mesh::sphere(r as f32, s)
+                    }
+                    "box" => {
+                        let size = *md.size.get_or_insert([50.0, 50.0, 50.0]);
+                        let s = *md.segments.get_or_insert(16);
+                        if size.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+                            bail!("[mesh] size = {size:?} must be three positive lengths");
+                        }
+                        Mesh::cuboid(vec3(size), s)
+                    }
+                    other => bail!("unknown builtin mesh '{other}'; choose bunny, sphere or box"),
+                }
+            }
+        };
+        let texture = match &md.texture {
+            Some(t) => {
+                if !mesh.has_uvs {
+                    bail!("a texture is given but the mesh has no texture coordinates");
+                }
+                let p = base.join(t);
+                let img = image::open(&p)
+                    .with_context(|| format!("cannot read texture '{}'", p.display()))?;
+                Some(img.to_rgba8())
+            }
+            None => None,
+        };
+
+        // Transform: units, scale, rotation, translation.
+        let td = &mut desc.transform;
+        let scale = *td.scale.get_or_insert(1.0);
+        let rot = *td.rotate_deg.get_or_insert([0.0; 3]);
+        let tr = *td.translate.get_or_insert([0.0; 3]);
+        finite("[transform] rotate_deg", &rot)?;
+        finite("[transform] translate", &tr)?;
+        if !(scale.is_finite() && scale > 0.0) {
+            bail!("[transform] scale = {scale} must be positive");
+        }
+        let rotation = glam::Quat::from_euler(
+            glam::EulerRot::XYZ,
+            (rot[0] as f32).to_radians(),
+            (rot[1] as f32).to_radians(),
+            (rot[2] as f32).to_radians(),
+        );
+        let m = Mat4::from_scale_rotation_translation(
+            Vec3::splat((scale * units.to_mm()) as f32),
+            rotation,
+            vec3(tr),
+        );
+        mesh.transform(m);
+        let (center, radius) = mesh.bounding_sphere();
+
+        // Camera: frame the bounding sphere from the front, slightly above.
+        let cd = &mut desc.camera;
+        let fov_deg = *cd.fov_deg.get_or_insert(30.0);
+        if !(fov_deg.is_finite() && fov_deg > 1.0 && fov_deg < 170.0) {
+            bail!("[camera] fov_deg = {fov_deg} must lie between 1 and 170 degrees");
+        }
+        let target = *cd.target.get_or_insert(center.as_dvec3().to_array());
+        let dist = radius as f64 / (0.5 * fov_deg.to_radians()).sin() * 1.1;
+        let position = *cd.position.get_or_insert(
+            (DVec3::from_array(target) + DVec3::new(0.0, 0.25, 1.0).normalize() * dist).to_array(),
+        );
+        let up = *cd.up.get_or_insert([0.0, 1.0, 0.0]);
+        finite("[camera] position", &position)?;
+        finite("[camera] target", &target)?;
+        let view_dir = DVec3::from_array(target) - DVec3::from_array(position);
+        if view_dir.length() < 1e-6 {
+            bail!("[camera] position and target coincide");
+        }
+        let up_v = unit("[camera] up", up)?;
+        if view_dir.normalize().as_vec3().cross(up_v).length() < 1e-4 {
+            bail!("[camera] up is parallel to the viewing direction");
+        }
+        let camera = Camera {
+            position: vec3(position),
+            target: vec3(target),
+            up: up_v,
+            fov_y: (fov_deg as f32).to_radians(),
+        };
+
+        // Lights.
+        let light_descs = desc.lights.get_or_insert_with(|| {
+            vec![desc::LightDesc {
+                kind: LightKind::Directional,
+                position: None,
+                direction: Some([-1.0, -1.0, -1.0]),
+                color: Some([1.0, 1.0, 1.0]),
+                intensity: Some(1.0),
+                cone_deg: None,
+            }]
+        });
+        if light_descs.is_empty() {
+            bail!("the scene has no lights: the image would be black (omit [[lights]] for the default light)");
+        }
+        if light_descs.len() > MAX_LIGHTS {
+            bail!("the scene has {} lights; at most {MAX_LIGHTS} are supported", light_descs.len());
+        }
+        let mut lights = Vec::new();
+        for (i, l) in light_descs.iter_mut().enumerate() {
+            let name = |field: &str| format!("[[lights]] #{} {field}", i + 1);
+            let color = *l.color.get_or_insert([1.0; 3]);
+            let intensity = *l.intensity.get_or_insert(1.0);
+            finite(&name("color"), &color)?;
+            if color.iter().any(|c| *c < 0.0) || !(intensity.is_finite() && intensity >= 0.0) {
+                bail!("{}: colour and intensity must be non-negative", name(""));
+            }
+            let radiance = vec3(color) * intensity as f32;
+            let light = match l.kind {
+                LightKind::Directional => Light {
+                    kind: l.kind,
+                    position: Vec3::ZERO,
+                    direction: unit(&name("direction"), *l.direction.get_or_insert([-1.0, -1.0, -1.0]))?,
+                    radiance,
+                    cos_cone: -1.0,
+                },
+                LightKind::Point | LightKind::Spot => {
+                    let Some(p) = l.position else {
+                        bail!("{} is required for a {:?} light", name("position"), l.kind);
+                    };
+                    finite(&name("position"), &p)?;
+                    let (direction, cos_cone) = if l.kind == LightKind::Spot {
+                        let to_center = (center.as_dvec3() - DVec3::from_array(p)).to_array();
+                        let d = unit(&name("direction"), *l.direction.get_or_insert(to_center))?;
+                        let cone = *l.cone_deg.get_or_insert(30.0);
+                        if !(cone.is_finite() && cone > 0.0 && cone < 85.0) {
+                            bail!("{} = {cone} must lie between 0 and 85 degrees", name("cone_deg"));
+                        }
+                        (d, (cone as f32).to_radians().cos())
+                    } else {
+                        (Vec3::ZERO, -1.0)
+                    };
+                    Light {
+                        kind: l.kind,
+                        position: vec3(p),
+                        direction,
+                        radiance,
+                        cos_cone,
+                    }
+                }
+            };
+            lights.push(light);
+        }
+
+        // Material.
+        let mat = &mut desc.material;
+        let material = match (&mat.preset, mat.sigma_s_prime, mat.sigma_a) {
+            (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+                bail!("[material] gives both a preset and coefficients; choose one")
+            }
+            (None, Some(s), Some(a)) => {
+                let eta = *mat.eta.get_or_insert(1.3);
+                Material::custom(s, a, eta).context("[material]")?
+            }
+            (None, Some(_), None) | (None, None, Some(_)) => {
+                bail!("[material] needs both sigma_s_prime and sigma_a")
+            }
+            (preset, None, None) => {
+                let name = preset.clone().unwrap_or_else(|| "skimmilk".into());
+                let m = Material::preset(&name)?;
+                mat.preset = Some(name);
+                if let Some(eta) = mat.eta {
+                    Material::custom(m.sigma_s_prime, m.sigma_a, eta).context("[material]")?
+                } else {
+                    m
+                }
+            }
+        };
+
+        // Output.
+        let od = &mut desc.output;
+        let width = *od.width.get_or_insert(512);
+        let height = *od.height.get_or_insert(512);
+        if width == 0 || height == 0 {
+            bail!("[output] size {width}x{height} must be at least 1x1");
+        }
+        if width > 16384 || height > 16384 {
+            bail!("[output] size {width}x{height} exceeds 16384 pixels per side");
+        }
+        // The shadow map resolves the object at least as finely as the image does.
+        let shadow_map_size = *od
+            .shadow_map
+            .get_or_insert((2 * width.max(height)).next_power_of_two().clamp(256, 4096));
+        if !(16..=16384).contains(&shadow_map_size) {
+            bail!("[output] shadow_map = {shadow_map_size} must lie between 16 and 16384");
+        }
+        // Auto exposure: a white Lambertian surface facing the strongest light (at the object's
+        // centre) maps to 0.8 of full scale.
+        let exposure = match od.exposure {
+            Some(e) if e.is_finite() && e > 0.0 => e,
+            Some(e) => bail!("[output] exposure = {e} must be positive"),
+            None => {
+                let peak = lights
+                    .iter()
+                    .map(|l| {
+                        let e = l.radiance.max_element();
+                        match l.kind {
+                            LightKind::Directional => e,
+                            _ => e / l.position.distance_squared(center).max(1e-6),
+                        }
+                    })
+                    .fold(0.0f32, f32::max);
+                let e = if peak > 0.0 { 0.8 * std::f64::consts::PI / peak as f64 } else { 1.0 };
+                od.exposure = Some(e);
+                e
+            }
+        };
+
+        Ok(Scene {
+            mesh,
+            texture,
+            camera,
+            lights,
+            material,
+            width,
+            height,
+            exposure: exposure as f32,
+            shadow_map_size,
+            resolved: desc,
+        })
+    }
+
+    /// Centre and radius of the object's bounding sphere.
+    pub fn bounds(&self) -> (Vec3, f32) {
+        self.mesh.bounding_sphere()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_scene_is_the_bunny_about_50_mm_tall() {
+        let s = Scene::load(None, &Overrides::default()).unwrap();
+        let (lo, hi) = s.mesh.bounds();
+        let h = hi.y - lo.y;
+        assert!((40.0..60.0).contains(&h), "bunny height {h} mm");
+        assert_eq!(s.lights.len(), 1);
+        assert_eq!(s.resolved.material.preset.as_deref(), Some("skimmilk"));
+        assert_eq!((s.width, s.height), (512, 512));
+        // The printed description makes every default explicit and reproduces the scene.
+        let text = s.resolved.to_toml();
+        for key in ["builtin", "fov_deg", "position", "preset", "width", "shadow_map", "exposure"] {
+            assert!(text.contains(key), "{key} missing from\n{text}");
+        }
+        let again = Scene::from_desc(SceneDesc::parse(&text).unwrap(), Path::new(""), &Overrides::default()).unwrap();
+        assert_eq!(again.camera, s.camera);
+        assert_eq!(again.lights, s.lights);
+    }
+
+    #[test]
+    fn overrides_replace_scene_values() {
+        let o = Overrides {
+            material: Some("ketchup".into()),
+            width: Some(64),
+            height: Some(32),
+            ..Default::default()
+        };
+        let s = Scene::load(None, &o).unwrap();
+        assert_eq!(s.material, Material::preset("ketchup").unwrap());
+        assert_eq!((s.width, s.height), (64, 32));
+    }
+
+    #[test]
+    fn bad_descriptions_are_refused_with_the_field_named() {
+        let cases = [
+            ("lights = []", "no lights"),
+            ("[output]\nwidth = 0", "at least 1x1"),
+            ("[material]\npreset = \"marble\"\nsigma_a = [1.0, 1.0, 1.0]", "both a preset"),
+            ("[material]\nsigma_s_prime = [1.0, 1.0, 1.0]\nsigma_a = [-1.0, 1.0, 1.0]\n", "sigma_a"),
+            ("[material]\npreset = \"marble\"\neta = 0.0", "eta"),
+            ("[camera]\nposition = [0.0, 0.0, 0.0]\ntarget = [0.0, 0.0, 0.0]", "coincide"),
+            ("[mesh]\nobj = \"does-not-exist.obj\"", "does not exist"),
+            ("[mesh]\nbuiltin = \"teapot\"", "teapot"),
+            ("[[lights]]\nkind = \"point\"", "position"),
+            ("[[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, 0.0]", "zero vector"),
+            ("[mesh]\nbuiltin = \"sphere\"\ntexture = \"missing.png\"", "cannot read texture"),
+        ];
+        for (text, needle) in cases {
+            let desc = SceneDesc::parse(text).unwrap();
+            let e = Scene::from_desc(desc, Path::new(""), &Overrides::default()).unwrap_err();
+            let msg = format!("{e:#}");
+            assert!(msg.contains(needle), "{text:?}: {msg}");
+        }
+    }
+}
