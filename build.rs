@@ -7,8 +7,8 @@
 
 use glslang::{
     include::{IncludeHandler, IncludeResult, IncludeType},
-    Compiler, CompilerOptions, ShaderInput, ShaderSource, ShaderStage, SourceLanguage, SpirvVersion,
-    Target, VulkanVersion,
+    Compiler, CompilerOptions, ShaderInput, ShaderSource, ShaderStage, SourceLanguage,
+    SpirvVersion, Target, VulkanVersion,
 };
 use std::{
     fmt::Write as _,
@@ -150,7 +150,9 @@ fn main() {
         }
         std::process::exit(1);
     }
-    generated.push_str("/// Every compiled shader as (file name, SPIR-V).\npub const ALL: &[(&str, &[u8])] = &[\n");
+    generated.push_str(
+        "/// Every compiled shader as (file name, SPIR-V).\npub const ALL: &[(&str, &[u8])] = &[\n",
+    );
     for (file, name) in &all {
         let _ = writeln!(generated, "    (\"{file}\", {name}),");
     }

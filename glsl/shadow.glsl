@@ -3,7 +3,7 @@
 #define SHADOW_GLSL
 
 // Visibility of light `index` from x with geometric normal n: normal-offset bias, a constant
-// depth bias and 3x3 percentage-closer filtering on top of the hardware's 2x2 comparison.
+// depth bias and 3x3 percentage-closer filtering of nearest-texel comparisons.
 float shadow_visibility(sampler2DArrayShadow maps, uint index, vec3 x, vec3 n) {
     Light l = frame.lights[index];
     vec4 clip = l.shadow_view_proj * vec4(x + n * l.params.y, 1.0);

@@ -83,15 +83,35 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     let resolved = scene.resolved.to_toml();
     let mut renderer = Renderer::new(&gpu, scene)?;
     let result = renderer.render(args.frames)?;
-    let report = TimingReport::new(&gpu.info.name, &gpu.info.driver, &result.pass_names, &result.frames);
+    let report = TimingReport::new(
+        &gpu.info.name,
+        &gpu.info.driver,
+        &result.pass_names,
+        &result.frames,
+    );
     let out = &args.out;
-    output::write_png(&out.join("render.png"), result.width, result.height, &result.display)?;
-    output::write_exr(&out.join("render.exr"), result.width, result.height, &result.radiance)?;
+    output::write_png(
+        &out.join("render.png"),
+        result.width,
+        result.height,
+        &result.display,
+    )?;
+    output::write_exr(
+        &out.join("render.exr"),
+        result.width,
+        result.height,
+        &result.radiance,
+    )?;
     output::write_timings(&out.join("timings.json"), &report)?;
     output::write_trace(&out.join("trace.json"), &result.pass_names, &result.frames)?;
-    output::write_atomic(&out.join("scene.toml"), |p| Ok(std::fs::write(p, &resolved)?))?;
+    output::write_atomic(&out.join("scene.toml"), |p| {
+        Ok(std::fs::write(p, &resolved)?)
+    })?;
     println!("device: {} ({})", report.device, report.driver);
-    println!("{:<12} {:>10} {:>10} {:>10}", "pass", "min ms", "median ms", "max ms");
+    println!(
+        "{:<12} {:>10} {:>10} {:>10}",
+        "pass", "min ms", "median ms", "max ms"
+    );
     for p in &report.passes {
         println!(
             "{:<12} {:>10.3} {:>10.3} {:>10.3}",
@@ -102,7 +122,10 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         "frame: GPU median {:.3} ms, wall median {:.3} ms over {} frames",
         report.frame.gpu_median_ms, report.frame.wall_median_ms, report.frames
     );
-    println!("wrote render.png, render.exr, timings.json, trace.json, scene.toml to {}", out.display());
+    println!(
+        "wrote render.png, render.exr, timings.json, trace.json, scene.toml to {}",
+        out.display()
+    );
     drop(renderer);
     check_validation(&gpu)
 }
@@ -110,7 +133,10 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
 fn check_validation(gpu: &Gpu) -> Result<()> {
     let n = gpu.validation.count();
     if n > 0 {
-        bail!("the validation layer reported {n} message(s); first: {}", gpu.validation.messages()[0]);
+        bail!(
+            "the validation layer reported {n} message(s); first: {}",
+            gpu.validation.messages()[0]
+        );
     }
     Ok(())
 }
@@ -149,7 +175,14 @@ pub fn main() -> ExitCode {
         .with_writer(std::io::stderr)
         .try_init();
     let result = match &cli.command {
-        None => render(&cli, &RenderArgs { out: "out".into(), frames: 10, ..Default::default() }),
+        None => render(
+            &cli,
+            &RenderArgs {
+                out: "out".into(),
+                frames: 10,
+                ..Default::default()
+            },
+        ),
         Some(Command::Render(args)) => render(&cli, args),
         Some(Command::Devices) => devices(),
     };

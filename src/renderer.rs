@@ -53,7 +53,14 @@ impl Renderer {
             MemoryLocation::CpuToGpu,
         )?);
         let readback = |name: &str, bytes: u64| {
-            Buffer::new(gpu, name, bytes, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu).map(Arc::new)
+            Buffer::new(
+                gpu,
+                name,
+                bytes,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+            )
+            .map(Arc::new)
         };
         let pixels = w as u64 * h as u64;
         let hdr_readback = readback("radiance readback", pixels * 16)?;
@@ -68,9 +75,18 @@ impl Renderer {
         let display_rb = g.import_buffer(display_readback.clone(), Some(Access::HostRead));
         let lights = scene.lights.len() as u32;
         let s = scene.shadow_map_size;
-        let shadow_maps = g.image("shadow maps", ImageDesc::layered(passes::shadow::FORMAT, s, s, lights));
-        let hdr = g.image("radiance", ImageDesc::new(passes::lambert::HDR_FORMAT, w, h));
-        let depth = g.image("camera depth", ImageDesc::new(passes::lambert::DEPTH_FORMAT, w, h));
+        let shadow_maps = g.image(
+            "shadow maps",
+            ImageDesc::layered(passes::shadow::FORMAT, s, s, lights),
+        );
+        let hdr = g.image(
+            "radiance",
+            ImageDesc::new(passes::lambert::HDR_FORMAT, w, h),
+        );
+        let depth = g.image(
+            "camera depth",
+            ImageDesc::new(passes::lambert::DEPTH_FORMAT, w, h),
+        );
         let display = g.image("display", ImageDesc::new(vk::Format::R8G8B8A8_UNORM, w, h));
 
         passes::shadow::add(

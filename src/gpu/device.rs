@@ -152,10 +152,9 @@ pub const REQUIRED_FORMATS: &[(vk::Format, vk::FormatFeatureFlags, &str)] = &[
         vk::Format::D32_SFLOAT,
         vk::FormatFeatureFlags::from_raw(
             vk::FormatFeatureFlags::DEPTH_STENCIL_ATTACHMENT.as_raw()
-                | vk::FormatFeatureFlags::SAMPLED_IMAGE.as_raw()
-                | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR.as_raw(),
+                | vk::FormatFeatureFlags::SAMPLED_IMAGE.as_raw(),
         ),
-        "D32_SFLOAT depth attachment, sampled with linear filtering (shadow maps)",
+        "D32_SFLOAT depth attachment, sampled (shadow maps)",
     ),
     (
         vk::Format::R32G32B32A32_SFLOAT,
@@ -338,9 +337,7 @@ pub fn choose_device(devices: &[DeviceInfo], wanted: Option<&str>) -> GpuResult<
             Ok(i) => devices.iter().find(|d| d.index == i),
             Err(_) => {
                 let lw = w.to_lowercase();
-                devices
-                    .iter()
-                    .find(|d| d.name.to_lowercase().contains(&lw))
+                devices.iter().find(|d| d.name.to_lowercase().contains(&lw))
             }
         };
         return match found {
@@ -409,11 +406,12 @@ impl Gpu {
         } else {
             None
         };
-        let destroy_messenger = |m: &Option<(debug_utils::Instance, vk::DebugUtilsMessengerEXT)>| {
-            if let Some((l, m)) = m {
-                unsafe { l.destroy_debug_utils_messenger(*m, None) };
-            }
-        };
+        let destroy_messenger =
+            |m: &Option<(debug_utils::Instance, vk::DebugUtilsMessengerEXT)>| {
+                if let Some((l, m)) = m {
+                    unsafe { l.destroy_debug_utils_messenger(*m, None) };
+                }
+            };
 
         let pds = match unsafe { instance.enumerate_physical_devices() } {
             Ok(p) => p,
@@ -496,8 +494,8 @@ impl Gpu {
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(queue_family)
             .flags(vk::CommandPoolCreateFlags::TRANSIENT);
-        let upload_pool = unsafe { device.create_command_pool(&pool_info, None) }
-            .vk("vkCreateCommandPool")?;
+        let upload_pool =
+            unsafe { device.create_command_pool(&pool_info, None) }.vk("vkCreateCommandPool")?;
         let debug_device = has_debug_utils.then(|| debug_utils::Device::new(instance, &device));
         tracing::info!(
             device = %info.name,

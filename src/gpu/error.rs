@@ -17,7 +17,9 @@ pub enum GpuError {
         result: vk::Result,
     },
     /// No physical device is visible to the loader.
-    #[error("no Vulkan device found; on Debian install mesa-vulkan-drivers for the lavapipe CPU device")]
+    #[error(
+        "no Vulkan device found; on Debian install mesa-vulkan-drivers for the lavapipe CPU device"
+    )]
     NoDevice,
     /// The device requested by name or index does not exist.
     #[error("no Vulkan device matches {wanted:?}; available devices: {available}")]

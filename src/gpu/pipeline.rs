@@ -338,7 +338,9 @@ impl Pipeline {
     /// Binds the pipeline and its descriptor set.
     pub fn bind(&self, cmd: vk::CommandBuffer) {
         unsafe {
-            self.gpu.device.cmd_bind_pipeline(cmd, self.bind_point, self.raw);
+            self.gpu
+                .device
+                .cmd_bind_pipeline(cmd, self.bind_point, self.raw);
             if self.set != vk::DescriptorSet::null() {
                 self.gpu.device.cmd_bind_descriptor_sets(
                     cmd,

@@ -129,9 +129,8 @@ impl Buffer {
         let staging = Buffer::staging(&self.gpu, &format!("{} (staging)", self.name), data)?;
         let region = [vk::BufferCopy::default().size(data.len() as u64)];
         let (src, dst) = (staging.raw, self.raw);
-        self.gpu.one_shot(|cmd| unsafe {
-            self.gpu.device.cmd_copy_buffer(cmd, src, dst, &region)
-        })
+        self.gpu
+            .one_shot(|cmd| unsafe { self.gpu.device.cmd_copy_buffer(cmd, src, dst, &region) })
     }
 
     /// Writes `data` at the start of a host-visible buffer; returns false if the buffer is not
@@ -144,7 +143,11 @@ impl Buffer {
                 // SAFETY: the mapping covers `size` bytes, checked above, and no GPU work that
                 // touches this buffer is in flight (see above).
                 unsafe {
-                    std::ptr::copy_nonoverlapping(data.as_ptr(), ptr.as_ptr() as *mut u8, data.len())
+                    std::ptr::copy_nonoverlapping(
+                        data.as_ptr(),
+                        ptr.as_ptr() as *mut u8,
+                        data.len(),
+                    )
                 };
                 true
             }
@@ -425,17 +428,32 @@ pub struct Sampler {
 }
 
 impl Sampler {
-    /// Bilinear, clamp-to-edge sampler; with `compare` a depth-comparison sampler
-    /// (`LESS_OR_EQUAL`) for shadow maps.
-    pub fn linear(gpu: &Arc<Gpu>, repeat: bool, compare: bool) -> GpuResult<Sampler> {
+    /// Bilinear sampler, repeating or clamped to the edge.
+    pub fn linear(gpu: &Arc<Gpu>, repeat: bool) -> GpuResult<Sampler> {
+        Self::create(gpu, vk::Filter::LINEAR, repeat, false)
+    }
+
+    /// Depth-comparison sampler (`LESS_OR_EQUAL`) for shadow maps. Nearest filtering: not
+    /// every device filters depth formats linearly (lavapipe does not), and the shaders
+    /// filter by percentage-closer sampling themselves, so images match across devices.
+    pub fn shadow(gpu: &Arc<Gpu>) -> GpuResult<Sampler> {
+        Self::create(gpu, vk::Filter::NEAREST, false, true)
+    }
+
+    fn create(
+        gpu: &Arc<Gpu>,
+        filter: vk::Filter,
+        repeat: bool,
+        compare: bool,
+    ) -> GpuResult<Sampler> {
         let mode = if repeat {
             vk::SamplerAddressMode::REPEAT
         } else {
             vk::SamplerAddressMode::CLAMP_TO_EDGE
         };
         let info = vk::SamplerCreateInfo::default()
-            .mag_filter(vk::Filter::LINEAR)
-            .min_filter(vk::Filter::LINEAR)
+            .mag_filter(filter)
+            .min_filter(filter)
             .mipmap_mode(vk::SamplerMipmapMode::NEAREST)
             .address_mode_u(mode)
             .address_mode_v(mode)

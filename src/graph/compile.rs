@@ -1,9 +1,12 @@
 //! Graph compilation: pass ordering and barrier derivation. Pure code, no GPU.
 //!
-//! Semantics of a frame graph here:
-//! - Passes that write a resource run in the order they were declared.
-//! - A pass that only reads a resource runs after every pass that writes it: readers see the
-//!   resource's final contents for the frame. (Ping-pong within a frame uses two resources.)
+//! Semantics of a frame graph here (declaration order defines the data flow):
+//! - Passes that write a resource run in the order they were declared (write-after-write).
+//! - A read sees the last write declared before it (read-after-write); a later write waits
+//!   for it (write-after-read).
+//! - A read declared before any write sees, for an imported resource, its contents at the
+//!   start of the frame; for a transient resource, the first write, wherever that pass was
+//!   declared. So a consumer may be declared before its producer and the graph reorders them.
 //! - Among passes free to run, the one declared first runs first.
 //! - A transient resource read by a pass must be written by some pass of the graph.
 //! - Barriers follow from each resource's previous access in the schedule: read-after-write
@@ -87,7 +90,9 @@ pub struct Schedule {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum GraphError {
     /// A pass lists the same resource twice.
-    #[error("pass '{pass}' declares resource '{resource}' more than once; use one combined access")]
+    #[error(
+        "pass '{pass}' declares resource '{resource}' more than once; use one combined access"
+    )]
     DuplicateAccess {
         /// The pass.
         pass: String,
@@ -168,38 +173,65 @@ fn validate(resources: &[ResourceDecl], passes: &[PassDecl]) -> Result<(), Graph
 }
 
 /// Orders the passes (see the module documentation for the rules).
-pub fn order_passes(resources: &[ResourceDecl], passes: &[PassDecl]) -> Result<Vec<usize>, GraphError> {
+pub fn order_passes(
+    resources: &[ResourceDecl],
+    passes: &[PassDecl],
+) -> Result<Vec<usize>, GraphError> {
     validate(resources, passes)?;
     let n = passes.len();
     let mut edges: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); n];
+    let mut edge = |from: usize, to: usize| {
+        if from != to {
+            edges[from].insert(to);
+        }
+    };
     for (rid, res) in resources.iter().enumerate() {
-        let mut writers = Vec::new();
-        let mut readers = Vec::new();
-        for (pi, p) in passes.iter().enumerate() {
-            for (r, a) in &p.accesses {
-                if r.0 == rid {
-                    if a.info().writes {
-                        writers.push(pi);
-                    } else {
-                        readers.push(pi);
+        let uses: Vec<(usize, bool)> = passes
+            .iter()
+            .enumerate()
+            .flat_map(|(pi, p)| {
+                p.accesses
+                    .iter()
+                    .filter(move |(r, _)| r.0 == rid)
+                    .map(move |(_, a)| (pi, a.info().writes))
+            })
+            .collect();
+        let first_writer = uses.iter().find(|(_, w)| *w).map(|(p, _)| *p);
+        let mut last_writer: Option<usize> = None;
+        let mut readers: Vec<usize> = Vec::new();
+        let mut early_readers: Vec<usize> = Vec::new();
+        for (p, writes) in uses {
+            if writes {
+                if let Some(w) = last_writer {
+                    edge(w, p);
+                }
+                for &q in &readers {
+                    edge(q, p);
+                }
+                readers = if last_writer.is_none() {
+                    std::mem::take(&mut early_readers)
+                } else {
+                    Vec::new()
+                };
+                last_writer = Some(p);
+            } else {
+                match (last_writer, res.imported, first_writer) {
+                    (Some(w), _, _) => {
+                        edge(w, p);
+                        readers.push(p);
+                    }
+                    (None, true, _) => readers.push(p),
+                    (None, false, Some(w)) => {
+                        edge(w, p);
+                        early_readers.push(p);
+                    }
+                    (None, false, None) => {
+                        return Err(GraphError::ReadWithoutWriter {
+                            pass: passes[p].name.clone(),
+                            resource: res.name.clone(),
+                        })
                     }
                 }
-            }
-        }
-        if writers.is_empty() && !res.imported {
-            if let Some(&reader) = readers.first() {
-                return Err(GraphError::ReadWithoutWriter {
-                    pass: passes[reader].name.clone(),
-                    resource: res.name.clone(),
-                });
-            }
-        }
-        for w in writers.windows(2) {
-            edges[w[0]].insert(w[1]);
-        }
-        for &w in &writers {
-            for &r in &readers {
-                edges[w].insert(r);
             }
         }
     }
@@ -256,11 +288,24 @@ impl State {
     }
 
     /// The barrier (if any) needed before `next`, and the state after it.
-    fn transition(&mut self, resource: ResourceId, kind: ResourceKind, next: AccessInfo) -> Option<Barrier> {
+    fn transition(
+        &mut self,
+        resource: ResourceId,
+        kind: ResourceKind,
+        next: AccessInfo,
+    ) -> Option<Barrier> {
         let is_image = kind == ResourceKind::Image;
         let layout_change = is_image && self.layout != next.layout;
-        let new_layout = if is_image { next.layout } else { vk::ImageLayout::UNDEFINED };
-        let old_layout = if is_image { self.layout } else { vk::ImageLayout::UNDEFINED };
+        let new_layout = if is_image {
+            next.layout
+        } else {
+            vk::ImageLayout::UNDEFINED
+        };
+        let old_layout = if is_image {
+            self.layout
+        } else {
+            vk::ImageLayout::UNDEFINED
+        };
         let barrier = if next.writes || layout_change {
             // The write (or the layout transition, itself a write) must wait for everything
             // that touched the resource since its last write.
@@ -271,8 +316,7 @@ impl State {
             } else {
                 (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE)
             };
-            let needed = layout_change
-                || src_stages != vk::PipelineStageFlags2::NONE;
+            let needed = layout_change || src_stages != vk::PipelineStageFlags2::NONE;
             needed.then_some(Barrier {
                 resource,
                 src_stages,
@@ -393,8 +437,20 @@ mod tests {
     fn orders_readers_after_writers_whatever_the_declaration_order() {
         let res = [image("shadow"), image("hdr"), image("ldr")];
         let passes = [
-            pass("tonemap", &[(1, Access::StorageRead(Stage::Compute)), (2, Access::StorageWrite(Stage::Compute))]),
-            pass("shade", &[(0, Access::Sampled(Stage::Fragment)), (1, Access::ColorAttachment)]),
+            pass(
+                "tonemap",
+                &[
+                    (1, Access::StorageRead(Stage::Compute)),
+                    (2, Access::StorageWrite(Stage::Compute)),
+                ],
+            ),
+            pass(
+                "shade",
+                &[
+                    (0, Access::Sampled(Stage::Fragment)),
+                    (1, Access::ColorAttachment),
+                ],
+            ),
             pass("shadow", &[(0, Access::DepthAttachment)]),
         ];
         let order = order_passes(&res, &passes).unwrap();
@@ -415,20 +471,56 @@ mod tests {
     fn detects_cycles_and_bad_declarations() {
         let res = [image("a"), image("b")];
         let passes = [
-            pass("p", &[(0, Access::StorageWrite(Stage::Compute)), (1, Access::Sampled(Stage::Compute))]),
-            pass("q", &[(1, Access::StorageWrite(Stage::Compute)), (0, Access::Sampled(Stage::Compute))]),
+            pass(
+                "p",
+                &[
+                    (0, Access::StorageWrite(Stage::Compute)),
+                    (1, Access::Sampled(Stage::Compute)),
+                ],
+            ),
+            pass(
+                "q",
+                &[
+                    (1, Access::StorageWrite(Stage::Compute)),
+                    (0, Access::Sampled(Stage::Compute)),
+                ],
+            ),
         ];
         assert!(matches!(compile(&res, &passes), Err(GraphError::Cycle(_))));
-        let dup = [pass("p", &[(0, Access::ColorAttachment), (0, Access::Sampled(Stage::Fragment))])];
-        assert!(matches!(compile(&res, &dup), Err(GraphError::DuplicateAccess { .. })));
+        let dup = [pass(
+            "p",
+            &[
+                (0, Access::ColorAttachment),
+                (0, Access::Sampled(Stage::Fragment)),
+            ],
+        )];
+        assert!(matches!(
+            compile(&res, &dup),
+            Err(GraphError::DuplicateAccess { .. })
+        ));
         let bad = [pass("p", &[(0, Access::VertexBuffer)])];
-        assert!(matches!(compile(&res, &bad), Err(GraphError::InvalidAccess { .. })));
+        assert!(matches!(
+            compile(&res, &bad),
+            Err(GraphError::InvalidAccess { .. })
+        ));
         let orphan = [pass("p", &[(0, Access::Sampled(Stage::Fragment))])];
-        assert!(matches!(compile(&res, &orphan), Err(GraphError::ReadWithoutWriter { .. })));
-        let twice = [pass("p", &[(0, Access::ColorAttachment)]), pass("p", &[(1, Access::ColorAttachment)])];
-        assert!(matches!(compile(&res, &twice), Err(GraphError::DuplicatePassName(_))));
+        assert!(matches!(
+            compile(&res, &orphan),
+            Err(GraphError::ReadWithoutWriter { .. })
+        ));
+        let twice = [
+            pass("p", &[(0, Access::ColorAttachment)]),
+            pass("p", &[(1, Access::ColorAttachment)]),
+        ];
+        assert!(matches!(
+            compile(&res, &twice),
+            Err(GraphError::DuplicatePassName(_))
+        ));
         let unknown = [pass("p", &[(9, Access::ColorAttachment)])];
-        assert!(matches!(compile(&res, &unknown), Err(GraphError::UnknownResource { .. })));
+        assert!(matches!(
+            compile(&res, &unknown),
+            Err(GraphError::UnknownResource { .. })
+        ));
     }
 
     #[test]
@@ -436,18 +528,36 @@ mod tests {
         let res = [image("shadow"), image("hdr")];
         let passes = [
             pass("shadow", &[(0, Access::DepthAttachment)]),
-            pass("shade", &[(0, Access::Sampled(Stage::Fragment)), (1, Access::ColorAttachment)]),
+            pass(
+                "shade",
+                &[
+                    (0, Access::Sampled(Stage::Fragment)),
+                    (1, Access::ColorAttachment),
+                ],
+            ),
         ];
         let s = compile(&res, &passes).unwrap();
         // First use: UNDEFINED -> DEPTH_ATTACHMENT_OPTIMAL, nothing to wait for.
         assert_eq!(s.barriers[0].len(), 1);
         let b = s.barriers[0][0];
-        assert_eq!((b.old_layout, b.new_layout), (L::UNDEFINED, L::DEPTH_ATTACHMENT_OPTIMAL));
+        assert_eq!(
+            (b.old_layout, b.new_layout),
+            (L::UNDEFINED, L::DEPTH_ATTACHMENT_OPTIMAL)
+        );
         assert_eq!(b.src_stages, S::NONE);
         // Read after write: the depth writes are made visible to fragment sampling.
-        let b = s.barriers[1].iter().find(|b| b.resource == ResourceId(0)).unwrap();
-        assert_eq!((b.old_layout, b.new_layout), (L::DEPTH_ATTACHMENT_OPTIMAL, L::SHADER_READ_ONLY_OPTIMAL));
-        assert_eq!(b.src_stages, S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS);
+        let b = s.barriers[1]
+            .iter()
+            .find(|b| b.resource == ResourceId(0))
+            .unwrap();
+        assert_eq!(
+            (b.old_layout, b.new_layout),
+            (L::DEPTH_ATTACHMENT_OPTIMAL, L::SHADER_READ_ONLY_OPTIMAL)
+        );
+        assert_eq!(
+            b.src_stages,
+            S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS
+        );
         assert_eq!(b.src_access, A::DEPTH_STENCIL_ATTACHMENT_WRITE);
         assert_eq!(b.dst_stages, S::FRAGMENT_SHADER);
         assert_eq!(b.dst_access, A::SHADER_SAMPLED_READ);
@@ -458,21 +568,42 @@ mod tests {
         // An imported buffer is read by one pass and then overwritten by another.
         let res = [buffer("data", true), buffer("out", false)];
         let passes = [
-            pass("read", &[(0, Access::TexelRead(Stage::Compute)), (1, Access::StorageWrite(Stage::Compute))]),
-            pass("overwrite", &[(1, Access::StorageRead(Stage::Compute)), (0, Access::TransferWrite)]),
+            pass(
+                "read",
+                &[
+                    (0, Access::TexelRead(Stage::Compute)),
+                    (1, Access::StorageWrite(Stage::Compute)),
+                ],
+            ),
+            pass(
+                "overwrite",
+                &[
+                    (1, Access::StorageRead(Stage::Compute)),
+                    (0, Access::TransferWrite),
+                ],
+            ),
         ];
         let s = compile(&res, &passes).unwrap();
         assert_eq!(s.order, vec![0, 1]);
         // The imported buffer's first read needs no barrier: uploads complete before the frame.
         assert!(s.barriers[0].is_empty());
-        let war = s.barriers[1].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        let war = s.barriers[1]
+            .iter()
+            .find(|b| b.resource == ResourceId(0))
+            .unwrap();
         assert_eq!(war.src_stages, S::COMPUTE_SHADER);
         assert_eq!(war.src_access, A::NONE);
         assert_eq!(war.dst_stages, S::COPY | S::CLEAR);
         assert_eq!(war.dst_access, A::TRANSFER_WRITE);
         // Buffers have no layouts.
-        assert_eq!((war.old_layout, war.new_layout), (L::UNDEFINED, L::UNDEFINED));
-        let raw = s.barriers[1].iter().find(|b| b.resource == ResourceId(1)).unwrap();
+        assert_eq!(
+            (war.old_layout, war.new_layout),
+            (L::UNDEFINED, L::UNDEFINED)
+        );
+        let raw = s.barriers[1]
+            .iter()
+            .find(|b| b.resource == ResourceId(1))
+            .unwrap();
         assert_eq!(raw.src_access, A::SHADER_STORAGE_WRITE);
         assert_eq!(raw.dst_access, A::SHADER_STORAGE_READ);
     }
@@ -482,16 +613,42 @@ mod tests {
         let res = [image("hdr"), image("x"), image("y"), image("z")];
         let passes = [
             pass("draw", &[(0, Access::ColorAttachment)]),
-            pass("a", &[(0, Access::Sampled(Stage::Fragment)), (1, Access::ColorAttachment)]),
-            pass("b", &[(0, Access::Sampled(Stage::Fragment)), (2, Access::ColorAttachment)]),
-            pass("c", &[(0, Access::Sampled(Stage::Compute)), (3, Access::StorageWrite(Stage::Compute))]),
+            pass(
+                "a",
+                &[
+                    (0, Access::Sampled(Stage::Fragment)),
+                    (1, Access::ColorAttachment),
+                ],
+            ),
+            pass(
+                "b",
+                &[
+                    (0, Access::Sampled(Stage::Fragment)),
+                    (2, Access::ColorAttachment),
+                ],
+            ),
+            pass(
+                "c",
+                &[
+                    (0, Access::Sampled(Stage::Compute)),
+                    (3, Access::StorageWrite(Stage::Compute)),
+                ],
+            ),
         ];
         let s = compile(&res, &passes).unwrap();
-        let on_hdr = |i: usize| s.barriers[i].iter().filter(|b| b.resource == ResourceId(0)).count();
+        let on_hdr = |i: usize| {
+            s.barriers[i]
+                .iter()
+                .filter(|b| b.resource == ResourceId(0))
+                .count()
+        };
         assert_eq!(on_hdr(1), 1);
         assert_eq!(on_hdr(2), 0, "already visible to fragment sampling");
         assert_eq!(on_hdr(3), 1, "compute sampling needs its own visibility");
-        let b = s.barriers[3].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        let b = s.barriers[3]
+            .iter()
+            .find(|b| b.resource == ResourceId(0))
+            .unwrap();
         assert_eq!(b.src_access, A::COLOR_ATTACHMENT_WRITE);
         assert_eq!(b.old_layout, b.new_layout);
     }
@@ -501,13 +658,28 @@ mod tests {
         let res = [image("hdr"), image("x"), buffer("readback", true)];
         let passes = [
             pass("draw", &[(0, Access::ColorAttachment)]),
-            pass("sample", &[(0, Access::Sampled(Stage::Compute)), (1, Access::StorageWrite(Stage::Compute))]),
-            pass("copy", &[(0, Access::TransferRead), (2, Access::TransferWrite)]),
+            pass(
+                "sample",
+                &[
+                    (0, Access::Sampled(Stage::Compute)),
+                    (1, Access::StorageWrite(Stage::Compute)),
+                ],
+            ),
+            pass(
+                "copy",
+                &[(0, Access::TransferRead), (2, Access::TransferWrite)],
+            ),
         ];
         let s = compile(&res, &passes).unwrap();
-        let b = s.barriers[2].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        let b = s.barriers[2]
+            .iter()
+            .find(|b| b.resource == ResourceId(0))
+            .unwrap();
         assert_eq!(b.src_stages, S::COMPUTE_SHADER);
-        assert_eq!((b.old_layout, b.new_layout), (L::SHADER_READ_ONLY_OPTIMAL, L::TRANSFER_SRC_OPTIMAL));
+        assert_eq!(
+            (b.old_layout, b.new_layout),
+            (L::SHADER_READ_ONLY_OPTIMAL, L::TRANSFER_SRC_OPTIMAL)
+        );
     }
 
     #[test]
@@ -517,13 +689,19 @@ mod tests {
         let res = [image("hdr"), rb];
         let passes = [
             pass("draw", &[(0, Access::ColorAttachment)]),
-            pass("copy", &[(0, Access::TransferRead), (1, Access::TransferWrite)]),
+            pass(
+                "copy",
+                &[(0, Access::TransferRead), (1, Access::TransferWrite)],
+            ),
         ];
         let s = compile(&res, &passes).unwrap();
         assert_eq!(s.final_barriers.len(), 1);
         let b = s.final_barriers[0];
         assert_eq!(b.resource, ResourceId(1));
-        assert_eq!((b.src_access, b.dst_stages, b.dst_access), (A::TRANSFER_WRITE, S::HOST, A::HOST_READ));
+        assert_eq!(
+            (b.src_access, b.dst_stages, b.dst_access),
+            (A::TRANSFER_WRITE, S::HOST, A::HOST_READ)
+        );
     }
 
     #[test]
@@ -531,15 +709,27 @@ mod tests {
         let res = [image("acc"), buffer("out", true)];
         let passes = [
             pass("clear", &[(0, Access::TransferWrite)]),
-            pass("accumulate", &[(0, Access::StorageReadWrite(Stage::Compute))]),
-            pass("copy", &[(0, Access::TransferRead), (1, Access::TransferWrite)]),
+            pass(
+                "accumulate",
+                &[(0, Access::StorageReadWrite(Stage::Compute))],
+            ),
+            pass(
+                "copy",
+                &[(0, Access::TransferRead), (1, Access::TransferWrite)],
+            ),
         ];
         let s = compile(&res, &passes).unwrap();
         assert_eq!(s.order, vec![0, 1, 2]);
         let b = s.barriers[1][0];
         assert_eq!(b.src_access, A::TRANSFER_WRITE);
-        assert_eq!((b.old_layout, b.new_layout), (L::TRANSFER_DST_OPTIMAL, L::GENERAL));
-        let b = s.barriers[2].iter().find(|b| b.resource == ResourceId(0)).unwrap();
+        assert_eq!(
+            (b.old_layout, b.new_layout),
+            (L::TRANSFER_DST_OPTIMAL, L::GENERAL)
+        );
+        let b = s.barriers[2]
+            .iter()
+            .find(|b| b.resource == ResourceId(0))
+            .unwrap();
         assert_eq!(b.src_access, A::SHADER_STORAGE_WRITE);
     }
 }

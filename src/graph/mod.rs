@@ -18,7 +18,9 @@ pub mod compile;
 pub mod timing;
 
 pub use access::{Access, Stage};
-pub use compile::{Barrier, GraphError, PassDecl, ResourceDecl, ResourceId, ResourceKind, Schedule};
+pub use compile::{
+    Barrier, GraphError, PassDecl, ResourceDecl, ResourceId, ResourceKind, Schedule,
+};
 
 use crate::gpu::{Buffer, Gpu, GpuError, GpuResult, Image, ImageInfo, VkCall};
 use ash::vk;
@@ -88,7 +90,9 @@ impl Resources {
     pub fn image(&self, id: ResourceId) -> &Arc<Image> {
         match &self.physical[id.0] {
             Physical::Image(i) => i,
-            Physical::Buffer(_) => panic!("resource '{}' is a buffer, not an image", self.names[id.0]),
+            Physical::Buffer(_) => {
+                panic!("resource '{}' is a buffer, not an image", self.names[id.0])
+            }
         }
     }
 
@@ -96,7 +100,9 @@ impl Resources {
     pub fn buffer(&self, id: ResourceId) -> &Arc<Buffer> {
         match &self.physical[id.0] {
             Physical::Buffer(b) => b,
-            Physical::Image(_) => panic!("resource '{}' is an image, not a buffer", self.names[id.0]),
+            Physical::Image(_) => {
+                panic!("resource '{}' is an image, not a buffer", self.names[id.0])
+            }
         }
     }
 }
@@ -247,18 +253,31 @@ impl RenderGraph {
                 .map(|(_, a)| *a);
             physical.push(match source {
                 Source::TransientImage(desc) => {
-                    let usage = accesses.fold(vk::ImageUsageFlags::empty(), |u, a| u | a.image_usage());
+                    let usage =
+                        accesses.fold(vk::ImageUsageFlags::empty(), |u, a| u | a.image_usage());
                     let info = ImageInfo {
                         format: desc.format,
                         extent: desc.extent,
                         layers: desc.layers,
                         usage,
                     };
-                    Physical::Image(Arc::new(Image::new(gpu, &decl.name, info, desc.array_view)?))
+                    Physical::Image(Arc::new(Image::new(
+                        gpu,
+                        &decl.name,
+                        info,
+                        desc.array_view,
+                    )?))
                 }
                 Source::TransientBuffer(size) => {
-                    let usage = accesses.fold(vk::BufferUsageFlags::empty(), |u, a| u | a.buffer_usage());
-                    Physical::Buffer(Arc::new(Buffer::new(gpu, &decl.name, *size, usage, MemoryLocation::GpuOnly)?))
+                    let usage =
+                        accesses.fold(vk::BufferUsageFlags::empty(), |u, a| u | a.buffer_usage());
+                    Physical::Buffer(Arc::new(Buffer::new(
+                        gpu,
+                        &decl.name,
+                        *size,
+                        usage,
+                        MemoryLocation::GpuOnly,
+                    )?))
                 }
                 Source::ImportedImage(i) => Physical::Image(i.clone()),
                 Source::ImportedBuffer(b) => Physical::Buffer(b.clone()),
@@ -312,7 +331,12 @@ pub struct FrameGraph {
 /// Issues `barriers` as one `vkCmdPipelineBarrier2`. With no barriers it still issues an
 /// execution dependency: lavapipe latches a begin timestamp after the following work unless a
 /// barrier separates them (see `shared/LAVAPIPE.md`), which would make the pass read as ~0 ms.
-pub fn record_barriers(gpu: &Gpu, cmd: vk::CommandBuffer, resources: &Resources, barriers: &[Barrier]) {
+pub fn record_barriers(
+    gpu: &Gpu,
+    cmd: vk::CommandBuffer,
+    resources: &Resources,
+    barriers: &[Barrier],
+) {
     let mut images = Vec::new();
     let mut buffers = Vec::new();
     for b in barriers {
@@ -378,12 +402,15 @@ impl FrameGraph {
             .command_pool(pool)
             .level(vk::CommandBufferLevel::PRIMARY)
             .command_buffer_count(1);
-        graph.cmd = unsafe { d.allocate_command_buffers(&alloc) }.vk("vkAllocateCommandBuffers")?[0];
-        graph.fence = unsafe { d.create_fence(&vk::FenceCreateInfo::default(), None) }.vk("vkCreateFence")?;
+        graph.cmd =
+            unsafe { d.allocate_command_buffers(&alloc) }.vk("vkAllocateCommandBuffers")?[0];
+        graph.fence =
+            unsafe { d.create_fence(&vk::FenceCreateInfo::default(), None) }.vk("vkCreateFence")?;
         let query_info = vk::QueryPoolCreateInfo::default()
             .query_type(vk::QueryType::TIMESTAMP)
             .query_count(graph.query_count());
-        graph.queries = unsafe { d.create_query_pool(&query_info, None) }.vk("vkCreateQueryPool")?;
+        graph.queries =
+            unsafe { d.create_query_pool(&query_info, None) }.vk("vkCreateQueryPool")?;
         Ok(graph)
     }
 
@@ -411,7 +438,8 @@ impl FrameGraph {
                 .vk("vkResetCommandBuffer")?;
             let begin = vk::CommandBufferBeginInfo::default()
                 .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
-            d.begin_command_buffer(self.cmd, &begin).vk("vkBeginCommandBuffer")?;
+            d.begin_command_buffer(self.cmd, &begin)
+                .vk("vkBeginCommandBuffer")?;
             d.cmd_reset_query_pool(self.cmd, self.queries, 0, self.query_count());
         }
         for (i, pass) in self.passes.iter_mut().enumerate() {
@@ -453,8 +481,10 @@ impl FrameGraph {
             d.reset_fences(&[self.fence]).vk("vkResetFences")?;
             let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
             let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cmds)];
-            d.queue_submit2(gpu.queue, &submit, self.fence).vk("vkQueueSubmit2")?;
-            d.wait_for_fences(&[self.fence], true, u64::MAX).vk("vkWaitForFences")?;
+            d.queue_submit2(gpu.queue, &submit, self.fence)
+                .vk("vkQueueSubmit2")?;
+            d.wait_for_fences(&[self.fence], true, u64::MAX)
+                .vk("vkWaitForFences")?;
         }
         let wall_ms = wall_start.elapsed().as_secs_f64() * 1e3;
         let mut stamps = vec![0u64; 2 * self.passes.len()];
@@ -477,7 +507,7 @@ impl FrameGraph {
             (Some(&a), Some(&b)) => to_ms(a, b),
             _ => 0.0,
         };
-        if stamps.iter().any(|&s| s == 0) {
+        if stamps.contains(&0) {
             return Err(GpuError::Vk {
                 call: "vkGetQueryPoolResults (a timestamp was never written)",
                 result: vk::Result::NOT_READY,

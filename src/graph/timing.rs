@@ -94,7 +94,12 @@ pub struct TimingReport {
 
 impl TimingReport {
     /// Summarises `frames` (each with one time per pass of `names`).
-    pub fn new(device: &str, driver: &str, names: &[String], frames: &[FrameTiming]) -> TimingReport {
+    pub fn new(
+        device: &str,
+        driver: &str,
+        names: &[String],
+        frames: &[FrameTiming],
+    ) -> TimingReport {
         let passes = names
             .iter()
             .enumerate()
@@ -144,7 +149,12 @@ mod tests {
             wall_ms: a + b + 0.5,
         };
         let names = vec!["shadow".to_string(), "shade".to_string()];
-        let r = TimingReport::new("dev", "drv", &names, &[frame(1.0, 2.0), frame(3.0, 4.0), frame(2.0, 3.0)]);
+        let r = TimingReport::new(
+            "dev",
+            "drv",
+            &names,
+            &[frame(1.0, 2.0), frame(3.0, 4.0), frame(2.0, 3.0)],
+        );
         assert_eq!(r.frames, 3);
         assert_eq!(r.passes[0].stats.median_ms, 2.0);
         assert_eq!(r.passes[1].stats.max_ms, 4.0);

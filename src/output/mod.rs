@@ -7,7 +7,10 @@ use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
 fn temporary(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
 }
 
@@ -15,7 +18,8 @@ fn temporary(path: &Path) -> PathBuf {
 pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let tmp = temporary(path);
     let result = write(&tmp).and_then(|_| {
-        std::fs::rename(&tmp, path).with_context(|| format!("cannot move {} into place", path.display()))
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("cannot move {} into place", path.display()))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -26,7 +30,14 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
 /// Writes tightly packed RGBA8 pixels as PNG.
 pub fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
     write_atomic(path, |tmp| {
-        image::save_buffer_with_format(tmp, rgba, width, height, image::ColorType::Rgba8, image::ImageFormat::Png)?;
+        image::save_buffer_with_format(
+            tmp,
+            rgba,
+            width,
+            height,
+            image::ColorType::Rgba8,
+            image::ImageFormat::Png,
+        )?;
         Ok(())
     })
 }
@@ -48,7 +59,12 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     use exr::prelude::*;
     let image = read_first_rgba_layer_from_file(
         path,
-        |resolution, _| (resolution.width(), vec![0f32; resolution.width() * resolution.height() * 4]),
+        |resolution, _| {
+            (
+                resolution.width(),
+                vec![0f32; resolution.width() * resolution.height() * 4],
+            )
+        },
         |(w, px), pos, (r, g, b, a): (f32, f32, f32, f32)| {
             let i = 4 * (pos.y() * *w + pos.x());
             px[i..i + 4].copy_from_slice(&[r, g, b, a]);
@@ -56,7 +72,11 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     )
     .with_context(|| format!("cannot read '{}'", path.display()))?;
     let size = image.layer_data.size;
-    Ok((size.width() as u32, size.height() as u32, image.layer_data.channel_data.pixels.1))
+    Ok((
+        size.width() as u32,
+        size.height() as u32,
+        image.layer_data.channel_data.pixels.1,
+    ))
 }
 
 /// Writes `timings.json`.
@@ -109,7 +129,10 @@ mod tests {
         let (w, h, back) = read_exr(&path).unwrap();
         assert_eq!((w, h), (2, 3));
         assert_eq!(back, px);
-        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
         assert_eq!(names.len(), 1, "{names:?}");
         // A failed write leaves nothing behind under the final name.
         let bad = dir.join("missing-dir").join("y.png");
@@ -123,17 +146,23 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("translucent-trace-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let frames = vec![
-            FrameTiming { pass_ms: vec![1.0, 2.0], pass_start_ms: vec![0.0, 1.0], gpu_ms: 3.0, wall_ms: 4.0 };
+            FrameTiming {
+                pass_ms: vec![1.0, 2.0],
+                pass_start_ms: vec![0.0, 1.0],
+                gpu_ms: 3.0,
+                wall_ms: 4.0
+            };
             3
         ];
         let names = vec!["a".to_string(), "b".to_string()];
         let path = dir.join("trace.json");
         write_trace(&path, &names, &frames).unwrap();
-        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
         let events = v["traceEvents"].as_array().unwrap();
         let passes = events.iter().filter(|e| e["cat"] == "pass").count();
         assert_eq!(passes, 6);
-        let last_b = events.iter().filter(|e| e["name"] == "b").last().unwrap();
+        let last_b = events.iter().rfind(|e| e["name"] == "b").unwrap();
         assert_eq!(last_b["ts"].as_f64().unwrap(), 8000.0 + 1000.0);
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -49,13 +49,19 @@ fn any_perpendicular(d: Vec3) -> Vec3 {
 /// The shadow projection of `light` that covers the bounding sphere (`center`, `radius`)
 /// with a `size`-texel map: orthographic for directional lights, perspective for spot lights
 /// (their cone) and point lights (the sphere seen from the light).
-pub fn shadow_projection(light: &Light, center: Vec3, radius: f32, size: u32) -> Result<ShadowProjection> {
+pub fn shadow_projection(
+    light: &Light,
+    center: Vec3,
+    radius: f32,
+    size: u32,
+) -> Result<ShadowProjection> {
     let radius = radius.max(1e-3);
     match light.kind {
         LightKind::Directional => {
             let eye = center - light.direction * 2.0 * radius;
             let view = Mat4::look_at_rh(eye, center, any_perpendicular(light.direction));
-            let proj = Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius);
+            let proj =
+                Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius);
             let texel = 2.0 * radius / size as f32;
             Ok(ShadowProjection {
                 view_proj: proj * view,
@@ -67,7 +73,10 @@ pub fn shadow_projection(light: &Light, center: Vec3, radius: f32, size: u32) ->
             let to_center = center - light.position;
             let dist = to_center.length();
             let (axis, half) = if light.kind == LightKind::Spot {
-                (light.direction, light.cos_cone.clamp(-1.0, 1.0).acos() * 1.02)
+                (
+                    light.direction,
+                    light.cos_cone.clamp(-1.0, 1.0).acos() * 1.02,
+                )
             } else {
                 if dist < radius * 1.05 {
                     bail!(
@@ -80,7 +89,11 @@ pub fn shadow_projection(light: &Light, center: Vec3, radius: f32, size: u32) ->
                 (to_center / dist, (radius / dist).asin() * 1.05)
             };
             let half = half.min(80f32.to_radians());
-            let view = Mat4::look_at_rh(light.position, light.position + axis, any_perpendicular(axis));
+            let view = Mat4::look_at_rh(
+                light.position,
+                light.position + axis,
+                any_perpendicular(axis),
+            );
             let far = dist + radius;
             let near = (dist - radius).max(far * 1e-3);
             let proj = Mat4::perspective_rh(2.0 * half, 1.0, near, far);
@@ -100,7 +113,10 @@ impl FrameUniforms {
         let aspect = scene.width as f32 / scene.height as f32;
         let albedo = scene.material.total_reflectance();
         let mut u = FrameUniforms::zeroed();
-        u.view_proj = scene.camera.view_proj(aspect, center, radius).to_cols_array_2d();
+        u.view_proj = scene
+            .camera
+            .view_proj(aspect, center, radius)
+            .to_cols_array_2d();
         u.camera_pos = scene.camera.position.extend(1.0).to_array();
         u.albedo = [albedo[0] as f32, albedo[1] as f32, albedo[2] as f32, 1.0];
         u.counts = [lights.len() as u32, 0, 0, 0];
@@ -115,7 +131,12 @@ impl FrameUniforms {
                 position: light.position.extend(1.0).to_array(),
                 direction: light.direction.extend(0.0).to_array(),
                 radiance: light.radiance.extend(0.0).to_array(),
-                params: [light.cos_cone, 1.5 * shadow.texel_mm, shadow.depth_bias, kind],
+                params: [
+                    light.cos_cone,
+                    1.5 * shadow.texel_mm,
+                    shadow.depth_bias,
+                    kind,
+                ],
                 shadow_view_proj: shadow.view_proj.to_cols_array_2d(),
             };
         }
@@ -142,14 +163,22 @@ mod tests {
     fn shadow_projections_cover_the_object() {
         let (c, r) = (Vec3::new(1.0, 20.0, -3.0), 25.0);
         let lights = [
-            light(LightKind::Directional, Vec3::ZERO, Vec3::new(-1.0, -2.0, 0.5).normalize()),
+            light(
+                LightKind::Directional,
+                Vec3::ZERO,
+                Vec3::new(-1.0, -2.0, 0.5).normalize(),
+            ),
             light(LightKind::Point, Vec3::new(0.0, 200.0, 100.0), Vec3::ZERO),
         ];
         for l in lights {
             let p = shadow_projection(&l, c, r, 1024).unwrap();
             for i in 0..200 {
                 let t = i as f32 * 0.7;
-                let d = Vec3::new(t.sin() * (t * 0.3).cos(), (t * 0.3).sin(), t.cos() * (t * 0.3).cos());
+                let d = Vec3::new(
+                    t.sin() * (t * 0.3).cos(),
+                    (t * 0.3).sin(),
+                    t.cos() * (t * 0.3).cos(),
+                );
                 let clip = p.view_proj * (c + d.normalize() * r * 0.99).extend(1.0);
                 let ndc = clip.truncate() / clip.w;
                 assert!(clip.w > 0.0);

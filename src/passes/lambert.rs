@@ -39,8 +39,8 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadeInputs, hdr: ResourceId, depth:
         .access(hdr, Access::ColorAttachment)
         .access(depth, Access::DepthAttachment)
         .setup(move |gpu, res| {
-            let shadow_sampler = Sampler::linear(gpu, false, true)?;
-            let texture_sampler = Sampler::linear(gpu, true, false)?;
+            let shadow_sampler = Sampler::shadow(gpu)?;
+            let texture_sampler = Sampler::linear(gpu, true)?;
             let pipeline = Pipeline::graphics(
                 gpu,
                 "shade",
@@ -83,7 +83,10 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadeInputs, hdr: ResourceId, depth:
                     .load_op(vk::AttachmentLoadOp::CLEAR)
                     .store_op(vk::AttachmentStoreOp::DONT_CARE)
                     .clear_value(vk::ClearValue {
-                        depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 },
+                        depth_stencil: vk::ClearDepthStencilValue {
+                            depth: 1.0,
+                            stencil: 0,
+                        },
                     });
                 let info = vk::RenderingInfo::default()
                     .render_area(vk::Rect2D {

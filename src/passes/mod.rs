@@ -27,11 +27,12 @@ pub struct Vertex {
 }
 
 /// Vertex input binding of [`Vertex`].
-pub const VERTEX_BINDINGS: [vk::VertexInputBindingDescription; 1] = [vk::VertexInputBindingDescription {
-    binding: 0,
-    stride: std::mem::size_of::<Vertex>() as u32,
-    input_rate: vk::VertexInputRate::VERTEX,
-}];
+pub const VERTEX_BINDINGS: [vk::VertexInputBindingDescription; 1] =
+    [vk::VertexInputBindingDescription {
+        binding: 0,
+        stride: std::mem::size_of::<Vertex>() as u32,
+        input_rate: vk::VertexInputRate::VERTEX,
+    }];
 
 /// All attributes of [`Vertex`].
 pub const VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 3] = [

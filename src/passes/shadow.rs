@@ -59,7 +59,10 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                         .load_op(vk::AttachmentLoadOp::CLEAR)
                         .store_op(vk::AttachmentStoreOp::STORE)
                         .clear_value(vk::ClearValue {
-                            depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 },
+                            depth_stencil: vk::ClearDepthStencilValue {
+                                depth: 1.0,
+                                stencil: 0,
+                            },
                         });
                     let info = vk::RenderingInfo::default()
                         .render_area(vk::Rect2D {

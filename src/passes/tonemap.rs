@@ -18,7 +18,10 @@ pub fn add(graph: &mut RenderGraph, hdr: ResourceId, display: ResourceId, exposu
                 gpu,
                 "tonemap",
                 shaders::TONEMAP_COMP,
-                &[Binding::StorageImage(src.view), Binding::StorageImage(res.image(display).view)],
+                &[
+                    Binding::StorageImage(src.view),
+                    Binding::StorageImage(res.image(display).view),
+                ],
                 4,
             )?;
             let extent = src.info.extent;

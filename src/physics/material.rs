@@ -26,10 +26,20 @@ pub const PRESETS: &[(&str, [f64; 3], [f64; 3], f64)] = &[
     ("ketchup", [0.18, 0.07, 0.03], [0.061, 0.97, 1.45], 1.3),
     ("marble", [2.19, 2.62, 3.00], [0.0021, 0.0041, 0.0071], 1.5),
     ("potato", [0.68, 0.70, 0.55], [0.0024, 0.0090, 0.12], 1.3),
-    ("skimmilk", [0.70, 1.22, 1.90], [0.0014, 0.0025, 0.0142], 1.3),
+    (
+        "skimmilk",
+        [0.70, 1.22, 1.90],
+        [0.0014, 0.0025, 0.0142],
+        1.3,
+    ),
     ("skin1", [0.74, 0.88, 1.01], [0.032, 0.17, 0.48], 1.3),
     ("skin2", [1.09, 1.59, 1.79], [0.013, 0.070, 0.145], 1.3),
-    ("wholemilk", [2.55, 3.21, 3.77], [0.0011, 0.0024, 0.014], 1.3),
+    (
+        "wholemilk",
+        [2.55, 3.21, 3.77],
+        [0.0011, 0.0024, 0.014],
+        1.3,
+    ),
 ];
 
 /// Published total diffuse reflectance of each preset (Jensen 2001), for tests.
@@ -100,11 +110,19 @@ impl Material {
     }
 
     /// Custom coefficients, validated.
-    pub fn custom(sigma_s_prime: [f64; 3], sigma_a: [f64; 3], eta: f64) -> Result<Material, MaterialError> {
+    pub fn custom(
+        sigma_s_prime: [f64; 3],
+        sigma_a: [f64; 3],
+        eta: f64,
+    ) -> Result<Material, MaterialError> {
         for (name, values) in [("sigma_s_prime", sigma_s_prime), ("sigma_a", sigma_a)] {
             for (channel, &value) in values.iter().enumerate() {
                 if !value.is_finite() || value < 0.0 {
-                    return Err(MaterialError::BadCoefficient { name, channel, value });
+                    return Err(MaterialError::BadCoefficient {
+                        name,
+                        channel,
+                        value,
+                    });
                 }
             }
         }
@@ -127,7 +145,11 @@ impl Material {
 
     /// The dipole of each channel.
     pub fn dipoles(&self) -> [Dipole; 3] {
-        [Dipole::new(self, 0), Dipole::new(self, 1), Dipole::new(self, 2)]
+        [
+            Dipole::new(self, 0),
+            Dipole::new(self, 1),
+            Dipole::new(self, 2),
+        ]
     }
 
     /// Total diffuse reflectance per channel.
@@ -142,7 +164,10 @@ mod tests {
 
     #[test]
     fn presets_by_loose_name() {
-        assert_eq!(Material::preset("Skim Milk").unwrap(), Material::preset("skim_milk").unwrap());
+        assert_eq!(
+            Material::preset("Skim Milk").unwrap(),
+            Material::preset("skim_milk").unwrap()
+        );
         assert_eq!(Material::preset("marble").unwrap().eta, 1.5);
         let e = Material::preset("jelly").unwrap_err().to_string();
         assert!(e.contains("jelly") && e.contains("ketchup"), "{e}");
@@ -155,15 +180,29 @@ mod tests {
         let ok = [1.0; 3];
         assert!(matches!(
             Material::custom([1.0, -1.0, 1.0], ok, 1.3),
-            Err(MaterialError::BadCoefficient { name: "sigma_s_prime", channel: 1, .. })
+            Err(MaterialError::BadCoefficient {
+                name: "sigma_s_prime",
+                channel: 1,
+                ..
+            })
         ));
         assert!(matches!(
             Material::custom(ok, [f64::NAN, 0.0, 0.0], 1.3),
-            Err(MaterialError::BadCoefficient { name: "sigma_a", channel: 0, .. })
+            Err(MaterialError::BadCoefficient {
+                name: "sigma_a",
+                channel: 0,
+                ..
+            })
         ));
-        assert!(matches!(Material::custom([0.0; 3], [0.0; 3], 1.3), Err(MaterialError::NoExtinction(0))));
+        assert!(matches!(
+            Material::custom([0.0; 3], [0.0; 3], 1.3),
+            Err(MaterialError::NoExtinction(0))
+        ));
         for eta in [0.0, -1.0, 0.5, f64::INFINITY, 10.0] {
-            assert!(matches!(Material::custom(ok, ok, eta), Err(MaterialError::BadEta(_))));
+            assert!(matches!(
+                Material::custom(ok, ok, eta),
+                Err(MaterialError::BadEta(_))
+            ));
         }
         assert!(Material::custom(ok, [0.0; 3], 1.0).is_ok());
     }

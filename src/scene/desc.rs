@@ -197,7 +197,7 @@ impl SceneDesc {
 
     /// TOML text of this description.
     pub fn to_toml(&self) -> String {
-        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# (cannot print scene: {e})"))
+        toml::to_string(self).unwrap_or_else(|e| format!("# (cannot print scene: {e})"))
     }
 }
 
@@ -212,13 +212,19 @@ mod tests {
 
     #[test]
     fn unknown_keys_and_wrong_types_are_named() {
-        let e = SceneDesc::parse("[camera]\nfov = 30\n").unwrap_err().to_string();
+        let e = SceneDesc::parse("[camera]\nfov = 30\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("fov"), "{e}");
-        let e = SceneDesc::parse("[output]\nwidth = \"big\"\n").unwrap_err().to_string();
+        let e = SceneDesc::parse("[output]\nwidth = \"big\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("width") || e.contains("line 2"), "{e}");
         let e = SceneDesc::parse("colour = 1\n").unwrap_err().to_string();
         assert!(e.contains("colour"), "{e}");
-        let e = SceneDesc::parse("[[lights]]\nkind = \"laser\"\n").unwrap_err().to_string();
+        let e = SceneDesc::parse("[[lights]]\nkind = \"laser\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("laser"), "{e}");
     }
 

@@ -43,7 +43,9 @@ pub enum MeshError {
         value: [f32; 3],
     },
     /// An index past the vertex list.
-    #[error("mesh '{name}': triangle {triangle} refers to vertex {index}, but there are only {count}")]
+    #[error(
+        "mesh '{name}': triangle {triangle} refers to vertex {index}, but there are only {count}"
+    )]
     IndexOutOfRange {
         /// Mesh.
         name: String,
@@ -76,7 +78,10 @@ impl Mesh {
         Self::from_tobj(name, loaded.map(|(m, _)| m))
     }
 
-    fn from_tobj(name: &str, loaded: Result<Vec<tobj::Model>, tobj::LoadError>) -> Result<Mesh, MeshError> {
+    fn from_tobj(
+        name: &str,
+        loaded: Result<Vec<tobj::Model>, tobj::LoadError>,
+    ) -> Result<Mesh, MeshError> {
         let models = loaded.map_err(|e| MeshError::Obj {
             path: name.into(),
             reason: e.to_string(),
@@ -107,7 +112,7 @@ impl Mesh {
                     .extend(m.normals.chunks(3).map(|n| Vec3::new(n[0], n[1], n[2])));
             } else {
                 all_have_normals = false;
-                mesh.normals.extend(std::iter::repeat(Vec3::ZERO).take(count));
+                mesh.normals.extend(std::iter::repeat_n(Vec3::ZERO, count));
             }
             if m.texcoords.len() / 2 == count && count > 0 {
                 // OBJ's v axis points up; images are stored top row first.
@@ -115,13 +120,18 @@ impl Mesh {
                     .extend(m.texcoords.chunks(2).map(|t| Vec2::new(t[0], 1.0 - t[1])));
             } else {
                 all_have_uvs = false;
-                mesh.uvs.extend(std::iter::repeat(Vec2::ZERO).take(count));
+                mesh.uvs.extend(std::iter::repeat_n(Vec2::ZERO, count));
             }
             mesh.indices.extend(m.indices.iter().map(|i| i + base));
         }
         mesh.has_uvs = all_have_uvs && !models.is_empty();
         mesh.validate(name)?;
-        if !all_have_normals || mesh.normals.iter().any(|n| !(n.length() > 1e-6) || !n.is_finite()) {
+        if !all_have_normals
+            || mesh
+                .normals
+                .iter()
+                .any(|n| !n.is_finite() || n.length() <= 1e-6)
+        {
             mesh.compute_normals();
         } else {
             for n in &mut mesh.normals {
@@ -242,7 +252,11 @@ impl Mesh {
             for i in 0..=seg {
                 let u = i as f32 / seg as f32;
                 let phi = u * std::f32::consts::TAU;
-                let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), -theta.sin() * phi.sin());
+                let n = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    -theta.sin() * phi.sin(),
+                );
                 m.positions.push(n * radius);
                 m.normals.push(n);
                 m.uvs.push(Vec2::new(u, v));
@@ -284,13 +298,21 @@ impl Mesh {
             (Vec3::NEG_Z, Vec3::NEG_X, Vec3::Y),
         ];
         for (n, u, v) in faces {
-            let (nu, nv) = (steps((u * size).abs().max_element()), steps((v * size).abs().max_element()));
+            let (nu, nv) = (
+                steps((u * size).abs().max_element()),
+                steps((v * size).abs().max_element()),
+            );
             let base = m.positions.len() as u32;
-            let (eu, ev, en) = ((u * h).abs().max_element(), (v * h).abs().max_element(), (n * h).abs().max_element());
+            let (eu, ev, en) = (
+                (u * h).abs().max_element(),
+                (v * h).abs().max_element(),
+                (n * h).abs().max_element(),
+            );
             for j in 0..=nv {
                 for i in 0..=nu {
                     let (s, t) = (i as f32 / nu as f32, j as f32 / nv as f32);
-                    m.positions.push(n * en + u * eu * (2.0 * s - 1.0) + v * ev * (2.0 * t - 1.0));
+                    m.positions
+                        .push(n * en + u * eu * (2.0 * s - 1.0) + v * ev * (2.0 * t - 1.0));
                     m.normals.push(n);
                     m.uvs.push(Vec2::new(s, 1.0 - t));
                 }
@@ -341,7 +363,9 @@ mod tests {
         assert!((b.surface_area() - 2.0 * (1600.0 + 400.0 + 400.0)).abs() < 1e-2);
         for (p, n) in b.positions.iter().zip(&b.normals) {
             // Every vertex lies on the face its normal points out of.
-            assert!((p.dot(*n) - (n.abs() * Vec3::new(20.0, 20.0, 5.0)).max_element()).abs() < 1e-4);
+            assert!(
+                (p.dot(*n) - (n.abs() * Vec3::new(20.0, 20.0, 5.0)).max_element()).abs() < 1e-4
+            );
         }
     }
 

@@ -269,7 +269,10 @@ impl Scene {
             bail!("the scene has no lights: the image would be black (omit [[lights]] for the default light)");
         }
         if light_descs.len() > MAX_LIGHTS {
-            bail!("the scene has {} lights; at most {MAX_LIGHTS} are supported", light_descs.len());
+            bail!(
+                "the scene has {} lights; at most {MAX_LIGHTS} are supported",
+                light_descs.len()
+            );
         }
         let mut lights = Vec::new();
         for (i, l) in light_descs.iter_mut().enumerate() {
@@ -285,7 +288,10 @@ impl Scene {
                 LightKind::Directional => Light {
                     kind: l.kind,
                     position: Vec3::ZERO,
-                    direction: unit(&name("direction"), *l.direction.get_or_insert([-1.0, -1.0, -1.0]))?,
+                    direction: unit(
+                        &name("direction"),
+                        *l.direction.get_or_insert([-1.0, -1.0, -1.0]),
+                    )?,
                     radiance,
                     cos_cone: -1.0,
                 },
@@ -299,7 +305,10 @@ impl Scene {
                         let d = unit(&name("direction"), *l.direction.get_or_insert(to_center))?;
                         let cone = *l.cone_deg.get_or_insert(30.0);
                         if !(cone.is_finite() && cone > 0.0 && cone < 85.0) {
-                            bail!("{} = {cone} must lie between 0 and 85 degrees", name("cone_deg"));
+                            bail!(
+                                "{} = {cone} must lie between 0 and 85 degrees",
+                                name("cone_deg")
+                            );
                         }
                         (d, (cone as f32).to_radians().cos())
                     } else {
@@ -375,7 +384,11 @@ impl Scene {
                         }
                     })
                     .fold(0.0f32, f32::max);
-                let e = if peak > 0.0 { 0.8 * std::f64::consts::PI / peak as f64 } else { 1.0 };
+                let e = if peak > 0.0 {
+                    0.8 * std::f64::consts::PI / peak as f64
+                } else {
+                    1.0
+                };
                 od.exposure = Some(e);
                 e
             }
@@ -416,10 +429,23 @@ mod tests {
         assert_eq!((s.width, s.height), (512, 512));
         // The printed description makes every default explicit and reproduces the scene.
         let text = s.resolved.to_toml();
-        for key in ["builtin", "fov_deg", "position", "preset", "width", "shadow_map", "exposure"] {
+        for key in [
+            "builtin",
+            "fov_deg",
+            "position",
+            "preset",
+            "width",
+            "shadow_map",
+            "exposure",
+        ] {
             assert!(text.contains(key), "{key} missing from\n{text}");
         }
-        let again = Scene::from_desc(SceneDesc::parse(&text).unwrap(), Path::new(""), &Overrides::default()).unwrap();
+        let again = Scene::from_desc(
+            SceneDesc::parse(&text).unwrap(),
+            Path::new(""),
+            &Overrides::default(),
+        )
+        .unwrap();
         assert_eq!(again.camera, s.camera);
         assert_eq!(again.lights, s.lights);
     }
@@ -442,15 +468,30 @@ mod tests {
         let cases = [
             ("lights = []", "no lights"),
             ("[output]\nwidth = 0", "at least 1x1"),
-            ("[material]\npreset = \"marble\"\nsigma_a = [1.0, 1.0, 1.0]", "both a preset"),
-            ("[material]\nsigma_s_prime = [1.0, 1.0, 1.0]\nsigma_a = [-1.0, 1.0, 1.0]\n", "sigma_a"),
+            (
+                "[material]\npreset = \"marble\"\nsigma_a = [1.0, 1.0, 1.0]",
+                "both a preset",
+            ),
+            (
+                "[material]\nsigma_s_prime = [1.0, 1.0, 1.0]\nsigma_a = [-1.0, 1.0, 1.0]\n",
+                "sigma_a",
+            ),
             ("[material]\npreset = \"marble\"\neta = 0.0", "eta"),
-            ("[camera]\nposition = [0.0, 0.0, 0.0]\ntarget = [0.0, 0.0, 0.0]", "coincide"),
+            (
+                "[camera]\nposition = [0.0, 0.0, 0.0]\ntarget = [0.0, 0.0, 0.0]",
+                "coincide",
+            ),
             ("[mesh]\nobj = \"does-not-exist.obj\"", "does not exist"),
             ("[mesh]\nbuiltin = \"teapot\"", "teapot"),
             ("[[lights]]\nkind = \"point\"", "position"),
-            ("[[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, 0.0]", "zero vector"),
-            ("[mesh]\nbuiltin = \"sphere\"\ntexture = \"missing.png\"", "cannot read texture"),
+            (
+                "[[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, 0.0]",
+                "zero vector",
+            ),
+            (
+                "[mesh]\nbuiltin = \"sphere\"\ntexture = \"missing.png\"",
+                "cannot read texture",
+            ),
         ];
         for (text, needle) in cases {
             let desc = SceneDesc::parse(text).unwrap();

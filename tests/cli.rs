@@ -1,0 +1,218 @@
+//! The command line: the default render works, bad input gives a clear error and a non-zero
+//! exit, never a panic.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_translucent"));
+    c.env("RUST_LOG", "warn");
+    c
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("translucent-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs and expects failure with `needle` in the message.
+fn fails_with(mut cmd: Command, needle: &str) {
+    let o = cmd.output().unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success(), "expected failure, got success: {err}");
+    assert!(
+        !err.contains("panicked"),
+        "panic instead of an error: {err}"
+    );
+    assert!(
+        err.contains(needle),
+        "error does not mention {needle:?}: {err}"
+    );
+    assert_eq!(o.status.code(), Some(1), "exit code: {err}");
+}
+
+#[test]
+fn default_render_writes_all_outputs_validated() {
+    let out = temp_dir("default");
+    let o = bin()
+        .args([
+            "--validate",
+            "render",
+            "--frames",
+            "3",
+            "--width",
+            "128",
+            "--height",
+            "96",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    // The resolved scene is printed with its defaults.
+    assert!(
+        stdout.contains("preset = \"skimmilk\"") && stdout.contains("fov_deg"),
+        "{stdout}"
+    );
+    for f in [
+        "render.png",
+        "render.exr",
+        "timings.json",
+        "trace.json",
+        "scene.toml",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let png = image::open(out.join("render.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (128, 96));
+    let (w, h, px) = translucent::output::read_exr(&out.join("render.exr")).unwrap();
+    assert_eq!((w, h), (128, 96));
+    assert!(px.iter().all(|v| v.is_finite()));
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("timings.json")).unwrap()).unwrap();
+    assert_eq!(t["frames"], 3);
+    assert!(t["device"].as_str().unwrap().len() > 1);
+    for key in ["name", "min_ms", "median_ms", "max_ms"] {
+        assert!(t["passes"][0].get(key).is_some(), "{key}");
+    }
+    let trace: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("trace.json")).unwrap()).unwrap();
+    assert!(trace["traceEvents"].as_array().unwrap().len() >= 3 * 4);
+    // The written scene renders again.
+    let o2 = bin()
+        .args(["render", "--frames", "1", "--out"])
+        .arg(out.join("again"))
+        .arg(out.join("scene.toml"))
+        .args(["--width", "32", "--height", "32"])
+        .output()
+        .unwrap();
+    assert!(o2.status.success(), "{}", stderr(&o2));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn devices_are_listed() {
+    let o = bin().arg("devices").output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("[0]"));
+}
+
+#[test]
+fn unknown_device_names_the_available_ones() {
+    let mut c = bin();
+    c.args([
+        "--device",
+        "no-such-gpu",
+        "render",
+        "--frames",
+        "1",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--out",
+    ])
+    .arg(temp_dir("device"));
+    fails_with(c, "available devices: [0]");
+}
+
+fn render_scene(dir: &Path, scene: &str) -> Command {
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, scene).unwrap();
+    let mut c = bin();
+    c.args(["render", "--frames", "1", "--out"])
+        .arg(dir.join("out"))
+        .arg(path);
+    c
+}
+
+#[test]
+fn bad_scene_files_are_refused_clearly() {
+    let dir = temp_dir("scenes");
+    let cases = [
+        ("[camera]\nfov = 30\n", "unknown field `fov`"),
+        ("[output]\nwidth = \"wide\"\n", "width"),
+        ("[output]\nwidth = -3\n", "width"),
+        ("[mesh]\nobj = \"nowhere.obj\"\n", "does not exist"),
+        (
+            "[material]\npreset = \"jelly\"\n",
+            "unknown material preset 'jelly'",
+        ),
+        (
+            "[material]\nsigma_s_prime = [1.0, 1.0, 1.0]\nsigma_a = [1.0, \"x\", 1.0]\n",
+            "sigma_a",
+        ),
+        ("lights = []\n", "no lights"),
+        ("this is not toml", "scene file"),
+    ];
+    for (text, needle) in cases {
+        fails_with(render_scene(&dir, text), needle);
+    }
+    let mut missing = bin();
+    missing.args(["render", "/nonexistent/scene.toml"]);
+    fails_with(missing, "cannot read scene file '/nonexistent/scene.toml'");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn broken_objs_are_refused_clearly() {
+    let dir = temp_dir("objs");
+    let cases: [(&str, &[u8], &str); 6] = [
+        ("empty.obj", b"", "has no triangles"),
+        (
+            "junk.obj",
+            &[0xff, 0x00, 0x13, 0x37, 0xfe, 0x80, 0x0a, 0x00],
+            "junk.obj",
+        ),
+        (
+            "numbers.obj",
+            b"v 1 2 three\nv 0 0 0\nv 1 1 1\nf 1 2 3\n",
+            "numbers.obj",
+        ),
+        (
+            "range.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n",
+            "range.obj",
+        ),
+        (
+            "nan.obj",
+            b"v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+            "non-finite",
+        ),
+        (
+            "flat.obj",
+            b"v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n",
+            "degenerate",
+        ),
+    ];
+    for (name, bytes, needle) in cases {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let mut c = bin();
+        c.args([
+            "render", "--frames", "1", "--width", "8", "--height", "8", "--out",
+        ])
+        .arg(dir.join("out"))
+        .arg("--mesh")
+        .arg(&path);
+        fails_with(c, needle);
+    }
+    let mut c = bin();
+    c.args(["render", "--mesh", "/nonexistent/mesh.obj"]);
+    fails_with(c, "does not exist");
+    let mut c = bin();
+    c.args(["render", "--frames", "0"]);
+    fails_with(c, "--frames must be at least 1");
+    let mut c = bin();
+    c.args(["render", "--width", "0"]);
+    fails_with(c, "at least 1x1");
+    let _ = std::fs::remove_dir_all(&dir);
+}

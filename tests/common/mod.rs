@@ -1,0 +1,28 @@
+//! Helpers shared by the integration tests: a validated device on lavapipe (or the device in
+//! TRANSLUCENT_DEVICE), and a check that the validation layer stayed silent.
+
+#![allow(dead_code)]
+
+use std::sync::Arc;
+use translucent::gpu::{Gpu, GpuOptions};
+
+/// Opens the test device with the Khronos validation layer on. Fails (does not skip) when the
+/// layer or a device is missing: tests must run validated.
+pub fn gpu() -> Arc<Gpu> {
+    Gpu::new(&GpuOptions {
+        validate: true,
+        device: std::env::var("TRANSLUCENT_DEVICE").ok(),
+    })
+    .unwrap_or_else(|e| panic!("cannot open a validated Vulkan device: {e}"))
+}
+
+/// Panics with the messages if the validation layer reported anything.
+pub fn assert_no_validation_messages(gpu: &Gpu) {
+    let messages = gpu.validation.messages();
+    assert!(
+        messages.is_empty(),
+        "validation layer reported {} message(s):\n{}",
+        messages.len(),
+        messages.join("\n")
+    );
+}

@@ -1,0 +1,274 @@
+//! End-to-end renders on the device with validation on: silhouette against an independent CPU
+//! projection, light direction, finiteness, and the timing report.
+
+mod common;
+
+use glam::{Vec3, Vec4};
+use std::path::Path;
+use translucent::graph::timing::TimingReport;
+use translucent::renderer::{RenderOutput, Renderer};
+use translucent::scene::{desc::SceneDesc, Overrides, Scene};
+
+/// The bunny lit by a directional light travelling along -x (so its +x side is lit), seen from
+/// the front (+z), at a size small enough for a quick test.
+fn bunny_scene(width: u32, height: u32) -> Scene {
+    let text = r#"
+        [camera]
+        position = [0.0, 30.0, 170.0]
+        target = [0.0, 24.0, 0.0]
+        fov_deg = 30.0
+        [[lights]]
+        kind = "directional"
+        direction = [-1.0, 0.0, 0.0]
+        [output]
+        shadow_map = 512
+    "#;
+    let overrides = Overrides {
+        width: Some(width),
+        height: Some(height),
+        ..Default::default()
+    };
+    Scene::from_desc(SceneDesc::parse(text).unwrap(), Path::new(""), &overrides).unwrap()
+}
+
+fn render(scene: Scene, frames: usize) -> RenderOutput {
+    let gpu = common::gpu();
+    let out = {
+        let mut r = Renderer::new(&gpu, scene).expect("renderer");
+        r.render(frames).expect("render")
+    };
+    common::assert_no_validation_messages(&gpu);
+    out
+}
+
+/// Coverage mask of the mesh by an independent CPU rasteriser: own look-at and perspective
+/// (OpenGL-style matrices written out here, y flipped to image rows), pixel-centre sampling.
+fn cpu_coverage(scene: &Scene) -> Vec<bool> {
+    let (w, h) = (scene.width as usize, scene.height as usize);
+    let cam = scene.camera;
+    let f = (cam.target - cam.position).normalize();
+    let s = f.cross(cam.up).normalize();
+    let u = s.cross(f);
+    let t = 1.0 / (0.5 * cam.fov_y).tan();
+    let aspect = w as f32 / h as f32;
+    let project = |p: Vec3| -> Option<(f32, f32)> {
+        let d = p - cam.position;
+        let (x, y, z) = (d.dot(s), d.dot(u), d.dot(f));
+        if z <= 1e-3 {
+            return None;
+        }
+        let ndc_x = x * t / aspect / z;
+        let ndc_y = y * t / z;
+        Some((
+            (ndc_x * 0.5 + 0.5) * w as f32,
+            (0.5 - ndc_y * 0.5) * h as f32,
+        ))
+    };
+    let mut mask = vec![false; w * h];
+    let m = &scene.mesh;
+    for tri in m.indices.chunks(3) {
+        let pts: Vec<_> = tri
+            .iter()
+            .filter_map(|&i| project(m.positions[i as usize]))
+            .collect();
+        if pts.len() < 3 {
+            continue;
+        }
+        let (a, b, c) = (pts[0], pts[1], pts[2]);
+        let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
+        if area.abs() < 1e-12 {
+            continue;
+        }
+        let x0 = a.0.min(b.0).min(c.0).floor().max(0.0) as usize;
+        let x1 = (a.0.max(b.0).max(c.0).ceil() as usize).min(w);
+        let y0 = a.1.min(b.1).min(c.1).floor().max(0.0) as usize;
+        let y1 = (a.1.max(b.1).max(c.1).ceil() as usize).min(h);
+        let edge = |p: (f32, f32), q: (f32, f32), x: f32, y: f32| {
+            (q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)
+        };
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+                let e = [edge(a, b, px, py), edge(b, c, px, py), edge(c, a, px, py)];
+                if e.iter().all(|v| *v * area.signum() >= 0.0) {
+                    mask[y * w + x] = true;
+                }
+            }
+        }
+    }
+    mask
+}
+
+#[test]
+fn bunny_silhouette_matches_cpu_projection_and_lit_side_is_brighter() {
+    let scene = bunny_scene(256, 256);
+    let expected = cpu_coverage(&scene);
+    let (w, h) = (scene.width as usize, scene.height as usize);
+    let out = render(scene, 2);
+    assert!(
+        out.radiance.iter().all(|v| v.is_finite()),
+        "NaN or inf in the radiance image"
+    );
+    let covered: Vec<bool> = out.radiance.chunks(4).map(|p| p[3] > 0.5).collect();
+
+    // Pixels where GPU and CPU disagree must lie within 2 pixels of the CPU silhouette edge.
+    let near_edge = |x: usize, y: usize| {
+        let c = expected[y * w + x];
+        (y.saturating_sub(2)..(y + 3).min(h))
+            .any(|yy| (x.saturating_sub(2)..(x + 3).min(w)).any(|xx| expected[yy * w + xx] != c))
+    };
+    let mut disagreements = 0;
+    for y in 0..h {
+        for x in 0..w {
+            if covered[y * w + x] != expected[y * w + x] {
+                disagreements += 1;
+                assert!(
+                    near_edge(x, y),
+                    "pixel ({x}, {y}) disagrees away from the silhouette"
+                );
+            }
+        }
+    }
+    let n_gpu = covered.iter().filter(|c| **c).count();
+    let n_cpu = expected.iter().filter(|c| **c).count();
+    assert!(n_cpu > w * h / 20, "the bunny covers only {n_cpu} pixels");
+    assert!(
+        disagreements * 50 < n_cpu,
+        "{disagreements} of {n_cpu} pixels disagree"
+    );
+    assert!((n_gpu as f64 - n_cpu as f64).abs() < 0.02 * n_cpu as f64);
+
+    // Light travels along -x: the right part (+x, image right) is lit, the left is not.
+    let xs: Vec<usize> = (0..w * h).filter(|i| covered[*i]).map(|i| i % w).collect();
+    let (xmin, xmax) = (*xs.iter().min().unwrap(), *xs.iter().max().unwrap());
+    let band = (xmax - xmin) / 4;
+    let mean_lum = |lo: usize, hi: usize| {
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for (i, (p, c)) in out.radiance.chunks(4).zip(&covered).enumerate() {
+            let x = i % w;
+            if *c && x >= lo && x < hi {
+                sum += (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) as f64;
+                n += 1;
+            }
+        }
+        sum / n.max(1) as f64
+    };
+    let left = mean_lum(xmin, xmin + band);
+    let right = mean_lum(xmax - band, xmax + 1);
+    assert!(
+        right > 0.0 && left < 0.3 * right,
+        "lit side {right}, shadowed side {left}"
+    );
+    // Uncovered pixels are black: nothing is drawn outside the object.
+    for (p, c) in out.radiance.chunks(4).zip(&covered) {
+        if !*c {
+            assert_eq!(&p[..3], &[0.0, 0.0, 0.0]);
+        }
+    }
+}
+
+#[test]
+fn a_shadow_falls_where_an_occluder_blocks_the_light() {
+    // A plate floating 22 mm above a wide slab, lit at 45 degrees from +x: the plate's shadow
+    // falls on the slab 22 mm towards -x; the +x side stays lit.
+    let text = r#"
+        [mesh]
+        builtin = "box"
+        size = [100.0, 4.0, 100.0]
+        segments = 8
+        [camera]
+        position = [0.0, 300.0, 0.0]
+        target = [0.0, 0.0, 0.0]
+        up = [0.0, 0.0, -1.0]
+        fov_deg = 30.0
+        [[lights]]
+        kind = "directional"
+        direction = [-1.0, -1.0, 0.0]
+        [output]
+        width = 64
+        height = 64
+        shadow_map = 256
+    "#;
+    let scene = Scene::from_desc(
+        SceneDesc::parse(text).unwrap(),
+        Path::new(""),
+        &Overrides::default(),
+    )
+    .unwrap();
+    let mut scene_with_occluder = scene.clone();
+    // Add a small square plate 20 mm above the slab's top, facing up.
+    let mut plate = translucent::scene::mesh::Mesh::cuboid(Vec3::new(30.0, 2.0, 30.0), 2);
+    plate.transform(glam::Mat4::from_translation(Vec3::new(0.0, 25.0, 0.0)));
+    let m = &mut scene_with_occluder.mesh;
+    let base = m.positions.len() as u32;
+    m.positions.extend(&plate.positions);
+    m.normals.extend(&plate.normals);
+    m.uvs.extend(&plate.uvs);
+    m.indices.extend(plate.indices.iter().map(|i| i + base));
+
+    let lit = render(scene, 1);
+    let shadowed = render(scene_with_occluder.clone(), 1);
+    // Probe a point on the slab top between plate and slab edges, visible from the camera.
+    let view = scene_with_occluder.camera.view_proj(1.0, Vec3::ZERO, 60.0);
+    let pixel = |p: Vec3| {
+        let c = view * Vec4::new(p.x, p.y, p.z, 1.0);
+        let (x, y) = (
+            (c.x / c.w * 0.5 + 0.5) * 64.0,
+            (c.y / c.w * 0.5 + 0.5) * 64.0,
+        );
+        4 * (y as usize * 64 + x as usize)
+    };
+    let under = pixel(Vec3::new(-30.0, 2.0, 0.0));
+    let rim = pixel(Vec3::new(30.0, 2.0, 0.0));
+    assert!(lit.radiance[under] > 0.1, "unshadowed slab is lit");
+    assert!(
+        shadowed.radiance[rim] > 0.9 * lit.radiance[rim],
+        "rim stays lit"
+    );
+    assert!(
+        shadowed.radiance[under] < 0.05 * lit.radiance[under],
+        "plate casts a shadow"
+    );
+}
+
+#[test]
+fn timings_cover_every_pass_and_add_up_to_the_frame() {
+    let out = render(bunny_scene(256, 256), 6);
+    let names = ["shadow", "shade", "tonemap", "readback"];
+    assert_eq!(out.pass_names, names);
+    // The first frame carries shader compilation; judge the rest.
+    for f in &out.frames[1..] {
+        assert_eq!(f.pass_ms.len(), names.len());
+        assert!(f.pass_ms.iter().all(|t| *t > 0.0), "{f:?}");
+        let sum: f64 = f.pass_ms.iter().sum();
+        assert!(
+            sum <= f.gpu_ms * 1.001 + 1e-3,
+            "passes {sum} ms exceed the GPU frame {} ms",
+            f.gpu_ms
+        );
+        assert!(
+            f.gpu_ms <= f.wall_ms,
+            "GPU frame {} ms exceeds wall {} ms",
+            f.gpu_ms,
+            f.wall_ms
+        );
+        // A timestamp latched in the wrong place reads as ~0 ms: the passes must account for
+        // most of the frame's wall time.
+        assert!(
+            sum >= 0.5 * f.wall_ms,
+            "passes {sum} ms vs wall {} ms",
+            f.wall_ms
+        );
+    }
+    let report = TimingReport::new("dev", "drv", &out.pass_names, &out.frames);
+    let json = serde_json::to_value(&report).unwrap();
+    let listed: Vec<&str> = json["passes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(listed, names);
+    assert!(json["frame"]["gpu_median_ms"].as_f64().unwrap() > 0.0);
+    assert!(json["frame"]["wall_median_ms"].as_f64().unwrap() > 0.0);
+}
