@@ -15,3 +15,4 @@ pub mod passes;
 pub mod physics;
 pub mod renderer;
 pub mod scene;
+pub mod preprocess;

@@ -1,0 +1,117 @@
+//! The operators applied on the CPU: the reference the GPU passes are tested against.
+
+use super::atlas::Atlas;
+use super::operators::{Blend, Csr, Operators};
+
+/// Radiosity B per texel and per node for one illumination map.
+#[derive(Debug, Clone)]
+pub struct Applied {
+    /// B at every covered texel (composite value), RGB.
+    pub texel: Vec<[f64; 3]>,
+    /// Local response B^l per texel (including the direct term where the mode has one).
+    pub local: Vec<[f64; 3]>,
+    /// Irradiance gathered at the nodes.
+    pub node_irradiance: Vec<[f64; 3]>,
+    /// Global response B^g at the nodes.
+    pub node_global: Vec<[f64; 3]>,
+}
+
+/// Local convolution: B^l(t) = sum over t's kernel of K E (+ beta(t) E(t) when `direct`).
+pub fn local(atlas: &Atlas, ops: &Operators, irradiance: &[[f32; 3]], direct: Option<&[[f32; 3]]>) -> Vec<[f64; 3]> {
+    let k = ops.kernel_size as i64;
+    let half = k / 2;
+    let kk = (k * k) as usize;
+    atlas
+        .texels
+        .iter()
+        .enumerate()
+        .map(|(t, tx)| {
+            let mut b = [0.0; 3];
+            for dy in -half..=half {
+                for dx in -half..=half {
+                    if let Some(s) = atlas.texel_at(tx.x as i64 + dx, tx.y as i64 + dy) {
+                        let w = ops.kernels[t * kk + ((dy + half) * k + dx + half) as usize];
+                        for c in 0..3 {
+                            b[c] += w[c] as f64 * irradiance[s][c] as f64;
+                        }
+                    }
+                }
+            }
+            if let Some(beta) = direct {
+                for c in 0..3 {
+                    b[c] += beta[t][c] as f64 * irradiance[t][c] as f64;
+                }
+            }
+            b
+        })
+        .collect()
+}
+
+/// Gather: E_p = sum_t g_p(t) E_t.
+pub fn gather(ops: &Operators, irradiance: &[[f32; 3]]) -> Vec<[f64; 3]> {
+    (0..ops.gather.rows())
+        .map(|p| {
+            ops.gather.row(p).fold([0.0; 3], |mut e, (t, w)| {
+                for c in 0..3 {
+                    e[c] += w as f64 * irradiance[t as usize][c] as f64;
+                }
+                e
+            })
+        })
+        .collect()
+}
+
+/// Global product: B^g_q = sum_p W_pq E_p, optionally without the diagonal.
+pub fn global(matrix: &Csr, node_irradiance: &[[f64; 3]], skip_diagonal: bool) -> Vec<[f64; 3]> {
+    (0..matrix.rows())
+        .map(|q| {
+            matrix.row(q).fold([0.0; 3], |mut b, (p, w)| {
+                if !(skip_diagonal && p as usize == q) {
+                    for c in 0..3 {
+                        b[c] += w[c] as f64 * node_irradiance[p as usize][c];
+                    }
+                }
+                b
+            })
+        })
+        .collect()
+}
+
+/// Applies the whole method in `mode` to the illumination map `irradiance` (per texel).
+pub fn apply(atlas: &Atlas, ops: &Operators, irradiance: &[[f32; 3]], mode: Blend) -> Applied {
+    let n_texels = atlas.texels.len();
+    let direct = match mode {
+        Blend::Simple => Some(ops.direct_simple.as_slice()),
+        Blend::Optimized => Some(ops.direct_optimized.as_slice()),
+        _ => None,
+    };
+    let local = if mode == Blend::Global {
+        vec![[0.0; 3]; n_texels]
+    } else {
+        local(atlas, ops, irradiance, direct)
+    };
+    let node_irradiance = gather(ops, irradiance);
+    let node_global = match mode {
+        Blend::Local => vec![[0.0; 3]; node_irradiance.len()],
+        Blend::Global => global(&ops.global, &node_irradiance, false),
+        Blend::Simple => global(&ops.global, &node_irradiance, true),
+        Blend::Optimized => global(&ops.optimized, &node_irradiance, false),
+    };
+    let texel = (0..n_texels)
+        .map(|t| {
+            let mut b = local[t];
+            for (q, phi) in ops.texel_nodes.row(t) {
+                for c in 0..3 {
+                    b[c] += phi as f64 * node_global[q as usize][c];
+                }
+            }
+            b
+        })
+        .collect();
+    Applied {
+        texel,
+        local,
+        node_irradiance,
+        node_global,
+    }
+}

@@ -1,0 +1,254 @@
+//! Nodes of the global response: the render mesh's (welded) vertices, or those of a simplified
+//! proxy mesh when the render mesh is finer than the material needs.
+//!
+//! Each render vertex is tied to the nodes by weights that sum to 1 (its prolongation): itself
+//! when it is a node, else the barycentric weights of its closest point on the proxy mesh
+//! (only proxy triangles facing the same way are considered, so that the two sides of a thin
+//! part are not mixed). The node basis function phi_p is the linear interpolation of these
+//! weights over the render triangles: the composite interpolates B across render triangles, so
+//! every operator uses that same phi_p.
+
+use crate::scene::mesh::Mesh;
+use glam::{DVec3, Vec3};
+use std::collections::HashMap;
+
+/// The node set and the map from render vertices to nodes.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Nodes {
+    /// Node positions, mm.
+    pub positions: Vec<Vec3>,
+    /// Node normals.
+    pub normals: Vec<Vec3>,
+    /// Per render vertex: (node, weight) pairs, weights summing to 1.
+    pub prolong: Vec<Vec<(u32, f32)>>,
+    /// Whether the render mesh was simplified.
+    pub simplified: bool,
+    /// Mean edge length of the node mesh, mm.
+    pub spacing_mm: f64,
+}
+
+fn mean_edge(positions: &[Vec3], indices: &[u32]) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for t in indices.chunks(3) {
+        for k in 0..3 {
+            sum += positions[t[k] as usize].distance(positions[t[(k + 1) % 3] as usize]) as f64;
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f64
+}
+
+/// Closest point of triangle (a, b, c) to p, as barycentric weights (Ericson, Real-Time
+/// Collision Detection, 5.1.5).
+fn closest_barycentric(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    [1.0 - v - w, v, w]
+}
+
+impl Nodes {
+    /// Builds the nodes for `mesh` with a target spacing (mm).
+    pub fn build(mesh: &Mesh, spacing_mm: f64) -> Nodes {
+        // Weld by position so that seams of normals or texture coordinates do not split nodes.
+        let mut map: HashMap<[u32; 3], u32> = HashMap::new();
+        let mut welded_of = Vec::with_capacity(mesh.positions.len());
+        let mut first = Vec::new();
+        for (i, p) in mesh.positions.iter().enumerate() {
+            let next = first.len() as u32;
+            let id = *map.entry(p.to_array().map(f32::to_bits)).or_insert(next);
+            if id == next {
+                first.push(i as u32);
+            }
+            welded_of.push(id);
+        }
+        let welded_positions: Vec<Vec3> = first.iter().map(|&i| mesh.positions[i as usize]).collect();
+        let welded_indices: Vec<u32> = mesh.indices.iter().map(|&i| welded_of[i as usize]).collect();
+        let edge = mean_edge(&welded_positions, &welded_indices);
+        let normals_of = |ids: &[u32]| -> Vec<Vec3> {
+            let mut acc = vec![Vec3::ZERO; welded_positions.len()];
+            for (v, &w) in welded_of.iter().enumerate() {
+                acc[w as usize] += mesh.normals[v];
+            }
+            ids.iter().map(|&w| acc[w as usize].normalize_or_zero()).collect()
+        };
+
+        // Fine enough already (or as coarse as the material allows): every welded vertex is a node.
+        let ratio = edge / spacing_mm;
+        if ratio >= 0.8 {
+            let all: Vec<u32> = (0..welded_positions.len() as u32).collect();
+            return Nodes {
+                positions: welded_positions.clone(),
+                normals: normals_of(&all),
+                prolong: welded_of.iter().map(|&w| vec![(w, 1.0)]).collect(),
+                simplified: false,
+                spacing_mm: edge,
+            };
+        }
+
+        let target_indices = ((welded_indices.len() as f64) * ratio * ratio).max(12.0) as usize / 3 * 3;
+        let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&welded_positions), 12, 0)
+            .expect("positions are 12-byte vertices");
+        let simplified = meshopt::simplify(&welded_indices, &adapter, target_indices, 1.0, meshopt::SimplifyOptions::empty(), None);
+        // Node ids for the welded vertices the proxy keeps.
+        let mut node_of: HashMap<u32, u32> = HashMap::new();
+        let mut node_welded = Vec::new();
+        for &w in &simplified {
+            node_of.entry(w).or_insert_with(|| {
+                node_welded.push(w);
+                (node_welded.len() - 1) as u32
+            });
+        }
+        let positions: Vec<Vec3> = node_welded.iter().map(|&w| welded_positions[w as usize]).collect();
+        let normals = normals_of(&node_welded);
+        let tris: Vec<[u32; 3]> = simplified.chunks(3).map(|t| [node_of[&t[0]], node_of[&t[1]], node_of[&t[2]]]).collect();
+        let node_spacing = mean_edge(&welded_positions, &simplified);
+
+        // Uniform grid of proxy triangles for closest-point queries.
+        let cell = (2.0 * node_spacing).max(1e-6);
+        let key = |p: DVec3| ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64, (p.z / cell).floor() as i64);
+        let mut grid: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
+        for (ti, t) in tris.iter().enumerate() {
+            let ps = t.map(|n| positions[n as usize].as_dvec3());
+            let (lo, hi) = (key(ps[0].min(ps[1]).min(ps[2])), key(ps[0].max(ps[1]).max(ps[2])));
+            for x in lo.0..=hi.0 {
+                for y in lo.1..=hi.1 {
+                    for z in lo.2..=hi.2 {
+                        grid.entry((x, y, z)).or_default().push(ti as u32);
+                    }
+                }
+            }
+        }
+        let tri_normals: Vec<DVec3> = tris
+            .iter()
+            .map(|t| {
+                let ps = t.map(|n| positions[n as usize].as_dvec3());
+                (ps[1] - ps[0]).cross(ps[2] - ps[0]).normalize_or_zero()
+            })
+            .collect();
+        let welded_normals = normals_of(&(0..welded_positions.len() as u32).collect::<Vec<_>>());
+        let weights_of_welded: Vec<Vec<(u32, f32)>> = (0..welded_positions.len())
+            .map(|w| {
+                if let Some(&n) = node_of.get(&(w as u32)) {
+                    return vec![(n, 1.0)];
+                }
+                let p = welded_positions[w].as_dvec3();
+                let pn = welded_normals[w].as_dvec3();
+                let c = key(p);
+                let mut best: Option<(f64, u32, [f64; 3])> = None;
+                for reach in 1..=4i64 {
+                    for x in c.0 - reach..=c.0 + reach {
+                        for y in c.1 - reach..=c.1 + reach {
+                            for z in c.2 - reach..=c.2 + reach {
+                                for &ti in grid.get(&(x, y, z)).into_iter().flatten() {
+                                    if tri_normals[ti as usize].dot(pn) < 0.2 {
+                                        continue;
+                                    }
+                                    let ps = tris[ti as usize].map(|n| positions[n as usize].as_dvec3());
+                                    let b = closest_barycentric(p, ps[0], ps[1], ps[2]);
+                                    let q = ps[0] * b[0] + ps[1] * b[1] + ps[2] * b[2];
+                                    let d = q.distance_squared(p);
+                                    if best.is_none_or(|(bd, _, _)| d < bd) {
+                                        best = Some((d, ti, b));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    if best.is_some() {
+                        break;
+                    }
+                }
+                match best {
+                    Some((_, ti, b)) => tris[ti as usize]
+                        .iter()
+                        .zip(b)
+                        .filter(|(_, w)| *w > 1e-6)
+                        .map(|(n, w)| (*n, w as f32))
+                        .collect(),
+                    None => {
+                        // No facing proxy triangle nearby: tie to the nearest node.
+                        let nearest = positions
+                            .iter()
+                            .enumerate()
+                            .min_by(|a, b| a.1.distance_squared(p.as_vec3()).total_cmp(&b.1.distance_squared(p.as_vec3())))
+                            .map(|(i, _)| i as u32)
+                            .unwrap_or(0);
+                        vec![(nearest, 1.0)]
+                    }
+                }
+            })
+            .collect();
+        Nodes {
+            positions,
+            normals,
+            prolong: welded_of.iter().map(|&w| weights_of_welded[w as usize].clone()).collect(),
+            simplified: true,
+            spacing_mm: node_spacing,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coarse_mesh_keeps_its_vertices_and_fine_mesh_is_simplified() {
+        let box_mesh = Mesh::cuboid(Vec3::new(40.0, 40.0, 40.0), 8);
+        let n = Nodes::build(&box_mesh, 5.0);
+        assert!(!n.simplified);
+        // Welded: the box's faces share edge vertices.
+        assert!(n.positions.len() < box_mesh.positions.len());
+        let fine = Mesh::sphere(20.0, 128);
+        let n = Nodes::build(&fine, 4.0);
+        assert!(n.simplified);
+        assert!(n.positions.len() < fine.positions.len() / 4, "{} nodes", n.positions.len());
+        assert!(n.spacing_mm > 2.0, "spacing {}", n.spacing_mm);
+        for (v, w) in n.prolong.iter().enumerate() {
+            let sum: f32 = w.iter().map(|x| x.1).sum();
+            assert!((sum - 1.0).abs() < 1e-4);
+            // The prolongation reproduces positions to within the proxy's flattening.
+            let p: Vec3 = w.iter().map(|(i, x)| n.positions[*i as usize] * *x).sum();
+            assert!(p.distance(fine.positions[v]) < 1.0, "vertex {v}");
+        }
+    }
+
+    #[test]
+    fn closest_point_regions() {
+        let (a, b, c) = (DVec3::ZERO, DVec3::X, DVec3::Y);
+        assert_eq!(closest_barycentric(DVec3::new(-1.0, -1.0, 0.0), a, b, c), [1.0, 0.0, 0.0]);
+        assert_eq!(closest_barycentric(DVec3::new(2.0, 0.0, 1.0), a, b, c), [0.0, 1.0, 0.0]);
+        let inside = closest_barycentric(DVec3::new(0.25, 0.25, 3.0), a, b, c);
+        assert!((inside[1] - 0.25).abs() < 1e-12 && (inside[2] - 0.25).abs() < 1e-12);
+    }
+}

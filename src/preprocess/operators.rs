@@ -1,0 +1,674 @@
+//! The linear operators of the method, built once per mesh and material.
+//!
+//! Notation: texels t (area A_t, position x_t), nodes p, q of the global response with basis
+//! functions phi_p (see [`super::nodes`]), per colour channel throughout.
+//!
+//! - **Gather** (texel -> node): E_p = sum_t phi_p(t) A_t E_t / A_p with A_p = sum_t phi_p(t)
+//!   A_t: the phi-weighted average of the irradiance over the node's support.
+//! - **Global** F (source p -> receiver q): F_pq approximates integral phi_p(y) R_d(|y - x_q|)
+//!   dA(y), of which the lumped form (A_i/3) R_d(|v_i - v_j|) of Lensch et al. is the
+//!   midpoint rule (A_p is the node's share of the surface). Far pairs use that rule to second
+//!   order (centroid and second moment of the support, closed-form Laplacian of R_d); pairs
+//!   closer than [`NEAR_SPACINGS`] node spacings, where R_d is too curved for it, sum over the
+//!   support's texels, sum_t phi_p(t) A_t Rbar(x_t, x_q).
+//!   B^g_q = sum_p F_pq E_p. Rows (receivers) are pruned under an error bound.
+//! - **Local** kernels: K_t(s) = integral over texel s of R_d(|x_t - y|) dA(y), for the k x k
+//!   texels s around t *of the same chart*; texels of other charts and gutter texels get 0.
+//!   The centre texel uses the exact disc mean of R_d (the closed-form cumulative profile),
+//!   nearby texels a sub-sampling, the rest the profile at the texel position.
+//!   Light arriving across a chart seam is therefore left to the global response.
+//! - **Blending.** The composite adds B = B^l(t) + beta(t) E_t + sum_q phi_q(t) B^g_q.
+//!   * simple: the global uses F^0 (F without its diagonal: a node's own neighbourhood is the
+//!     kernel's business), and the direct term B^d = beta(t) E_t makes up for the difference
+//!     between what the kernel covers and what the diagonal carried:
+//!     beta(t) = sum_q phi_q(t) F_qq - P_win(t), P_win(t) the sum of t's kernel. Under locally
+//!     uniform light the blend then equals the full global response exactly, whatever the
+//!     kernel covers (truncated at seams or not), so nothing is counted twice or lost.
+//!   * optimized: the near-field entries of each receiver row q (sources p whose support meets
+//!     the 9x9 footprint around q) are fitted by least squares so that, for light of unit power
+//!     at any texel s in those supports, local plus global response at q's texel c matches the
+//!     reference Rbar(|x_c - x_s|) (the 9x9 reference kernel, taken over the whole supports and
+//!     across seams): min sum_s (K_c(s)/A_s + sum_p u_p phi_p(s) - Rbar_cs)^2
+//!     + lambda sum_p (u_p - F_pq/A_p)^2, W_pq = u_p A_p. The direct term conserves energy
+//!     the same way: beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t).
+//!   * local only: B^l; global only: F with its diagonal.
+
+use super::atlas::Atlas;
+use super::nodes::Nodes;
+use crate::physics::{Dipole, Material};
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Pairs closer than this many node spacings get the integrated (not lumped) F entry.
+pub const NEAR_SPACINGS: f64 = 2.5;
+
+/// How local and global responses are combined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Blend {
+    /// Local kernels only.
+    Local,
+    /// Global response only (F with its diagonal).
+    Global,
+    /// F^0 plus the direct term.
+    Simple,
+    /// Fitted near field plus the direct term.
+    Optimized,
+}
+
+impl Blend {
+    /// All modes.
+    pub const ALL: [Blend; 4] = [Blend::Local, Blend::Global, Blend::Simple, Blend::Optimized];
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Blend::Local => "local",
+            Blend::Global => "global",
+            Blend::Simple => "simple",
+            Blend::Optimized => "optimized",
+        }
+    }
+}
+
+/// Compressed sparse rows with RGB values.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Csr {
+    /// Start of each row in `cols`/`vals`; one more entry than rows.
+    pub row_start: Vec<u32>,
+    /// Column of each entry.
+    pub cols: Vec<u32>,
+    /// Value of each entry.
+    pub vals: Vec<[f32; 3]>,
+}
+
+impl Csr {
+    /// Builds from per-row entry lists.
+    pub fn from_rows(rows: Vec<Vec<(u32, [f32; 3])>>) -> Csr {
+        let mut m = Csr {
+            row_start: vec![0],
+            ..Default::default()
+        };
+        for row in rows {
+            for (c, v) in row {
+                m.cols.push(c);
+                m.vals.push(v);
+            }
+            m.row_start.push(m.cols.len() as u32);
+        }
+        m
+    }
+
+    /// Number of rows.
+    pub fn rows(&self) -> usize {
+        self.row_start.len().saturating_sub(1)
+    }
+
+    /// Entries of row `r`.
+    pub fn row(&self, r: usize) -> impl Iterator<Item = (u32, [f32; 3])> + '_ {
+        let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
+        self.cols[a..b].iter().copied().zip(self.vals[a..b].iter().copied())
+    }
+
+    /// Sum of row `r` per channel.
+    pub fn row_sum(&self, r: usize) -> [f64; 3] {
+        self.row(r).fold([0.0; 3], |mut s, (_, v)| {
+            for c in 0..3 {
+                s[c] += v[c] as f64;
+            }
+            s
+        })
+    }
+
+    /// Number of stored entries.
+    pub fn nnz(&self) -> usize {
+        self.cols.len()
+    }
+}
+
+/// How much pruning dropped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct PruneReport {
+    /// Entries before pruning (nodes^2).
+    pub dense_entries: u64,
+    /// Entries kept.
+    pub kept_entries: u64,
+    /// Largest fraction of a row's mass dropped (worst channel).
+    pub max_dropped: f64,
+    /// Mean over rows of the dropped fraction (worst channel).
+    pub mean_dropped: f64,
+}
+
+/// Everything the per-frame passes need, for one mesh and material.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Operators {
+    /// Kernel edge, texels.
+    pub kernel_size: u32,
+    /// Per texel, k*k RGB weights, offsets row-major from (-k/2, -k/2).
+    pub kernels: Vec<[f32; 3]>,
+    /// Per texel: (node, phi) pairs, summing to 1.
+    pub texel_nodes: Csr1,
+    /// Per node: (texel, gather weight) pairs, summing to 1.
+    pub gather: Csr1,
+    /// Node areas A_p, mm^2.
+    pub node_area: Vec<f32>,
+    /// Global F, rows = receivers, pruned, diagonal included.
+    pub global: Csr,
+    /// Optimized-blending global W, rows = receivers.
+    pub optimized: Csr,
+    /// Direct term beta per texel, simple blending.
+    pub direct_simple: Vec<[f32; 3]>,
+    /// Direct term beta per texel, optimized blending.
+    pub direct_optimized: Vec<[f32; 3]>,
+    /// What pruning dropped.
+    pub prune: PruneReport,
+}
+
+/// Compressed sparse rows with scalar values.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Csr1 {
+    /// Start of each row; one more entry than rows.
+    pub row_start: Vec<u32>,
+    /// Column of each entry.
+    pub cols: Vec<u32>,
+    /// Value of each entry.
+    pub vals: Vec<f32>,
+}
+
+impl Csr1 {
+    fn from_rows(rows: Vec<Vec<(u32, f32)>>) -> Csr1 {
+        let mut m = Csr1 {
+            row_start: vec![0],
+            ..Default::default()
+        };
+        for row in rows {
+            for (c, v) in row {
+                m.cols.push(c);
+                m.vals.push(v);
+            }
+            m.row_start.push(m.cols.len() as u32);
+        }
+        m
+    }
+
+    /// Entries of row `r`.
+    pub fn row(&self, r: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
+        let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
+        self.cols[a..b].iter().copied().zip(self.vals[a..b].iter().copied())
+    }
+
+    /// Number of rows.
+    pub fn rows(&self) -> usize {
+        self.row_start.len().saturating_sub(1)
+    }
+}
+
+/// Mean of R_d over texel `s` as seen from `x`, per channel: the exact disc mean when `x`
+/// lies within the texel, a 6x6 (within 1.5 texels) or 3x3 (within 2.5 texels) sub-sampling
+/// where R_d is too curved for one sample, the profile at the texel's position beyond.
+fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64; 3] {
+    let ts = &atlas.texels[s];
+    let area = ts.area as f64;
+    let xs = ts.position.as_dvec3();
+    let r = x.distance(xs);
+    let rho = (area / std::f64::consts::PI).sqrt();
+    let h = atlas.texel_mm;
+    if r < rho {
+        rgb(dipoles, |d| d.disc_mean(rho))
+    } else if r < 2.5 * h {
+        // Sub-samples per side: 6 next to the receiver, 3 further out.
+        let m = if r < 1.5 * h { 6 } else { 3 };
+        let chart = &atlas.charts[ts.chart as usize];
+        let (u, v) = (chart.axes.0.as_dvec3(), chart.axes.1.as_dvec3());
+        let mut acc = [0.0; 3];
+        let step = h / m as f64;
+        let weight = 1.0 / (m * m) as f64;
+        for j in 0..m {
+            for i in 0..m {
+                let (a, b) = ((i as f64 + 0.5) * step - 0.5 * h, (j as f64 + 0.5) * step - 0.5 * h);
+                let ry = x.distance(xs + u * a + v * b);
+                for c in 0..3 {
+                    acc[c] += dipoles[c].rd(ry) * weight;
+                }
+            }
+        }
+        acc
+    } else {
+        rgb(dipoles, |d| d.rd(r))
+    }
+}
+
+fn rgb(dipoles: &[Dipole; 3], f: impl Fn(&Dipole) -> f64) -> [f64; 3] {
+    [f(&dipoles[0]), f(&dipoles[1]), f(&dipoles[2])]
+}
+
+/// Progress callback: (stage name, done, total).
+pub type Progress<'a> = &'a (dyn Fn(&str, u64, u64) + Sync);
+
+/// Texel -> node weights phi_p(t) through the texel's render vertices.
+fn texel_nodes(atlas: &Atlas, nodes: &Nodes) -> Vec<Vec<(u32, f32)>> {
+    atlas
+        .texels
+        .iter()
+        .map(|t| {
+            let mut out: Vec<(u32, f32)> = Vec::with_capacity(4);
+            for &(v, w) in &t.vertices {
+                for &(p, wp) in &nodes.prolong[v as usize] {
+                    match out.iter_mut().find(|e| e.0 == p) {
+                        Some(e) => e.1 += w * wp,
+                        None => out.push((p, w * wp)),
+                    }
+                }
+            }
+            out
+        })
+        .collect()
+}
+
+/// Solves the symmetric positive definite system `m x = b` (n x n, row-major) in place by
+/// Cholesky factorisation; returns false if `m` is not positive definite.
+fn cholesky_solve(m: &mut [f64], b: &mut [f64], n: usize) -> bool {
+    for j in 0..n {
+        let mut d = m[j * n + j];
+        for k in 0..j {
+            d -= m[j * n + k] * m[j * n + k];
+        }
+        if d <= 0.0 {
+            return false;
+        }
+        let d = d.sqrt();
+        m[j * n + j] = d;
+        for i in j + 1..n {
+            let mut s = m[i * n + j];
+            for k in 0..j {
+                s -= m[i * n + k] * m[j * n + k];
+            }
+            m[i * n + j] = s / d;
+        }
+    }
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= m[i * n + k] * b[k];
+        }
+        b[i] = s / m[i * n + i];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in i + 1..n {
+            s -= m[k * n + i] * b[k];
+        }
+        b[i] = s / m[i * n + i];
+    }
+    true
+}
+
+impl Operators {
+    /// Builds all operators. `prune_tolerance` bounds the fraction of each row of F dropped.
+    pub fn build(atlas: &Atlas, nodes: &Nodes, material: &Material, kernel_size: u32, prune_tolerance: f64, progress: Progress<'_>) -> Operators {
+        let dipoles = material.dipoles();
+        let n_nodes = nodes.positions.len();
+        let n_texels = atlas.texels.len();
+
+        // Texel -> node basis and node supports.
+        let phi_rows = texel_nodes(atlas, nodes);
+        let mut supports: Vec<Vec<(u32, f32)>> = vec![Vec::new(); n_nodes];
+        for (t, row) in phi_rows.iter().enumerate() {
+            for &(p, w) in row {
+                supports[p as usize].push((t as u32, w));
+            }
+        }
+        let node_area: Vec<f64> = supports
+            .iter()
+            .map(|s| s.iter().map(|(t, w)| *w as f64 * atlas.texels[*t as usize].area as f64).sum())
+            .collect();
+        let gather: Vec<Vec<(u32, f32)>> = supports
+            .iter()
+            .zip(&node_area)
+            .map(|(s, a)| {
+                s.iter()
+                    .map(|(t, w)| (*t, if *a > 0.0 { (*w as f64 * atlas.texels[*t as usize].area as f64 / a) as f32 } else { 0.0 }))
+                    .collect()
+            })
+            .collect();
+        progress("basis", 1, 1);
+
+        // Local kernels.
+        let k = kernel_size as i64;
+        let half = k / 2;
+        let done = std::sync::atomic::AtomicU64::new(0);
+        let kernels: Vec<[f32; 3]> = atlas
+            .texels
+            .par_iter()
+            .flat_map_iter(|t| {
+                let xt = t.position.as_dvec3();
+                let mut out = Vec::with_capacity((k * k) as usize);
+                for dy in -half..=half {
+                    for dx in -half..=half {
+                        let w = match atlas.texel_at(t.x as i64 + dx, t.y as i64 + dy) {
+                            Some(s) if atlas.texels[s].chart == t.chart => {
+                                let mean = texel_mean(atlas, s, xt, &dipoles);
+                                mean.map(|m| m * atlas.texels[s].area as f64)
+                            }
+                            _ => [0.0; 3],
+                        };
+                        out.push(w.map(|x| x as f32));
+                    }
+                }
+                let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if n % 4096 == 0 {
+                    progress("kernels", n, n_texels as u64);
+                }
+                out
+            })
+            .collect();
+        progress("kernels", n_texels as u64, n_texels as u64);
+
+        // Global F, one receiver row at a time, pruned. Far pairs: second-order quadrature of
+        // the node's support, A_p (R_d(|c_p - x|) + m_p/2 Laplacian R_d), with c_p the support's
+        // centroid and m_p its second moment per axis (each texel adding its own h^2/12).
+        let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
+        let moments: Vec<(DVec3, f64)> = supports
+            .iter()
+            .zip(&node_area)
+            .zip(&positions)
+            .map(|((s, &a), &x)| {
+                if a <= 0.0 {
+                    return (x, 0.0);
+                }
+                let c = s.iter().map(|(t, w)| atlas.texels[*t as usize].position.as_dvec3() * (*w as f64 * atlas.texels[*t as usize].area as f64)).sum::<DVec3>() / a;
+                let m2 = s
+                    .iter()
+                    .map(|(t, w)| atlas.texels[*t as usize].position.as_dvec3().distance_squared(c) * *w as f64 * atlas.texels[*t as usize].area as f64)
+                    .sum::<f64>()
+                    / a;
+                (c, 0.5 * m2 + atlas.texel_mm * atlas.texel_mm / 12.0)
+            })
+            .collect();
+        let near = NEAR_SPACINGS * nodes.spacing_mm;
+        let done = std::sync::atomic::AtomicU64::new(0);
+        let rows: Vec<(Vec<(u32, [f32; 3])>, f64)> = (0..n_nodes)
+            .into_par_iter()
+            .map(|q| {
+                let xq = positions[q];
+                // The near field is integrated as seen from the centre of q's own texel (where
+                // phi_q peaks), so that the peak of R_d falls on that texel's exact disc mean
+                // rather than between sub-samples, the same way as in the kernels.
+                let xc = receiver_texel(&supports[q]).map(|c| atlas.texels[c].position.as_dvec3()).unwrap_or(xq);
+                let mut row: Vec<(u32, [f64; 3])> = Vec::with_capacity(n_nodes);
+                for p in 0..n_nodes {
+                    let r = positions[p].distance(xq);
+                    let f = if r < near {
+                        let mut acc = [0.0; 3];
+                        for &(t, w) in &supports[p] {
+                            let mean = texel_mean(atlas, t as usize, xc, &dipoles);
+                            let wa = w as f64 * atlas.texels[t as usize].area as f64;
+                            for c in 0..3 {
+                                acc[c] += wa * mean[c];
+                            }
+                        }
+                        acc
+                    } else {
+                        let (c, m) = moments[p];
+                        let rc = c.distance(xc);
+                        rgb(&dipoles, |d| {
+                            let (f, lap) = d.rd_and_laplacian(rc);
+                            node_area[p] * (f + 0.5 * m * lap).max(0.0)
+                        })
+                    };
+                    row.push((p as u32, f));
+                }
+                let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if n % 256 == 0 {
+                    progress("global", n, n_nodes as u64);
+                }
+                prune_row(row, prune_tolerance, q as u32)
+            })
+            .collect();
+        progress("global", n_nodes as u64, n_nodes as u64);
+        let prune = PruneReport {
+            dense_entries: (n_nodes * n_nodes) as u64,
+            kept_entries: rows.iter().map(|r| r.0.len() as u64).sum(),
+            max_dropped: rows.iter().map(|r| r.1).fold(0.0, f64::max),
+            mean_dropped: rows.iter().map(|r| r.1).sum::<f64>() / n_nodes.max(1) as f64,
+        };
+        let global = Csr::from_rows(rows.into_iter().map(|r| r.0).collect());
+
+        let mut ops = Operators {
+            kernel_size,
+            kernels,
+            texel_nodes: Csr1::from_rows(phi_rows),
+            gather: Csr1::from_rows(gather),
+            node_area: node_area.iter().map(|a| *a as f32).collect(),
+            global,
+            optimized: Csr::default(),
+            direct_simple: Vec::new(),
+            direct_optimized: Vec::new(),
+            prune,
+        };
+        ops.optimized = ops.fit_near_field(atlas, nodes, &dipoles, &supports, progress);
+        let simple_sums: Vec<[f64; 3]> = (0..n_nodes)
+            .map(|q| {
+                let mut s = ops.global.row_sum(q);
+                if let Some((_, d)) = ops.global.row(q).find(|(p, _)| *p as usize == q) {
+                    for c in 0..3 {
+                        s[c] -= d[c] as f64;
+                    }
+                }
+                s
+            })
+            .collect();
+        let optimized_sums: Vec<[f64; 3]> = (0..n_nodes).map(|q| ops.optimized.row_sum(q)).collect();
+        ops.direct_simple = ops.direct_term(&simple_sums);
+        ops.direct_optimized = ops.direct_term(&optimized_sums);
+        progress("blending", 1, 1);
+        ops
+    }
+
+    /// Sum of texel `t`'s kernel per channel (P_win).
+    pub fn kernel_sum(&self, t: usize) -> [f64; 3] {
+        let kk = (self.kernel_size * self.kernel_size) as usize;
+        self.kernels[t * kk..(t + 1) * kk].iter().fold([0.0; 3], |mut s, w| {
+            for c in 0..3 {
+                s[c] += w[c] as f64;
+            }
+            s
+        })
+    }
+
+    /// beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t): under locally uniform
+    /// light, kernel + beta + W then give exactly what the full F gives.
+    fn direct_term(&self, row_sums: &[[f64; 3]]) -> Vec<[f32; 3]> {
+        (0..self.kernels.len() / (self.kernel_size * self.kernel_size) as usize)
+            .map(|t| {
+                let win = self.kernel_sum(t);
+                let mut g = [0.0; 3];
+                for (q, phi) in self.texel_nodes.row(t) {
+                    let full = self.global.row_sum(q as usize);
+                    for c in 0..3 {
+                        g[c] += phi as f64 * (full[c] - row_sums[q as usize][c]);
+                    }
+                }
+                [0, 1, 2].map(|c| (g[c] - win[c]) as f32)
+            })
+            .collect()
+    }
+
+    /// Fits the near-field entries of every receiver row (optimized blending).
+    fn fit_near_field(&self, atlas: &Atlas, nodes: &Nodes, dipoles: &[Dipole; 3], supports: &[Vec<(u32, f32)>], progress: Progress<'_>) -> Csr {
+        let n_nodes = nodes.positions.len();
+        let k = self.kernel_size as i64;
+        let half = k / 2;
+        let kk = (k * k) as usize;
+        let footprint = 4.5 * atlas.texel_mm * std::f64::consts::SQRT_2;
+        let reach = footprint + nodes.spacing_mm;
+        let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
+        let done = std::sync::atomic::AtomicU64::new(0);
+        let rows: Vec<Vec<(u32, [f32; 3])>> = (0..n_nodes)
+            .into_par_iter()
+            .map(|q| {
+                let mut row: Vec<(u32, [f32; 3])> = self.global.row(q).collect();
+                let Some(c) = receiver_texel(&supports[q]) else {
+                    return row;
+                };
+                let c = c as u32;
+                let tc = &atlas.texels[c as usize];
+                let xc = tc.position.as_dvec3();
+                let near: Vec<u32> = (0..n_nodes as u32).filter(|&p| positions[p as usize].distance(xc) < reach).collect();
+                let mut texels: Vec<u32> = near.iter().flat_map(|&p| supports[p as usize].iter().map(|s| s.0)).collect();
+                texels.sort_unstable();
+                texels.dedup();
+                let n = near.len();
+                let mut m = vec![0.0; n * n];
+                let mut rhs = vec![[0.0f64; 3]; n];
+                let col_of = |p: u32| near.iter().position(|&x| x == p);
+                let mut phi = Vec::with_capacity(4);
+                for &s in &texels {
+                    let ts = &atlas.texels[s as usize];
+                    // Kernel weight of s in c's window, if s lies in it.
+                    let (dx, dy) = (ts.x as i64 - tc.x as i64, ts.y as i64 - tc.y as i64);
+                    let kw = if dx.abs() <= half && dy.abs() <= half && ts.chart == tc.chart {
+                        self.kernels[c as usize * kk + ((dy + half) * k + dx + half) as usize]
+                    } else {
+                        [0.0; 3]
+                    };
+                    let mean = texel_mean(atlas, s as usize, xc, dipoles);
+                    let mut target = [0, 1, 2].map(|ch| mean[ch] - kw[ch] as f64 / ts.area as f64);
+                    phi.clear();
+                    for (p, w) in self.texel_nodes.row(s as usize) {
+                        if let Some(i) = col_of(p) {
+                            phi.push((i, w as f64));
+                        } else if let Some((_, f)) = row.iter().find(|e| e.0 == p) {
+                            // Sources outside the fitted set keep their F entry: part of the
+                            // model's response that the fitted entries must not repeat.
+                            let a = self.node_area[p as usize].max(1e-30) as f64;
+                            for ch in 0..3 {
+                                target[ch] -= w as f64 * f[ch] as f64 / a;
+                            }
+                        }
+                    }
+                    for &(i, wi) in &phi {
+                        for &(j, wj) in &phi {
+                            m[i * n + j] += wi * wj;
+                        }
+                        for ch in 0..3 {
+                            rhs[i][ch] += wi * target[ch];
+                        }
+                    }
+                }
+                let trace: f64 = (0..n).map(|i| m[i * n + i]).sum::<f64>() / n.max(1) as f64;
+                let lambda = 1e-3 * trace.max(1e-30);
+                let prior: Vec<[f64; 3]> = near
+                    .iter()
+                    .map(|&p| {
+                        let f = row.iter().find(|e| e.0 == p).map(|e| e.1).unwrap_or([0.0; 3]);
+                        let a = self.node_area[p as usize].max(1e-30) as f64;
+                        f.map(|x| x as f64 / a)
+                    })
+                    .collect();
+                let mut solved = vec![[0.0; 3]; n];
+                for ch in 0..3 {
+                    let mut mm = m.clone();
+                    for i in 0..n {
+                        mm[i * n + i] += lambda;
+                    }
+                    let mut b: Vec<f64> = (0..n).map(|i| rhs[i][ch] + lambda * prior[i][ch]).collect();
+                    if !cholesky_solve(&mut mm, &mut b, n) {
+                        return row;
+                    }
+                    for i in 0..n {
+                        solved[i][ch] = b[i];
+                    }
+                }
+                row.retain(|e| !near.contains(&e.0));
+                for (i, &p) in near.iter().enumerate() {
+                    let a = self.node_area[p as usize] as f64;
+                    row.push((p, solved[i].map(|u| (u * a) as f32)));
+                }
+                row.sort_by_key(|e| e.0);
+                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if d % 256 == 0 {
+                    progress("fit", d, n_nodes as u64);
+                }
+                row
+            })
+            .collect();
+        progress("fit", n_nodes as u64, n_nodes as u64);
+        Csr::from_rows(rows)
+    }
+}
+
+/// The texel that represents node `q` as a receiver: where phi_q peaks.
+fn receiver_texel(support: &[(u32, f32)]) -> Option<usize> {
+    support.iter().max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0))).map(|s| s.0 as usize)
+}
+
+/// Drops the smallest entries of a row while the dropped mass stays within `tolerance` of
+/// the row's sum in every channel. Returns the kept entries and the dropped fraction.
+fn prune_row(mut row: Vec<(u32, [f64; 3])>, tolerance: f64, diagonal: u32) -> (Vec<(u32, [f32; 3])>, f64) {
+    let sums = row.iter().fold([0.0f64; 3], |mut s, e| {
+        for c in 0..3 {
+            s[c] += e.1[c];
+        }
+        s
+    });
+    let frac = |e: &[f64; 3]| (0..3).map(|c| if sums[c] > 0.0 { e[c] / sums[c] } else { 0.0 }).fold(0.0, f64::max);
+    row.sort_by(|a, b| frac(&a.1).total_cmp(&frac(&b.1)));
+    let mut dropped = [0.0f64; 3];
+    let mut keep = vec![true; row.len()];
+    for (i, e) in row.iter().enumerate() {
+        if e.0 == diagonal {
+            continue;
+        }
+        let next = [0, 1, 2].map(|c| dropped[c] + e.1[c]);
+        if (0..3).any(|c| sums[c] > 0.0 && next[c] > tolerance * sums[c]) {
+            break;
+        }
+        dropped = next;
+        keep[i] = false;
+    }
+    let worst = (0..3).map(|c| if sums[c] > 0.0 { dropped[c] / sums[c] } else { 0.0 }).fold(0.0, f64::max);
+    let mut kept: Vec<(u32, [f32; 3])> = row.iter().zip(&keep).filter(|(_, k)| **k).map(|(e, _)| (e.0, e.1.map(|x| x as f32))).collect();
+    kept.sort_by_key(|e| e.0);
+    (kept, worst)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pruning_respects_the_tolerance_and_keeps_the_diagonal() {
+        let row: Vec<(u32, [f64; 3])> = (0..100).map(|i| (i, [1.0 / (1.0 + i as f64).powi(2), 0.01, 1.0 / (1.0 + i as f64)])).collect();
+        for tol in [0.0, 0.005, 0.05, 0.3] {
+            let (kept, dropped) = prune_row(row.clone(), tol, 0);
+            assert!(dropped <= tol + 1e-12, "{dropped} > {tol}");
+            let sums: Vec<f64> = (0..3).map(|c| row.iter().map(|e| e.1[c]).sum()).collect();
+            for c in 0..3 {
+                let k: f64 = kept.iter().map(|e| e.1[c] as f64).sum();
+                assert!((1.0 - k / sums[c]) <= tol + 1e-6);
+            }
+            assert!(kept.iter().any(|e| e.0 == 0));
+            if tol == 0.0 {
+                assert_eq!(kept.len(), 100);
+            }
+        }
+        let (kept, _) = prune_row(row, 0.3, 0);
+        assert!(kept.len() < 100);
+    }
+
+    #[test]
+    fn cholesky_solves_spd_systems() {
+        let mut m = vec![4.0, 2.0, 0.6, 2.0, 5.0, 1.0, 0.6, 1.0, 3.0];
+        let x = [1.0, -2.0, 0.5];
+        let orig = m.clone();
+        let mut b: Vec<f64> = (0..3).map(|i| (0..3).map(|j| orig[i * 3 + j] * x[j]).sum()).collect();
+        assert!(cholesky_solve(&mut m, &mut b, 3));
+        for i in 0..3 {
+            assert!((b[i] - x[i]).abs() < 1e-12);
+        }
+        let mut bad = vec![1.0, 2.0, 2.0, 1.0];
+        assert!(!cholesky_solve(&mut bad, &mut [1.0, 1.0], 2));
+    }
+}

@@ -1,0 +1,236 @@
+//! Discretisation chosen from the material's scales and the object's size: texel size, kernel
+//! size, global node spacing and pruning tolerance. Every choice comes with its reason.
+//!
+//! The rules (per material, over the three channels):
+//! - **Texel size** h = the smallest z_r = 1/sigma_t' (the width of the R_d peak, hence of the
+//!   sharpest feature of B under a hard shadow edge), but no finer than one image pixel at the
+//!   object's distance (finer detail is not visible) and coarse enough that the atlas stays
+//!   within the texel budget.
+//! - **Kernel size** k (odd, default 7): the local window covers the near field, radius
+//!   k h / 2. It is widened (up to 11) when the window would hold less than half of the
+//!   reflectance of the sharpest channel, and narrowed (down to 3) when a smaller window already
+//!   holds 99 % of every channel's reflectance (the global response then has nothing to add).
+//! - **Node spacing** s of the global response: the kernel radius, so that irradiance detail
+//!   finer than the node spacing is still seen by a kernel; coarser when the reflectance beyond
+//!   the kernel radius (the tail the global response carries) is small, since its error is
+//!   proportional to that tail. The render mesh is simplified to this spacing when it is finer;
+//!   a coarser render mesh is used as it is and the shortfall is reported.
+//! - **Pruning tolerance** of F: 0.5 % of each row's mass, or a quarter of the target error if
+//!   that is smaller.
+
+use crate::physics::Material;
+use serde::{Deserialize, Serialize};
+
+/// The discretisation of one object in one material.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    /// Atlas texel edge, mm.
+    pub texel_mm: f64,
+    /// Local kernel edge, texels (odd).
+    pub kernel_size: u32,
+    /// Target spacing of the global response's nodes, mm.
+    pub node_spacing_mm: f64,
+    /// Largest fraction of a row of F that pruning may drop.
+    pub prune_tolerance: f64,
+    /// Chart normal bound, degrees.
+    pub chart_angle_deg: f64,
+}
+
+/// Values given by the user instead of derived ones.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct SettingsOverrides {
+    /// Texel edge, mm.
+    pub texel_mm: Option<f64>,
+    /// Kernel edge, texels.
+    pub kernel_size: Option<u32>,
+    /// Node spacing, mm.
+    pub node_spacing_mm: Option<f64>,
+    /// Pruning tolerance (fraction).
+    pub prune_tolerance: Option<f64>,
+}
+
+/// What the derivation needs to know about the object and the image.
+#[derive(Debug, Clone, Copy)]
+pub struct ObjectScale {
+    /// Surface area, mm^2.
+    pub area_mm2: f64,
+    /// Size of one image pixel at the object's distance, mm.
+    pub pixel_mm: f64,
+    /// Most texels the atlas may have.
+    pub max_texels: f64,
+    /// Target relative error of the render.
+    pub target_error: f64,
+}
+
+/// The chosen settings and why.
+#[derive(Debug, Clone)]
+pub struct Choice {
+    /// The settings.
+    pub settings: Settings,
+    /// One line per decision.
+    pub reasons: Vec<String>,
+}
+
+/// Validates user-given values.
+pub fn validate(o: &SettingsOverrides) -> anyhow::Result<()> {
+    if let Some(h) = o.texel_mm {
+        anyhow::ensure!(h.is_finite() && h > 0.0, "texel size {h} mm must be positive");
+    }
+    if let Some(k) = o.kernel_size {
+        anyhow::ensure!(k % 2 == 1 && (1..=31).contains(&k), "kernel size {k} must be odd and between 1 and 31");
+    }
+    if let Some(s) = o.node_spacing_mm {
+        anyhow::ensure!(s.is_finite() && s > 0.0, "node spacing {s} mm must be positive");
+    }
+    if let Some(t) = o.prune_tolerance {
+        anyhow::ensure!((0.0..0.5).contains(&t), "pruning tolerance {t} must lie in [0, 0.5)");
+    }
+    Ok(())
+}
+
+/// Derives the settings for `material` on an object of `scale` (see the module docs).
+pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -> Choice {
+    let dipoles = material.dipoles();
+    let names = ["red", "green", "blue"];
+    let mut reasons = Vec::new();
+
+    let (sharp, z_min) = dipoles
+        .iter()
+        .enumerate()
+        .map(|(c, d)| (c, d.z_r))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, 1.0));
+    let texel = match o.texel_mm {
+        Some(h) => {
+            reasons.push(format!("texel {h:.3} mm: given"));
+            h
+        }
+        None => {
+            let mut h = z_min;
+            let mut why = format!("texel {h:.3} mm = z_r of the {} channel (width of the R_d peak)", names[sharp]);
+            if h < scale.pixel_mm {
+                h = scale.pixel_mm;
+                why = format!("texel {h:.3} mm = one image pixel at the object (z_r = {z_min:.3} mm is finer than the image shows)");
+            }
+            // Gutters and packing roughly double the covered texels.
+            let budget_h = (2.0 * scale.area_mm2 / scale.max_texels).sqrt();
+            if h < budget_h {
+                h = budget_h;
+                why = format!("texel {h:.3} mm: the texel budget of {:.0} texels for {:.0} mm^2 of surface", scale.max_texels, scale.area_mm2);
+            }
+            reasons.push(why);
+            h
+        }
+    };
+
+    let holds = |k: u32, c: usize| dipoles[c].cumulative(k as f64 * texel / 2.0) / dipoles[c].total_reflectance().max(1e-300);
+    let kernel = match o.kernel_size {
+        Some(k) => {
+            reasons.push(format!("kernel {k}x{k}: given"));
+            k
+        }
+        None => {
+            let mut k = 7;
+            while k < 11 && holds(k, sharp) < 0.5 {
+                k += 2;
+            }
+            while k > 3 && (0..3).all(|c| holds(k - 2, c) >= 0.99) {
+                k -= 2;
+            }
+            let held: Vec<String> = (0..3).map(|c| format!("{:.0} %", 100.0 * holds(k, c))).collect();
+            reasons.push(format!(
+                "kernel {k}x{k} (radius {:.2} mm) holds {} of R_total (R, G, B)",
+                k as f64 * texel / 2.0,
+                held.join(" / ")
+            ));
+            k
+        }
+    };
+
+    let radius = kernel as f64 * texel / 2.0;
+    let spacing = match o.node_spacing_mm {
+        Some(s) => {
+            reasons.push(format!("node spacing {s:.2} mm: given"));
+            s
+        }
+        None => {
+            let tail = (0..3).map(|c| 1.0 - holds(kernel, c)).fold(0.0f64, f64::max);
+            // The global response carries the tail beyond the kernel; its error scales with
+            // the tail, so a small tail tolerates proportionally coarser nodes (up to 4x).
+            let relax = (0.25 / tail.max(1e-9)).sqrt().clamp(1.0, 4.0);
+            let s = radius * relax;
+            reasons.push(format!(
+                "node spacing {s:.2} mm = kernel radius x {relax:.1} (the global response carries {:.0} % of R_total beyond the kernel)",
+                100.0 * tail
+            ));
+            s
+        }
+    };
+
+    let prune = match o.prune_tolerance {
+        Some(t) => {
+            reasons.push(format!("pruning tolerance {:.2} %: given", 100.0 * t));
+            t
+        }
+        None => {
+            let t = (scale.target_error / 4.0).min(0.005);
+            reasons.push(format!("pruning tolerance {:.2} % of each row of F", 100.0 * t));
+            t
+        }
+    };
+
+    Choice {
+        settings: Settings {
+            texel_mm: texel,
+            kernel_size: kernel,
+            node_spacing_mm: spacing,
+            prune_tolerance: prune,
+            chart_angle_deg: 30.0,
+        },
+        reasons,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scale() -> ObjectScale {
+        ObjectScale {
+            area_mm2: 8000.0,
+            pixel_mm: 0.15,
+            max_texels: 1.0e6,
+            target_error: 0.02,
+        }
+    }
+
+    #[test]
+    fn materials_set_their_own_scales() {
+        let milk = derive(&Material::preset("skimmilk").unwrap(), &scale(), &Default::default()).settings;
+        let ketchup = derive(&Material::preset("ketchup").unwrap(), &scale(), &Default::default()).settings;
+        let cream = derive(&Material::preset("cream").unwrap(), &scale(), &Default::default()).settings;
+        // Texel = smallest z_r: skim milk blue 1/1.914, ketchup blue 1/1.48.
+        assert!((milk.texel_mm - 1.0 / 1.9142).abs() < 1e-3);
+        assert!((ketchup.texel_mm - 1.0 / 1.48).abs() < 1e-3);
+        // Cream's z_r is finer than a pixel: the pixel wins.
+        assert_eq!(cream.texel_mm, 0.15);
+        // Ketchup's reflectance is nearly all local: coarser global nodes than skim milk's.
+        assert!(ketchup.node_spacing_mm / ketchup.texel_mm > milk.node_spacing_mm / milk.texel_mm);
+        for s in [milk, ketchup, cream] {
+            assert!(s.kernel_size % 2 == 1 && (3..=11).contains(&s.kernel_size));
+            assert!(s.prune_tolerance <= 0.005);
+        }
+    }
+
+    #[test]
+    fn budget_and_overrides_win() {
+        let tight = ObjectScale { max_texels: 1000.0, ..scale() };
+        let s = derive(&Material::preset("skimmilk").unwrap(), &tight, &Default::default()).settings;
+        assert!((s.texel_mm - (2.0 * 8000.0 / 1000.0f64).sqrt()).abs() < 1e-9);
+        let o = SettingsOverrides { texel_mm: Some(2.0), kernel_size: Some(5), node_spacing_mm: Some(3.0), prune_tolerance: Some(0.0) };
+        let s = derive(&Material::preset("skimmilk").unwrap(), &scale(), &o).settings;
+        assert_eq!((s.texel_mm, s.kernel_size, s.node_spacing_mm, s.prune_tolerance), (2.0, 5, 3.0, 0.0));
+        assert!(validate(&SettingsOverrides { kernel_size: Some(4), ..Default::default() }).is_err());
+        assert!(validate(&SettingsOverrides { texel_mm: Some(f64::NAN), ..Default::default() }).is_err());
+    }
+}

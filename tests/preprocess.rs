@@ -1,0 +1,191 @@
+//! The preprocessing's operators against analytic results (CPU only):
+//! - semi-infinite slab under uniform light: B = E R_total away from the edges;
+//! - pencil beam: B(r) / power follows R_d(r);
+//! - pruning stays within its bound on the bunny.
+
+use glam::Vec3;
+use translucent::physics::{Dipole, Material};
+use translucent::preprocess::{
+    apply::apply,
+    operators::Blend,
+    settings::{self, ObjectScale, SettingsOverrides},
+    Preprocessed,
+};
+use translucent::scene::{mesh::Mesh, Overrides, Scene};
+
+fn quiet(_: &str, _: u64, _: u64) {}
+
+/// A slab of `size` (top face at y = size.y / 2) with `segments` along its longest edge,
+/// preprocessed with the given texel and node spacing.
+fn slab(material: &Material, size: [f32; 3], segments: u32, texel_mm: f64, node_spacing_mm: f64) -> Preprocessed {
+    let mesh = Mesh::cuboid(Vec3::from_array(size), segments);
+    let scale = ObjectScale {
+        area_mm2: mesh.surface_area(),
+        pixel_mm: 0.1,
+        max_texels: 1e6,
+        target_error: 0.02,
+    };
+    let o = SettingsOverrides {
+        texel_mm: Some(texel_mm),
+        node_spacing_mm: Some(node_spacing_mm),
+        kernel_size: Some(7),
+        ..Default::default()
+    };
+    let choice = settings::derive(material, &scale, &o);
+    Preprocessed::build(&mesh, material, &choice, &quiet)
+}
+
+/// A slab that is semi-infinite for `material`: the lit top face reaches 8 diffusion lengths
+/// (of the longest channel) beyond a 40 x 40 mm interior, at least 100 mm wide; thickness 4
+/// diffusion lengths within [20, 50] mm. Texel, kernel and node spacing are the settings rule's,
+/// coarsened to keep the test within 300 000 texels and 50 nodes along an edge.
+fn semi_infinite_slab(material: &Material) -> (Preprocessed, [f32; 3]) {
+    let ell = material.dipoles().iter().map(|d| d.diffusion_length()).fold(0.0f64, f64::max);
+    let width = (40.0 + 16.0 * ell).max(100.0) as f32;
+    let size = [width, (4.0 * ell).clamp(20.0, 50.0) as f32, width];
+    let mesh = Mesh::cuboid(Vec3::from_array(size), 50);
+    let scale = ObjectScale {
+        area_mm2: mesh.surface_area(),
+        pixel_mm: 0.01,
+        max_texels: 3e5,
+        target_error: 0.02,
+    };
+    let rule = settings::derive(material, &scale, &SettingsOverrides::default()).settings;
+    let p = slab(material, size, 50, rule.texel_mm, rule.node_spacing_mm.max(width as f64 / 50.0));
+    (p, size)
+}
+
+fn top(p: &Preprocessed, size: [f32; 3]) -> Vec<bool> {
+    p.atlas.texels.iter().map(|t| t.normal.y > 0.99 && t.position.y > size[1] / 2.0 - 0.01).collect()
+}
+
+#[test]
+fn slab_under_uniform_light_reflects_r_total() {
+    for name in ["skimmilk", "marble", "skin1", "ketchup"] {
+        let m = Material::preset(name).unwrap();
+        let r_total = m.total_reflectance();
+        let (p, size) = semi_infinite_slab(&m);
+        println!("{name}: slab {size:?}, {:?}, {} texels, {} nodes", p.settings, p.atlas.texels.len(), p.nodes.positions.len());
+        let lit = top(&p, size);
+        let e: Vec<[f32; 3]> = lit.iter().map(|l| if *l { [1.0; 3] } else { [0.0; 3] }).collect();
+        let interior: Vec<usize> = (0..lit.len())
+            .filter(|&t| lit[t] && p.atlas.texels[t].position.x.abs() < 20.0 && p.atlas.texels[t].position.z.abs() < 20.0)
+            .collect();
+        assert!(interior.len() > 400);
+        let worst = |mode: Blend| {
+            let b = apply(&p.atlas, &p.ops, &e, mode).texel;
+            interior
+                .iter()
+                .flat_map(|&t| (0..3).map(move |c| (c, t)))
+                .map(|(c, t)| (b[t][c] / r_total[c] - 1.0).abs())
+                .fold(0.0f64, f64::max)
+        };
+        {
+            let b = apply(&p.atlas, &p.ops, &e, Blend::Global).texel;
+            let mean: Vec<f64> = (0..3).map(|c| interior.iter().map(|&t| b[t][c] / r_total[c]).sum::<f64>() / interior.len() as f64).collect();
+            println!("{name}: mean B/(E R_total) per channel {mean:?}");
+        }
+        let simple = worst(Blend::Simple);
+        let optimized = worst(Blend::Optimized);
+        let global = worst(Blend::Global);
+        println!("{name}: max relative error simple {simple:.2e}, optimized {optimized:.2e}, global only {global:.2e}");
+        assert!(simple < 0.01, "{name} simple blending: {simple}");
+        assert!(optimized < 0.01, "{name} optimized blending: {optimized}");
+        assert!(global < 0.02, "{name} global only: {global}");
+        // Adding the local response to the full global one counts the near field twice: the
+        // slab test must see that.
+        let local = apply(&p.atlas, &p.ops, &e, Blend::Local).texel;
+        let global_b = apply(&p.atlas, &p.ops, &e, Blend::Global).texel;
+        let t = interior[interior.len() / 2];
+        let doubled = (0..3).map(|c| (local[t][c] + global_b[t][c]) / r_total[c] - 1.0).fold(f64::MIN, f64::max);
+        assert!(doubled > 0.05, "{name}: naive sum is only {doubled} too bright");
+    }
+}
+
+/// B at distance `r` from the centre of a uniformly lit disc of radius `a` (unit power), by
+/// polar quadrature over the disc: independent of atlas, kernels and F.
+fn spot_reference(d: &Dipole, a: f64, r: f64) -> f64 {
+    let (nr, nt) = (200, 256);
+    let mut sum = 0.0;
+    for i in 0..nr {
+        let rho = (i as f64 + 0.5) * a / nr as f64;
+        for j in 0..nt {
+            let th = (j as f64 + 0.5) * std::f64::consts::TAU / nt as f64;
+            let dist = (r * r + rho * rho - 2.0 * r * rho * th.cos()).max(0.0).sqrt();
+            sum += d.rd(dist) * rho * (a / nr as f64) * (std::f64::consts::TAU / nt as f64);
+        }
+    }
+    sum / (std::f64::consts::PI * a * a)
+}
+
+#[test]
+fn pencil_beam_follows_the_profile() {
+    let m = Material::preset("skimmilk").unwrap();
+    // 0.5 mm texels, 7x7 kernels (radius 1.75 mm), nodes 1 mm apart. The slab needs no
+    // margin: B(r) from a spot does not depend on surface beyond r.
+    let size = [44.0, 10.0, 44.0];
+    let p = slab(&m, size, 44, 0.5, 1.0);
+    let dipoles: Vec<Dipole> = m.dipoles().to_vec();
+    let lit = top(&p, size);
+    // Unit power spread uniformly over a 1 mm spot at the centre of the top face.
+    let a = 1.0f32;
+    let spot: Vec<usize> = (0..lit.len()).filter(|&t| lit[t] && (p.atlas.texels[t].position.x.powi(2) + p.atlas.texels[t].position.z.powi(2)).sqrt() < a).collect();
+    let spot_area: f32 = spot.iter().map(|&t| p.atlas.texels[t].area).sum();
+    let mut e = vec![[0.0f32; 3]; lit.len()];
+    for &t in &spot {
+        e[t] = [1.0 / spot_area; 3];
+    }
+    let centre = Vec3::new(0.0, size[1] / 2.0, 0.0);
+    let a_eff = (spot_area as f64 / std::f64::consts::PI).sqrt();
+    let mut worst = Vec::new();
+    for mode in [Blend::Simple, Blend::Optimized] {
+        let b = apply(&p.atlas, &p.ops, &e, mode).texel;
+        let mut report = Vec::new();
+        let mut err_all: f64 = 0.0;
+        for r_target in [1.5f32, 2.0, 3.0, 5.0, 8.0, 12.0, 18.0] {
+            let ring: Vec<usize> = (0..lit.len()).filter(|&t| lit[t] && (p.atlas.texels[t].position.distance(centre) - r_target).abs() < 0.25).collect();
+            assert!(!ring.is_empty());
+            let mut signed = Vec::new();
+            for c in 0..3 {
+                let got: f64 = ring.iter().map(|&t| b[t][c]).sum::<f64>() / ring.len() as f64;
+                let want: f64 = ring
+                    .iter()
+                    .map(|&t| spot_reference(&dipoles[c], a_eff, p.atlas.texels[t].position.distance(centre) as f64))
+                    .sum::<f64>()
+                    / ring.len() as f64;
+                err_all = err_all.max((got / want - 1.0).abs());
+                signed.push(format!("{:+.1}", 100.0 * (got / want - 1.0)));
+            }
+            report.push(format!("r={r_target}: {}", signed.join("/")));
+        }
+        println!("{mode:?} (% error R/G/B): {}", report.join(", "));
+        worst.push(err_all);
+    }
+    assert!(worst[1] < worst[0], "optimized blending is not better than simple: {worst:?}");
+    assert!(worst[1] < 0.15, "optimized: profile off by {:.1} %", 100.0 * worst[1]);
+}
+
+#[test]
+fn bunny_pruning_stays_within_tolerance() {
+    let scene = Scene::load(None, &Overrides::default()).unwrap();
+    let o = SettingsOverrides {
+        texel_mm: Some(1.0),
+        ..Default::default()
+    };
+    let choice = translucent::preprocess::choose(&scene, &o, 0.02).unwrap();
+    let p = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
+    let tol = p.settings.prune_tolerance;
+    assert!(p.ops.prune.max_dropped <= tol + 1e-12, "{:?}", p.ops.prune);
+    assert!(p.ops.prune.kept_entries <= p.ops.prune.dense_entries);
+    // Recompute each row's dropped mass independently from an unpruned build.
+    let full_choice = translucent::preprocess::choose(&scene, &SettingsOverrides { prune_tolerance: Some(0.0), ..o }, 0.02).unwrap();
+    let full = Preprocessed::build(&scene.mesh, &scene.material, &full_choice, &quiet);
+    assert_eq!(full.ops.global.nnz() as u64, full.ops.prune.dense_entries);
+    for q in 0..p.ops.global.rows() {
+        let (a, b) = (p.ops.global.row_sum(q), full.ops.global.row_sum(q));
+        for c in 0..3 {
+            assert!(1.0 - a[c] / b[c] <= tol + 1e-5, "row {q} channel {c}");
+        }
+    }
+}
+
