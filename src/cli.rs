@@ -3,12 +3,15 @@
 use crate::gpu::{list_devices, Gpu, GpuOptions};
 use crate::graph::timing::TimingReport;
 use crate::output;
+use crate::preprocess::{self, cache, settings::SettingsOverrides, CacheOutcome};
 use crate::renderer::Renderer;
 use crate::scene::{Overrides, Scene};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Mutex;
 
 /// Interactive rendering of translucent objects (Lensch et al. 2002) on Vulkan.
 #[derive(Debug, Parser)]
@@ -30,8 +33,67 @@ pub struct Cli {
 pub enum Command {
     /// Render a scene to render.png, render.exr, timings.json and trace.json.
     Render(RenderArgs),
+    /// Run the preprocessing (atlas, global response, kernels, blending) and cache it.
+    Precompute(PrecomputeArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
+}
+
+/// Preprocessing controls; every value left out is derived from the scene and printed.
+#[derive(Debug, Args, Clone, Default)]
+pub struct PreprocessArgs {
+    /// Atlas texel edge in mm.
+    #[arg(long)]
+    pub texel_mm: Option<f64>,
+    /// Local kernel edge in texels (odd).
+    #[arg(long)]
+    pub kernel: Option<u32>,
+    /// Spacing of the global response's nodes in mm.
+    #[arg(long)]
+    pub node_spacing_mm: Option<f64>,
+    /// Largest fraction of each row of F that pruning may drop (e.g. 0.005).
+    #[arg(long)]
+    pub prune: Option<f64>,
+    /// Target relative error of the render.
+    #[arg(long, default_value_t = 0.02)]
+    pub target_error: f64,
+    /// Cache folder (default: $XDG_CACHE_HOME/translucent or ~/.cache/translucent).
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
+    /// Neither read nor write the cache.
+    #[arg(long)]
+    pub no_cache: bool,
+}
+
+impl PreprocessArgs {
+    fn overrides(&self) -> SettingsOverrides {
+        SettingsOverrides {
+            texel_mm: self.texel_mm,
+            kernel_size: self.kernel,
+            node_spacing_mm: self.node_spacing_mm,
+            prune_tolerance: self.prune,
+        }
+    }
+
+    fn cache_dir(&self) -> Option<PathBuf> {
+        (!self.no_cache).then(|| self.cache.clone().unwrap_or_else(cache::default_dir))
+    }
+}
+
+/// Arguments of `precompute`.
+#[derive(Debug, Args, Default)]
+pub struct PrecomputeArgs {
+    /// Scene file (TOML); the default scene without one.
+    pub scene: Option<PathBuf>,
+    /// OBJ mesh replacing the scene's.
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Material preset replacing the scene's.
+    #[arg(long)]
+    pub material: Option<String>,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
 }
 
 /// Arguments of `render`.
@@ -130,6 +192,87 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     check_validation(&gpu)
 }
 
+/// Progress bars, one per preprocessing stage (hidden when stderr is not a terminal).
+struct Bars {
+    multi: MultiProgress,
+    bars: Mutex<Vec<(String, ProgressBar)>>,
+}
+
+impl Bars {
+    fn new() -> Bars {
+        Bars {
+            multi: MultiProgress::new(),
+            bars: Mutex::new(Vec::new()),
+        }
+    }
+
+    fn update(&self, stage: &str, done: u64, total: u64) {
+        let Ok(mut bars) = self.bars.lock() else {
+            return;
+        };
+        let bar = match bars.iter().find(|(s, _)| s == stage) {
+            Some((_, b)) => b.clone(),
+            None => {
+                let b = self.multi.add(ProgressBar::new(total.max(1)));
+                let style =
+                    ProgressStyle::with_template("{prefix:>10} [{bar:40}] {pos}/{len} {elapsed}")
+                        .unwrap_or_else(|_| ProgressStyle::default_bar())
+                        .progress_chars("=> ");
+                b.set_style(style);
+                b.set_prefix(stage.to_string());
+                bars.push((stage.to_string(), b.clone()));
+                b
+            }
+        };
+        bar.set_length(total.max(1));
+        bar.set_position(done);
+        if done >= total {
+            bar.finish();
+        }
+    }
+}
+
+fn precompute(args: &PrecomputeArgs) -> Result<()> {
+    let overrides = Overrides {
+        mesh: args.mesh.clone(),
+        material: args.material.clone(),
+        ..Default::default()
+    };
+    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
+    println!(
+        "mesh: {} vertices, {} triangles, {:.0} mm^2",
+        scene.mesh.positions.len(),
+        scene.mesh.triangle_count(),
+        scene.mesh.surface_area()
+    );
+    println!("settings (from the material and the object's size):");
+    for r in &choice.reasons {
+        println!("  {r}");
+    }
+    let bars = Bars::new();
+    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
+    let (pre, outcome) =
+        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
+    match &outcome {
+        CacheOutcome::Disabled => println!("cache: off"),
+        CacheOutcome::Hit(p) => println!("cache: loaded {}", p.display()),
+        CacheOutcome::Built { stored, replaced } => {
+            if let Some(why) = replaced {
+                println!("cache: rejected ({why}); rebuilt");
+            }
+            match stored {
+                Some(p) => println!("cache: stored {}", p.display()),
+                None => println!("cache: not stored (see the warning above)"),
+            }
+        }
+    }
+    for line in pre.summary() {
+        println!("{line}");
+    }
+    Ok(())
+}
+
 fn check_validation(gpu: &Gpu) -> Result<()> {
     let n = gpu.validation.count();
     if n > 0 {
@@ -184,6 +327,7 @@ pub fn main() -> ExitCode {
             },
         ),
         Some(Command::Render(args)) => render(&cli, args),
+        Some(Command::Precompute(args)) => precompute(args),
         Some(Command::Devices) => devices(),
     };
     match result {

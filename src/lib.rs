@@ -6,6 +6,9 @@
 //! [`renderer`] assembles the graph for a scene; [`cli`] is the command line.
 
 #![warn(missing_docs)]
+// Per-channel numeric code indexes several parallel arrays by channel; iterator rewrites of
+// those loops read worse.
+#![allow(clippy::needless_range_loop)]
 
 pub mod cli;
 pub mod gpu;
@@ -13,6 +16,6 @@ pub mod graph;
 pub mod output;
 pub mod passes;
 pub mod physics;
+pub mod preprocess;
 pub mod renderer;
 pub mod scene;
-pub mod preprocess;

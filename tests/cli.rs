@@ -216,3 +216,42 @@ fn broken_objs_are_refused_clearly() {
     fails_with(c, "at least 1x1");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn precompute_prints_its_choices_and_uses_the_cache() {
+    let dir = temp_dir("precompute");
+    let run = || {
+        bin()
+            .args([
+                "precompute",
+                "--material",
+                "ketchup",
+                "--texel-mm",
+                "1.0",
+                "--cache",
+            ])
+            .arg(dir.join("cache"))
+            .output()
+            .unwrap()
+    };
+    let o = run();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for needle in [
+        "texel 1.000 mm: given",
+        "kernel",
+        "node spacing",
+        "pruning tolerance",
+        "charts:",
+        "F:",
+        "cache: stored",
+    ] {
+        assert!(out.contains(needle), "{needle} missing from\n{out}");
+    }
+    let o = run();
+    assert!(String::from_utf8_lossy(&o.stdout).contains("cache: loaded"));
+    let mut c = bin();
+    c.args(["precompute", "--kernel", "4", "--no-cache"]);
+    fails_with(c, "kernel size 4 must be odd");
+    let _ = std::fs::remove_dir_all(&dir);
+}

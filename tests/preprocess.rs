@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)]
 //! The preprocessing's operators against analytic results (CPU only):
 //! - semi-infinite slab under uniform light: B = E R_total away from the edges;
 //! - pencil beam: B(r) / power follows R_d(r);
@@ -17,7 +18,13 @@ fn quiet(_: &str, _: u64, _: u64) {}
 
 /// A slab of `size` (top face at y = size.y / 2) with `segments` along its longest edge,
 /// preprocessed with the given texel and node spacing.
-fn slab(material: &Material, size: [f32; 3], segments: u32, texel_mm: f64, node_spacing_mm: f64) -> Preprocessed {
+fn slab(
+    material: &Material,
+    size: [f32; 3],
+    segments: u32,
+    texel_mm: f64,
+    node_spacing_mm: f64,
+) -> Preprocessed {
     let mesh = Mesh::cuboid(Vec3::from_array(size), segments);
     let scale = ObjectScale {
         area_mm2: mesh.surface_area(),
@@ -40,7 +47,11 @@ fn slab(material: &Material, size: [f32; 3], segments: u32, texel_mm: f64, node_
 /// diffusion lengths within [20, 50] mm. Texel, kernel and node spacing are the settings rule's,
 /// coarsened to keep the test within 300 000 texels and 50 nodes along an edge.
 fn semi_infinite_slab(material: &Material) -> (Preprocessed, [f32; 3]) {
-    let ell = material.dipoles().iter().map(|d| d.diffusion_length()).fold(0.0f64, f64::max);
+    let ell = material
+        .dipoles()
+        .iter()
+        .map(|d| d.diffusion_length())
+        .fold(0.0f64, f64::max);
     let width = (40.0 + 16.0 * ell).max(100.0) as f32;
     let size = [width, (4.0 * ell).clamp(20.0, 50.0) as f32, width];
     let mesh = Mesh::cuboid(Vec3::from_array(size), 50);
@@ -51,12 +62,22 @@ fn semi_infinite_slab(material: &Material) -> (Preprocessed, [f32; 3]) {
         target_error: 0.02,
     };
     let rule = settings::derive(material, &scale, &SettingsOverrides::default()).settings;
-    let p = slab(material, size, 50, rule.texel_mm, rule.node_spacing_mm.max(width as f64 / 50.0));
+    let p = slab(
+        material,
+        size,
+        50,
+        rule.texel_mm,
+        rule.node_spacing_mm.max(width as f64 / 50.0),
+    );
     (p, size)
 }
 
 fn top(p: &Preprocessed, size: [f32; 3]) -> Vec<bool> {
-    p.atlas.texels.iter().map(|t| t.normal.y > 0.99 && t.position.y > size[1] / 2.0 - 0.01).collect()
+    p.atlas
+        .texels
+        .iter()
+        .map(|t| t.normal.y > 0.99 && t.position.y > size[1] / 2.0 - 0.01)
+        .collect()
 }
 
 #[test]
@@ -65,11 +86,23 @@ fn slab_under_uniform_light_reflects_r_total() {
         let m = Material::preset(name).unwrap();
         let r_total = m.total_reflectance();
         let (p, size) = semi_infinite_slab(&m);
-        println!("{name}: slab {size:?}, {:?}, {} texels, {} nodes", p.settings, p.atlas.texels.len(), p.nodes.positions.len());
+        println!(
+            "{name}: slab {size:?}, {:?}, {} texels, {} nodes",
+            p.settings,
+            p.atlas.texels.len(),
+            p.nodes.positions.len()
+        );
         let lit = top(&p, size);
-        let e: Vec<[f32; 3]> = lit.iter().map(|l| if *l { [1.0; 3] } else { [0.0; 3] }).collect();
+        let e: Vec<[f32; 3]> = lit
+            .iter()
+            .map(|l| if *l { [1.0; 3] } else { [0.0; 3] })
+            .collect();
         let interior: Vec<usize> = (0..lit.len())
-            .filter(|&t| lit[t] && p.atlas.texels[t].position.x.abs() < 20.0 && p.atlas.texels[t].position.z.abs() < 20.0)
+            .filter(|&t| {
+                lit[t]
+                    && p.atlas.texels[t].position.x.abs() < 20.0
+                    && p.atlas.texels[t].position.z.abs() < 20.0
+            })
             .collect();
         assert!(interior.len() > 400);
         let worst = |mode: Blend| {
@@ -82,7 +115,12 @@ fn slab_under_uniform_light_reflects_r_total() {
         };
         {
             let b = apply(&p.atlas, &p.ops, &e, Blend::Global).texel;
-            let mean: Vec<f64> = (0..3).map(|c| interior.iter().map(|&t| b[t][c] / r_total[c]).sum::<f64>() / interior.len() as f64).collect();
+            let mean: Vec<f64> = (0..3)
+                .map(|c| {
+                    interior.iter().map(|&t| b[t][c] / r_total[c]).sum::<f64>()
+                        / interior.len() as f64
+                })
+                .collect();
             println!("{name}: mean B/(E R_total) per channel {mean:?}");
         }
         let simple = worst(Blend::Simple);
@@ -97,8 +135,13 @@ fn slab_under_uniform_light_reflects_r_total() {
         let local = apply(&p.atlas, &p.ops, &e, Blend::Local).texel;
         let global_b = apply(&p.atlas, &p.ops, &e, Blend::Global).texel;
         let t = interior[interior.len() / 2];
-        let doubled = (0..3).map(|c| (local[t][c] + global_b[t][c]) / r_total[c] - 1.0).fold(f64::MIN, f64::max);
-        assert!(doubled > 0.05, "{name}: naive sum is only {doubled} too bright");
+        let doubled = (0..3)
+            .map(|c| (local[t][c] + global_b[t][c]) / r_total[c] - 1.0)
+            .fold(f64::MIN, f64::max);
+        assert!(
+            doubled > 0.05,
+            "{name}: naive sum is only {doubled} too bright"
+        );
     }
 }
 
@@ -111,7 +154,9 @@ fn spot_reference(d: &Dipole, a: f64, r: f64) -> f64 {
         let rho = (i as f64 + 0.5) * a / nr as f64;
         for j in 0..nt {
             let th = (j as f64 + 0.5) * std::f64::consts::TAU / nt as f64;
-            let dist = (r * r + rho * rho - 2.0 * r * rho * th.cos()).max(0.0).sqrt();
+            let dist = (r * r + rho * rho - 2.0 * r * rho * th.cos())
+                .max(0.0)
+                .sqrt();
             sum += d.rd(dist) * rho * (a / nr as f64) * (std::f64::consts::TAU / nt as f64);
         }
     }
@@ -129,7 +174,14 @@ fn pencil_beam_follows_the_profile() {
     let lit = top(&p, size);
     // Unit power spread uniformly over a 1 mm spot at the centre of the top face.
     let a = 1.0f32;
-    let spot: Vec<usize> = (0..lit.len()).filter(|&t| lit[t] && (p.atlas.texels[t].position.x.powi(2) + p.atlas.texels[t].position.z.powi(2)).sqrt() < a).collect();
+    let spot: Vec<usize> = (0..lit.len())
+        .filter(|&t| {
+            lit[t]
+                && (p.atlas.texels[t].position.x.powi(2) + p.atlas.texels[t].position.z.powi(2))
+                    .sqrt()
+                    < a
+        })
+        .collect();
     let spot_area: f32 = spot.iter().map(|&t| p.atlas.texels[t].area).sum();
     let mut e = vec![[0.0f32; 3]; lit.len()];
     for &t in &spot {
@@ -143,14 +195,24 @@ fn pencil_beam_follows_the_profile() {
         let mut report = Vec::new();
         let mut err_all: f64 = 0.0;
         for r_target in [1.5f32, 2.0, 3.0, 5.0, 8.0, 12.0, 18.0] {
-            let ring: Vec<usize> = (0..lit.len()).filter(|&t| lit[t] && (p.atlas.texels[t].position.distance(centre) - r_target).abs() < 0.25).collect();
+            let ring: Vec<usize> = (0..lit.len())
+                .filter(|&t| {
+                    lit[t] && (p.atlas.texels[t].position.distance(centre) - r_target).abs() < 0.25
+                })
+                .collect();
             assert!(!ring.is_empty());
             let mut signed = Vec::new();
             for c in 0..3 {
                 let got: f64 = ring.iter().map(|&t| b[t][c]).sum::<f64>() / ring.len() as f64;
                 let want: f64 = ring
                     .iter()
-                    .map(|&t| spot_reference(&dipoles[c], a_eff, p.atlas.texels[t].position.distance(centre) as f64))
+                    .map(|&t| {
+                        spot_reference(
+                            &dipoles[c],
+                            a_eff,
+                            p.atlas.texels[t].position.distance(centre) as f64,
+                        )
+                    })
                     .sum::<f64>()
                     / ring.len() as f64;
                 err_all = err_all.max((got / want - 1.0).abs());
@@ -161,8 +223,15 @@ fn pencil_beam_follows_the_profile() {
         println!("{mode:?} (% error R/G/B): {}", report.join(", "));
         worst.push(err_all);
     }
-    assert!(worst[1] < worst[0], "optimized blending is not better than simple: {worst:?}");
-    assert!(worst[1] < 0.15, "optimized: profile off by {:.1} %", 100.0 * worst[1]);
+    assert!(
+        worst[1] < worst[0],
+        "optimized blending is not better than simple: {worst:?}"
+    );
+    assert!(
+        worst[1] < 0.15,
+        "optimized: profile off by {:.1} %",
+        100.0 * worst[1]
+    );
 }
 
 #[test]
@@ -178,7 +247,15 @@ fn bunny_pruning_stays_within_tolerance() {
     assert!(p.ops.prune.max_dropped <= tol + 1e-12, "{:?}", p.ops.prune);
     assert!(p.ops.prune.kept_entries <= p.ops.prune.dense_entries);
     // Recompute each row's dropped mass independently from an unpruned build.
-    let full_choice = translucent::preprocess::choose(&scene, &SettingsOverrides { prune_tolerance: Some(0.0), ..o }, 0.02).unwrap();
+    let full_choice = translucent::preprocess::choose(
+        &scene,
+        &SettingsOverrides {
+            prune_tolerance: Some(0.0),
+            ..o
+        },
+        0.02,
+    )
+    .unwrap();
     let full = Preprocessed::build(&scene.mesh, &scene.material, &full_choice, &quiet);
     assert_eq!(full.ops.global.nnz() as u64, full.ops.prune.dense_entries);
     for q in 0..p.ops.global.rows() {
@@ -189,3 +266,74 @@ fn bunny_pruning_stays_within_tolerance() {
     }
 }
 
+#[test]
+fn cache_round_trips_and_rejects_corrupt_or_stale_files() {
+    use translucent::preprocess::cache;
+    let m = Material::preset("ketchup").unwrap();
+    let mesh = Mesh::sphere(10.0, 24);
+    let scale = ObjectScale {
+        area_mm2: mesh.surface_area(),
+        pixel_mm: 0.1,
+        max_texels: 1e5,
+        target_error: 0.02,
+    };
+    let choice = settings::derive(&m, &scale, &SettingsOverrides::default());
+    let p = Preprocessed::build(&mesh, &m, &choice, &quiet);
+    let dir = std::env::temp_dir().join(format!("translucent-cache-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let key = cache::key(&mesh, &m, &p.settings);
+    assert!(cache::load(&dir, key).unwrap().is_none());
+    let path = cache::store(&dir, key, &p).unwrap();
+    assert_eq!(cache::load(&dir, key).unwrap().unwrap(), p);
+    // Any change of input changes the key.
+    let other = Material::preset("marble").unwrap();
+    assert_ne!(cache::key(&mesh, &other, &p.settings), key);
+    let mut s2 = p.settings;
+    s2.kernel_size = 5;
+    assert_ne!(cache::key(&mesh, &m, &s2), key);
+    // A flipped byte, a truncation, another version: errors that name the problem.
+    let bytes = std::fs::read(&path).unwrap();
+    let mut flipped = bytes.clone();
+    let last = flipped.len() - 10;
+    flipped[last] ^= 0x55;
+    std::fs::write(&path, &flipped).unwrap();
+    assert!(format!("{:#}", cache::load(&dir, key).unwrap_err()).contains("corrupt"));
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    assert!(format!("{:#}", cache::load(&dir, key).unwrap_err()).contains("truncated"));
+    let mut old = bytes.clone();
+    old[8] = old[8].wrapping_add(1);
+    std::fs::write(&path, &old).unwrap();
+    assert!(format!("{:#}", cache::load(&dir, key).unwrap_err()).contains("version"));
+    std::fs::write(&path, b"garbage").unwrap();
+    assert!(cache::load(&dir, key).is_err());
+    // prepare() rebuilds over the bad file and leaves a good one.
+    let scene_desc = translucent::scene::desc::SceneDesc::parse("[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"ketchup\"").unwrap();
+    let scene =
+        Scene::from_desc(scene_desc, std::path::Path::new(""), &Overrides::default()).unwrap();
+    let key = cache::key(&scene.mesh, &scene.material, &choice.settings);
+    std::fs::write(cache::path(&dir, key), b"garbage").unwrap();
+    let (_, outcome) =
+        translucent::preprocess::prepare(&scene, &choice, Some(&dir), &quiet).unwrap();
+    assert!(
+        matches!(
+            outcome,
+            translucent::preprocess::CacheOutcome::Built {
+                replaced: Some(_),
+                stored: Some(_)
+            }
+        ),
+        "{outcome:?}"
+    );
+    let (_, outcome) =
+        translucent::preprocess::prepare(&scene, &choice, Some(&dir), &quiet).unwrap();
+    assert!(
+        matches!(outcome, translucent::preprocess::CacheOutcome::Hit(_)),
+        "{outcome:?}"
+    );
+    // No temporary files remain.
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(name.ends_with(".bin") && !name.starts_with('.'), "{name}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -219,7 +219,10 @@ mod tests {
                             2.0 * PI * r * d.rd(r) * dr
                         })
                         .sum();
-                    assert!(close(d.cumulative(rho), numeric, 1e-5), "{name}[{c}] P({rho})");
+                    assert!(
+                        close(d.cumulative(rho), numeric, 1e-5),
+                        "{name}[{c}] P({rho})"
+                    );
                 }
             }
         }
@@ -240,7 +243,11 @@ mod tests {
             assert!(close(f, d.rd(r), 1e-12));
             let d1 = (d.rd(r + h) - d.rd(r - h)) / (2.0 * h);
             let d2 = (d.rd(r + h) - 2.0 * d.rd(r) + d.rd(r - h)) / (h * h);
-            assert!(close(lap, d2 + d1 / r, 1e-4), "r = {r}: {lap} vs {}", d2 + d1 / r);
+            assert!(
+                close(lap, d2 + d1 / r, 1e-4),
+                "r = {r}: {lap} vs {}",
+                d2 + d1 / r
+            );
         }
     }
 

@@ -17,7 +17,12 @@ pub struct Applied {
 }
 
 /// Local convolution: B^l(t) = sum over t's kernel of K E (+ beta(t) E(t) when `direct`).
-pub fn local(atlas: &Atlas, ops: &Operators, irradiance: &[[f32; 3]], direct: Option<&[[f32; 3]]>) -> Vec<[f64; 3]> {
+pub fn local(
+    atlas: &Atlas,
+    ops: &Operators,
+    irradiance: &[[f32; 3]],
+    direct: Option<&[[f32; 3]]>,
+) -> Vec<[f64; 3]> {
     let k = ops.kernel_size as i64;
     let half = k / 2;
     let kk = (k * k) as usize;

@@ -43,9 +43,9 @@ pub struct Texel {
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Chart {
     /// Mean normal (projection direction).
-    pub normal: Vec3,
+    pub normal: DVec3,
     /// Plane axes: chart coordinate u along `axes.0`, v along `axes.1`, in mm.
-    pub axes: (Vec3, Vec3),
+    pub axes: (DVec3, DVec3),
     /// Lower corner of the chart's projected bounds, mm.
     pub origin: DVec2,
     /// First texel of the chart's box (gutter included).
@@ -88,7 +88,10 @@ fn weld(mesh: &Mesh) -> Vec<u32> {
     mesh.positions
         .iter()
         .enumerate()
-        .map(|(i, p)| *map.entry(p.to_array().map(f32::to_bits)).or_insert(i as u32))
+        .map(|(i, p)| {
+            *map.entry(p.to_array().map(f32::to_bits))
+                .or_insert(i as u32)
+        })
         .collect()
 }
 
@@ -109,7 +112,10 @@ fn adjacency(mesh: &Mesh, welded: &[u32]) -> Vec<Vec<u32>> {
     for (f, t) in mesh.indices.chunks(3).enumerate() {
         for k in 0..3 {
             let (a, b) = (welded[t[k] as usize], welded[t[(k + 1) % 3] as usize]);
-            edges.entry((a.min(b), a.max(b))).or_default().push(f as u32);
+            edges
+                .entry((a.min(b), a.max(b)))
+                .or_default()
+                .push(f as u32);
         }
     }
     let mut adj = vec![Vec::new(); mesh.triangle_count()];
@@ -131,12 +137,25 @@ fn adjacency(mesh: &Mesh, welded: &[u32]) -> Vec<Vec<u32>> {
 }
 
 /// Groups `faces` into charts whose normals stay within acos(`cos_max`) of the chart mean.
-fn grow_charts(faces: &[u32], normals: &[DVec3], areas: &[f64], adj: &[Vec<u32>], cos_max: f64) -> Vec<Vec<u32>> {
+fn grow_charts(
+    faces: &[u32],
+    normals: &[DVec3],
+    areas: &[f64],
+    adj: &[Vec<u32>],
+    cos_max: f64,
+) -> Vec<Vec<u32>> {
     let mut member: HashMap<u32, bool> = faces.iter().map(|&f| (f, false)).collect();
     let mut order: Vec<u32> = faces.to_vec();
-    order.sort_by(|a, b| areas[*b as usize].total_cmp(&areas[*a as usize]).then(a.cmp(b)));
+    // Largest first: big flat regions seed charts before their ragged borders do.
+    order.sort_by(|a, b| {
+        areas[*b as usize]
+            .total_cmp(&areas[*a as usize])
+            .then(a.cmp(b))
+    });
     let mut charts = Vec::new();
-    for &seed in &order {
+    // Rejected triangles return to the back of the queue and seed later charts.
+    let mut queue: std::collections::VecDeque<u32> = order.into();
+    while let Some(seed) = queue.pop_front() {
         if member[&seed] {
             continue;
         }
@@ -160,13 +179,33 @@ fn grow_charts(faces: &[u32], normals: &[DVec3], areas: &[f64], adj: &[Vec<u32>]
                 }
             }
         }
-        // Enforce the bound against the final mean: violators go back to the pool.
-        let mean = sum.normalize_or_zero();
-        let (keep, reject): (Vec<u32>, Vec<u32>) = chart
-            .into_iter()
-            .partition(|&f| f == seed || normals[f as usize] == DVec3::ZERO || normals[f as usize].dot(mean) >= cos_max);
-        for f in reject {
-            member.insert(f, false);
+        // Enforce the bound against the final mean: violators go back to the pool, until the
+        // mean of what is left no longer changes the verdict.
+        let mut keep = chart;
+        loop {
+            let mean = keep
+                .iter()
+                .map(|&f| normals[f as usize] * areas[f as usize])
+                .sum::<DVec3>()
+                .normalize_or_zero();
+            let (ok, bad): (Vec<u32>, Vec<u32>) = keep.iter().partition(|&&f| {
+                normals[f as usize] == DVec3::ZERO
+                    || mean == DVec3::ZERO
+                    || normals[f as usize].dot(mean) >= cos_max
+            });
+            if bad.is_empty() {
+                break;
+            }
+            for f in bad {
+                member.insert(f, false);
+                queue.push_back(f);
+            }
+            keep = ok;
+            if keep.is_empty() {
+                keep = vec![seed];
+                member.insert(seed, true);
+                break;
+            }
         }
         charts.push(keep);
     }
@@ -219,6 +258,9 @@ fn barycentric(p: DVec2, a: DVec2, b: DVec2, c: DVec2) -> [f64; 3] {
     [1.0 - wb - wc, wb, wc]
 }
 
+/// A texel of a chart being rasterised: local column, row and what it accumulated.
+type Cell = (u32, u32, Accum);
+
 struct Accum {
     area: f64,
     position: DVec3,
@@ -228,9 +270,15 @@ struct Accum {
 
 /// Rasterises one chart: exact coverage of every texel of its box. Returns the texels (local
 /// coordinates) and whether two triangles covered one texel centre (a fold-over).
-fn rasterise_chart(mesh: &Mesh, normals: &[DVec3], chart: &Chart, texel: f64, gutter: u32) -> (Vec<(u32, u32, Accum)>, bool) {
-    let (u_axis, v_axis) = (chart.axes.0.as_dvec3(), chart.axes.1.as_dvec3());
-    let n_chart = chart.normal.as_dvec3();
+fn rasterise_chart(
+    mesh: &Mesh,
+    normals: &[DVec3],
+    chart: &Chart,
+    texel: f64,
+    gutter: u32,
+) -> (Vec<(u32, u32, Accum)>, bool) {
+    let (u_axis, v_axis) = chart.axes;
+    let n_chart = chart.normal;
     let (w, h) = chart.size;
     let mut cells: HashMap<(u32, u32), Accum> = HashMap::new();
     let mut centre_hits: HashMap<(u32, u32), u32> = HashMap::new();
@@ -240,14 +288,21 @@ fn rasterise_chart(mesh: &Mesh, normals: &[DVec3], chart: &Chart, texel: f64, gu
         let p3 = [t[0], t[1], t[2]].map(|i| mesh.positions[i as usize].as_dvec3());
         let nv = [t[0], t[1], t[2]].map(|i| mesh.normals[i as usize].as_dvec3());
         // Chart coordinates in texel units, gutter included.
-        let p2 = p3.map(|p| (DVec2::new(p.dot(u_axis), p.dot(v_axis)) - chart.origin) / texel + DVec2::splat(gutter as f64));
+        let p2 = p3.map(|p| {
+            (DVec2::new(p.dot(u_axis), p.dot(v_axis)) - chart.origin) / texel
+                + DVec2::splat(gutter as f64)
+        });
         let cos = normals[f as usize].dot(n_chart).abs().max(1e-6);
         let lo = p2[0].x.min(p2[1].x).min(p2[2].x).floor().max(0.0) as u32;
         let lo_y = p2[0].y.min(p2[1].y).min(p2[2].y).floor().max(0.0) as u32;
         let hi = (p2[0].x.max(p2[1].x).max(p2[2].x).ceil() as u32).min(w);
         let hi_y = (p2[0].y.max(p2[1].y).max(p2[2].y).ceil() as u32).min(h);
         let ccw = (p2[1] - p2[0]).perp_dot(p2[2] - p2[0]) >= 0.0;
-        let tri: Vec<DVec2> = if ccw { p2.to_vec() } else { vec![p2[0], p2[2], p2[1]] };
+        let tri: Vec<DVec2> = if ccw {
+            p2.to_vec()
+        } else {
+            vec![p2[0], p2[2], p2[1]]
+        };
         for y in lo_y..hi_y {
             for x in lo.min(w)..hi {
                 let (x0, y0) = (x as f64, y as f64);
@@ -290,7 +345,7 @@ fn rasterise_chart(mesh: &Mesh, normals: &[DVec3], chart: &Chart, texel: f64, gu
             }
         }
     }
-    let mut out: Vec<(u32, u32, Accum)> = cells.into_iter().map(|((x, y), a)| (x, y, a)).collect();
+    let mut out: Vec<Cell> = cells.into_iter().map(|((x, y), a)| (x, y, a)).collect();
     out.sort_by_key(|(x, y, _)| (*y, *x));
     (out, folded)
 }
@@ -327,7 +382,7 @@ impl Atlas {
         let adj = adjacency(mesh, &welded);
         let all: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
         let mut pending = vec![(all, max_angle_deg)];
-        let mut done: Vec<(Chart, Vec<(u32, u32, Accum)>)> = Vec::new();
+        let mut done: Vec<(Chart, Vec<Cell>)> = Vec::new();
         while !pending.is_empty() {
             let groups: Vec<(Vec<u32>, f64)> = pending
                 .drain(..)
@@ -340,8 +395,15 @@ impl Atlas {
             let results: Vec<_> = groups
                 .into_par_iter()
                 .map(|(triangles, angle)| {
-                    let sum: DVec3 = triangles.iter().map(|&f| normals[f as usize] * areas[f as usize]).sum();
-                    let n = if sum.length() > 0.0 { sum.normalize() } else { DVec3::Z };
+                    let sum: DVec3 = triangles
+                        .iter()
+                        .map(|&f| normals[f as usize] * areas[f as usize])
+                        .sum();
+                    let n = if sum.length() > 0.0 {
+                        sum.normalize()
+                    } else {
+                        DVec3::Z
+                    };
                     let (u, v) = plane_axes(n);
                     let mut lo = DVec2::splat(f64::INFINITY);
                     let mut hi = DVec2::splat(f64::NEG_INFINITY);
@@ -354,10 +416,13 @@ impl Atlas {
                         }
                     }
                     let ext = (hi - lo) / texel_mm;
-                    let size = (ext.x.ceil().max(1.0) as u32 + 2 * gutter, ext.y.ceil().max(1.0) as u32 + 2 * gutter);
+                    let size = (
+                        ext.x.ceil().max(1.0) as u32 + 2 * gutter,
+                        ext.y.ceil().max(1.0) as u32 + 2 * gutter,
+                    );
                     let chart = Chart {
-                        normal: n.as_vec3(),
-                        axes: (u.as_vec3(), v.as_vec3()),
+                        normal: n,
+                        axes: (u, v),
                         origin: lo,
                         offset: (0, 0),
                         size,
@@ -397,7 +462,11 @@ impl Atlas {
                     area: acc.area as f32,
                     position: (acc.position / acc.area).as_vec3(),
                     normal: acc.normal.normalize_or_zero().as_vec3(),
-                    vertices: acc.vertices.iter().map(|(v, w)| (*v, (*w / total) as f32)).collect(),
+                    vertices: acc
+                        .vertices
+                        .iter()
+                        .map(|(v, w)| (*v, (*w / total) as f32))
+                        .collect(),
                 });
             }
             charts.push(chart);
@@ -417,9 +486,12 @@ impl Atlas {
             for &v in t {
                 let id = *vertex_map.entry((v, ci)).or_insert_with(|| {
                     let p = mesh.positions[v as usize].as_dvec3();
-                    let q = DVec2::new(p.dot(chart.axes.0.as_dvec3()), p.dot(chart.axes.1.as_dvec3()));
+                    let q = DVec2::new(p.dot(chart.axes.0), p.dot(chart.axes.1));
                     let uv = (q - chart.origin) / texel_mm
-                        + DVec2::new((chart.offset.0 + gutter) as f64, (chart.offset.1 + gutter) as f64);
+                        + DVec2::new(
+                            (chart.offset.0 + gutter) as f64,
+                            (chart.offset.1 + gutter) as f64,
+                        );
                     vertex_mesh.push(v);
                     vertex_uv.push(uv);
                     (vertex_mesh.len() - 1) as u32
@@ -473,9 +545,18 @@ mod tests {
             assert!(c.triangles.contains(&(f as u32)));
             for &v in t {
                 let uv = atlas.vertex_uv[v as usize];
-                assert_eq!(atlas.vertex_mesh[v as usize], mesh.indices[3 * f + (t.iter().position(|x| *x == v).unwrap())]);
-                assert!(uv.x >= (c.offset.0 + gutter) as f64 - 1e-6 && uv.x <= (c.offset.0 + c.size.0 - gutter) as f64 + 1e-6);
-                assert!(uv.y >= (c.offset.1 + gutter) as f64 - 1e-6 && uv.y <= (c.offset.1 + c.size.1 - gutter) as f64 + 1e-6);
+                assert_eq!(
+                    atlas.vertex_mesh[v as usize],
+                    mesh.indices[3 * f + (t.iter().position(|x| *x == v).unwrap())]
+                );
+                assert!(
+                    uv.x >= (c.offset.0 + gutter) as f64 - 1e-6
+                        && uv.x <= (c.offset.0 + c.size.0 - gutter) as f64 + 1e-6
+                );
+                assert!(
+                    uv.y >= (c.offset.1 + gutter) as f64 - 1e-6
+                        && uv.y <= (c.offset.1 + c.size.1 - gutter) as f64 + 1e-6
+                );
             }
         }
         // Chart boxes do not overlap, and covered texels stay a gutter away from other charts.
@@ -495,7 +576,10 @@ mod tests {
             for dy in -(gutter as i64)..=gutter as i64 {
                 for dx in -(gutter as i64)..=gutter as i64 {
                     if let Some(o) = atlas.texel_at(t.x as i64 + dx, t.y as i64 + dy) {
-                        assert_eq!(atlas.texels[o].chart, t.chart, "another chart within the gutter");
+                        assert_eq!(
+                            atlas.texels[o].chart, t.chart,
+                            "another chart within the gutter"
+                        );
                     }
                 }
             }
@@ -508,7 +592,9 @@ mod tests {
                 let [a, b, d] = [t[0], t[1], t[2]].map(|i| mesh.positions[i as usize]);
                 let n = (b - a).cross(d - a);
                 if n.length() > 1e-9 {
-                    assert!(n.normalize().dot(c.normal) >= 30f32.to_radians().cos() - 1e-4);
+                    assert!(
+                        n.normalize().as_dvec3().dot(c.normal) >= 30f64.to_radians().cos() - 1e-6
+                    );
                 }
             }
         }
@@ -521,7 +607,11 @@ mod tests {
         let atlas = check(&mesh, 0.5, 4);
         assert_eq!(atlas.charts.len(), 6);
         // A fully covered interior texel of a face has exactly one texel of area.
-        let full = atlas.texels.iter().filter(|t| (t.area - 0.25).abs() < 1e-4).count();
+        let full = atlas
+            .texels
+            .iter()
+            .filter(|t| (t.area - 0.25).abs() < 1e-4)
+            .count();
         assert!(full > 500);
     }
 
@@ -539,7 +629,11 @@ mod tests {
         let atlas = Atlas::build(&mesh, 0.5, 3, 30.0);
         for t in &atlas.texels {
             // Area-weighted mean of flat facets: within the facets' sagitta of the sphere.
-            assert!((t.position.length() - 10.0).abs() < 0.1, "{}", t.position.length());
+            assert!(
+                (t.position.length() - 10.0).abs() < 0.1,
+                "{}",
+                t.position.length()
+            );
             assert!(t.normal.dot(t.position.normalize()) > 0.99);
         }
     }

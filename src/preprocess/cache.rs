@@ -48,7 +48,12 @@ pub fn key(mesh: &Mesh, material: &Material, settings: &Settings) -> u64 {
     h.write(bytemuck::cast_slice(&mesh.positions));
     h.write(bytemuck::cast_slice(&mesh.normals));
     h.write(bytemuck::cast_slice(&mesh.indices));
-    for v in material.sigma_s_prime.iter().chain(&material.sigma_a).chain([&material.eta]) {
+    for v in material
+        .sigma_s_prime
+        .iter()
+        .chain(&material.sigma_a)
+        .chain([&material.eta])
+    {
         h.write(&v.to_le_bytes());
     }
     h.write(&bincode::serialize(settings).unwrap_or_default());
@@ -73,7 +78,8 @@ pub fn path(dir: &Path, key: u64) -> PathBuf {
 
 /// Writes `value` under `key`.
 pub fn store(dir: &Path, key: u64, value: &Preprocessed) -> Result<PathBuf> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create cache folder '{}'", dir.display()))?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create cache folder '{}'", dir.display()))?;
     let payload = bincode::serialize(value).context("cannot serialise the preprocessing")?;
     let mut sum = Fnv::default();
     sum.write(&payload);
@@ -96,16 +102,24 @@ pub fn load(dir: &Path, key: u64) -> Result<Option<Preprocessed>> {
     let bytes = match std::fs::read(&p) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e).with_context(|| format!("cannot read cache file '{}'", p.display())),
+        Err(e) => {
+            return Err(e).with_context(|| format!("cannot read cache file '{}'", p.display()))
+        }
     };
     if bytes.len() < 36 || &bytes[..8] != MAGIC {
-        bail!("cache file '{}' is not a translucent cache file", p.display());
+        bail!(
+            "cache file '{}' is not a translucent cache file",
+            p.display()
+        );
     }
     let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().unwrap_or_default());
     let u64_at = |i: usize| u64::from_le_bytes(bytes[i..i + 8].try_into().unwrap_or_default());
     let version = u32_at(8);
     if version != FORMAT_VERSION {
-        bail!("cache file '{}' has format version {version}, this build writes {FORMAT_VERSION}", p.display());
+        bail!(
+            "cache file '{}' has format version {version}, this build writes {FORMAT_VERSION}",
+            p.display()
+        );
     }
     if u64_at(12) != key {
         bail!("cache file '{}' belongs to different inputs", p.display());
@@ -113,13 +127,21 @@ pub fn load(dir: &Path, key: u64) -> Result<Option<Preprocessed>> {
     let len = u64_at(20) as usize;
     let payload = &bytes[36..];
     if payload.len() != len {
-        bail!("cache file '{}' is truncated ({} of {len} bytes)", p.display(), payload.len());
+        bail!(
+            "cache file '{}' is truncated ({} of {len} bytes)",
+            p.display(),
+            payload.len()
+        );
     }
     let mut sum = Fnv::default();
     sum.write(payload);
     if sum.finish() != u64_at(28) {
-        bail!("cache file '{}' is corrupt (checksum mismatch)", p.display());
+        bail!(
+            "cache file '{}' is corrupt (checksum mismatch)",
+            p.display()
+        );
     }
-    let value = bincode::deserialize(payload).with_context(|| format!("cache file '{}' cannot be decoded", p.display()))?;
+    let value = bincode::deserialize(payload)
+        .with_context(|| format!("cache file '{}' cannot be decoded", p.display()))?;
     Ok(Some(value))
 }

@@ -63,14 +63,129 @@ pub fn object_scale(scene: &Scene, target_error: f64, max_texels: f64) -> Object
 }
 
 /// Chooses the settings for a scene.
-pub fn choose(scene: &Scene, overrides: &SettingsOverrides, target_error: f64) -> anyhow::Result<Choice> {
+pub fn choose(
+    scene: &Scene,
+    overrides: &SettingsOverrides,
+    target_error: f64,
+) -> anyhow::Result<Choice> {
     settings::validate(overrides)?;
-    Ok(settings::derive(&scene.material, &object_scale(scene, target_error, DEFAULT_MAX_TEXELS), overrides))
+    Ok(settings::derive(
+        &scene.material,
+        &object_scale(scene, target_error, DEFAULT_MAX_TEXELS),
+        overrides,
+    ))
+}
+
+/// What happened with the cache.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CacheOutcome {
+    /// No cache folder was given.
+    Disabled,
+    /// Loaded from this file.
+    Hit(std::path::PathBuf),
+    /// Built; stored at the path (if storing worked); `replaced` says why an existing file was
+    /// not used.
+    Built {
+        /// Where the result was stored.
+        stored: Option<std::path::PathBuf>,
+        /// Why a cache file present for this key was rejected.
+        replaced: Option<String>,
+    },
+}
+
+/// Loads the preprocessing for `scene` from `cache_dir` or builds (and stores) it.
+pub fn prepare(
+    scene: &Scene,
+    choice: &Choice,
+    cache_dir: Option<&std::path::Path>,
+    progress: Progress<'_>,
+) -> anyhow::Result<(Preprocessed, CacheOutcome)> {
+    let Some(dir) = cache_dir else {
+        return Ok((
+            Preprocessed::build(&scene.mesh, &scene.material, choice, progress),
+            CacheOutcome::Disabled,
+        ));
+    };
+    let key = cache::key(&scene.mesh, &scene.material, &choice.settings);
+    let replaced = match cache::load(dir, key) {
+        Ok(Some(p)) => return Ok((p, CacheOutcome::Hit(cache::path(dir, key)))),
+        Ok(None) => None,
+        Err(e) => {
+            tracing::warn!("{e:#}; rebuilding");
+            Some(format!("{e:#}"))
+        }
+    };
+    let built = Preprocessed::build(&scene.mesh, &scene.material, choice, progress);
+    let stored = match cache::store(dir, key, &built) {
+        Ok(p) => Some(p),
+        Err(e) => {
+            tracing::warn!("cannot store the preprocessing in the cache: {e:#}");
+            None
+        }
+    };
+    Ok((built, CacheOutcome::Built { stored, replaced }))
 }
 
 impl Preprocessed {
+    /// Bytes of the per-frame data (kernels, gather, F of both blends, direct terms, texel data).
+    pub fn device_bytes(&self) -> u64 {
+        let o = &self.ops;
+        let csr = |nnz: usize, rows: usize| (nnz * 16 + (rows + 1) * 4) as u64;
+        (o.kernels.len() * 12) as u64
+            + csr(o.global.nnz(), o.global.rows())
+            + csr(o.optimized.nnz(), o.optimized.rows())
+            + (o.gather.cols.len() * 8) as u64
+            + (o.texel_nodes.cols.len() * 8) as u64
+            + (o.direct_simple.len() * 24) as u64
+            + (self.atlas.width as u64 * self.atlas.height as u64 * 16)
+    }
+
+    /// A summary for people: what was built and how big it is.
+    pub fn summary(&self) -> Vec<String> {
+        let a = &self.atlas;
+        let o = &self.ops;
+        vec![
+            format!("charts: {}", a.charts.len()),
+            format!(
+                "atlas: {} x {} texels of {:.3} mm, {} covered ({:.0} % of the atlas), gutter {} texels",
+                a.width,
+                a.height,
+                a.texel_mm,
+                a.texels.len(),
+                100.0 * a.texels.len() as f64 / (a.width as f64 * a.height as f64).max(1.0),
+                a.gutter
+            ),
+            format!("atlas vertices: {} (mesh vertices split at chart borders)", a.vertex_mesh.len()),
+            format!(
+                "global nodes: {} ({}), spacing {:.2} mm",
+                self.nodes.positions.len(),
+                if self.nodes.simplified { "simplified proxy of the render mesh" } else { "render mesh vertices" },
+                self.nodes.spacing_mm
+            ),
+            format!(
+                "F: {} nonzeros of {} ({:.1} %), dropped at most {:.3} % of a row (mean {:.3} %)",
+                o.global.nnz(),
+                o.prune.dense_entries,
+                100.0 * o.global.nnz() as f64 / (o.prune.dense_entries as f64).max(1.0),
+                100.0 * o.prune.max_dropped,
+                100.0 * o.prune.mean_dropped
+            ),
+            format!("kernels: {0} x {0} RGB per texel", o.kernel_size),
+            format!("device memory for the per-frame data: {:.1} MiB", self.device_bytes() as f64 / (1u64 << 20) as f64),
+            format!(
+                "time: atlas {:.2} s, nodes {:.2} s, operators {:.2} s (kernels {:.2} s, global F {:.2} s, near-field fit {:.2} s)",
+                self.times.atlas_s, self.times.nodes_s, self.times.operators_s, o.seconds[0], o.seconds[1], o.seconds[2]
+            ),
+        ]
+    }
+
     /// Runs every stage for `mesh` in `material` with `choice`.
-    pub fn build(mesh: &Mesh, material: &Material, choice: &Choice, progress: Progress<'_>) -> Preprocessed {
+    pub fn build(
+        mesh: &Mesh,
+        material: &Material,
+        choice: &Choice,
+        progress: Progress<'_>,
+    ) -> Preprocessed {
         let s = choice.settings;
         let gutter = s.kernel_size / 2 + 1;
         let t0 = Instant::now();
@@ -81,7 +196,14 @@ impl Preprocessed {
         let nodes = Nodes::build(mesh, s.node_spacing_mm);
         progress("nodes", 1, 1);
         let t2 = Instant::now();
-        let ops = Operators::build(&atlas, &nodes, material, s.kernel_size, s.prune_tolerance, progress);
+        let ops = Operators::build(
+            &atlas,
+            &nodes,
+            material,
+            s.kernel_size,
+            s.prune_tolerance,
+            progress,
+        );
         let t3 = Instant::now();
         Preprocessed {
             settings: s,

@@ -91,15 +91,22 @@ impl Nodes {
             }
             welded_of.push(id);
         }
-        let welded_positions: Vec<Vec3> = first.iter().map(|&i| mesh.positions[i as usize]).collect();
-        let welded_indices: Vec<u32> = mesh.indices.iter().map(|&i| welded_of[i as usize]).collect();
+        let welded_positions: Vec<Vec3> =
+            first.iter().map(|&i| mesh.positions[i as usize]).collect();
+        let welded_indices: Vec<u32> = mesh
+            .indices
+            .iter()
+            .map(|&i| welded_of[i as usize])
+            .collect();
         let edge = mean_edge(&welded_positions, &welded_indices);
         let normals_of = |ids: &[u32]| -> Vec<Vec3> {
             let mut acc = vec![Vec3::ZERO; welded_positions.len()];
             for (v, &w) in welded_of.iter().enumerate() {
                 acc[w as usize] += mesh.normals[v];
             }
-            ids.iter().map(|&w| acc[w as usize].normalize_or_zero()).collect()
+            ids.iter()
+                .map(|&w| acc[w as usize].normalize_or_zero())
+                .collect()
         };
 
         // Fine enough already (or as coarse as the material allows): every welded vertex is a node.
@@ -115,10 +122,19 @@ impl Nodes {
             };
         }
 
-        let target_indices = ((welded_indices.len() as f64) * ratio * ratio).max(12.0) as usize / 3 * 3;
-        let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&welded_positions), 12, 0)
-            .expect("positions are 12-byte vertices");
-        let simplified = meshopt::simplify(&welded_indices, &adapter, target_indices, 1.0, meshopt::SimplifyOptions::empty(), None);
+        let target_indices =
+            ((welded_indices.len() as f64) * ratio * ratio).max(12.0) as usize / 3 * 3;
+        let adapter =
+            meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&welded_positions), 12, 0)
+                .expect("positions are 12-byte vertices");
+        let simplified = meshopt::simplify(
+            &welded_indices,
+            &adapter,
+            target_indices,
+            1.0,
+            meshopt::SimplifyOptions::empty(),
+            None,
+        );
         // Node ids for the welded vertices the proxy keeps.
         let mut node_of: HashMap<u32, u32> = HashMap::new();
         let mut node_welded = Vec::new();
@@ -128,18 +144,33 @@ impl Nodes {
                 (node_welded.len() - 1) as u32
             });
         }
-        let positions: Vec<Vec3> = node_welded.iter().map(|&w| welded_positions[w as usize]).collect();
+        let positions: Vec<Vec3> = node_welded
+            .iter()
+            .map(|&w| welded_positions[w as usize])
+            .collect();
         let normals = normals_of(&node_welded);
-        let tris: Vec<[u32; 3]> = simplified.chunks(3).map(|t| [node_of[&t[0]], node_of[&t[1]], node_of[&t[2]]]).collect();
+        let tris: Vec<[u32; 3]> = simplified
+            .chunks(3)
+            .map(|t| [node_of[&t[0]], node_of[&t[1]], node_of[&t[2]]])
+            .collect();
         let node_spacing = mean_edge(&welded_positions, &simplified);
 
         // Uniform grid of proxy triangles for closest-point queries.
         let cell = (2.0 * node_spacing).max(1e-6);
-        let key = |p: DVec3| ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64, (p.z / cell).floor() as i64);
+        let key = |p: DVec3| {
+            (
+                (p.x / cell).floor() as i64,
+                (p.y / cell).floor() as i64,
+                (p.z / cell).floor() as i64,
+            )
+        };
         let mut grid: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
         for (ti, t) in tris.iter().enumerate() {
             let ps = t.map(|n| positions[n as usize].as_dvec3());
-            let (lo, hi) = (key(ps[0].min(ps[1]).min(ps[2])), key(ps[0].max(ps[1]).max(ps[2])));
+            let (lo, hi) = (
+                key(ps[0].min(ps[1]).min(ps[2])),
+                key(ps[0].max(ps[1]).max(ps[2])),
+            );
             for x in lo.0..=hi.0 {
                 for y in lo.1..=hi.1 {
                     for z in lo.2..=hi.2 {
@@ -173,7 +204,8 @@ impl Nodes {
                                     if tri_normals[ti as usize].dot(pn) < 0.2 {
                                         continue;
                                     }
-                                    let ps = tris[ti as usize].map(|n| positions[n as usize].as_dvec3());
+                                    let ps =
+                                        tris[ti as usize].map(|n| positions[n as usize].as_dvec3());
                                     let b = closest_barycentric(p, ps[0], ps[1], ps[2]);
                                     let q = ps[0] * b[0] + ps[1] * b[1] + ps[2] * b[2];
                                     let d = q.distance_squared(p);
@@ -200,7 +232,10 @@ impl Nodes {
                         let nearest = positions
                             .iter()
                             .enumerate()
-                            .min_by(|a, b| a.1.distance_squared(p.as_vec3()).total_cmp(&b.1.distance_squared(p.as_vec3())))
+                            .min_by(|a, b| {
+                                a.1.distance_squared(p.as_vec3())
+                                    .total_cmp(&b.1.distance_squared(p.as_vec3()))
+                            })
                             .map(|(i, _)| i as u32)
                             .unwrap_or(0);
                         vec![(nearest, 1.0)]
@@ -211,7 +246,10 @@ impl Nodes {
         Nodes {
             positions,
             normals,
-            prolong: welded_of.iter().map(|&w| weights_of_welded[w as usize].clone()).collect(),
+            prolong: welded_of
+                .iter()
+                .map(|&w| weights_of_welded[w as usize].clone())
+                .collect(),
             simplified: true,
             spacing_mm: node_spacing,
         }
@@ -232,7 +270,11 @@ mod tests {
         let fine = Mesh::sphere(20.0, 128);
         let n = Nodes::build(&fine, 4.0);
         assert!(n.simplified);
-        assert!(n.positions.len() < fine.positions.len() / 4, "{} nodes", n.positions.len());
+        assert!(
+            n.positions.len() < fine.positions.len() / 4,
+            "{} nodes",
+            n.positions.len()
+        );
         assert!(n.spacing_mm > 2.0, "spacing {}", n.spacing_mm);
         for (v, w) in n.prolong.iter().enumerate() {
             let sum: f32 = w.iter().map(|x| x.1).sum();
@@ -246,8 +288,14 @@ mod tests {
     #[test]
     fn closest_point_regions() {
         let (a, b, c) = (DVec3::ZERO, DVec3::X, DVec3::Y);
-        assert_eq!(closest_barycentric(DVec3::new(-1.0, -1.0, 0.0), a, b, c), [1.0, 0.0, 0.0]);
-        assert_eq!(closest_barycentric(DVec3::new(2.0, 0.0, 1.0), a, b, c), [0.0, 1.0, 0.0]);
+        assert_eq!(
+            closest_barycentric(DVec3::new(-1.0, -1.0, 0.0), a, b, c),
+            [1.0, 0.0, 0.0]
+        );
+        assert_eq!(
+            closest_barycentric(DVec3::new(2.0, 0.0, 1.0), a, b, c),
+            [0.0, 1.0, 0.0]
+        );
         let inside = closest_barycentric(DVec3::new(0.25, 0.25, 3.0), a, b, c);
         assert!((inside[1] - 0.25).abs() < 1e-12 && (inside[2] - 0.25).abs() < 1e-12);
     }

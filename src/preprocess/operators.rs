@@ -28,9 +28,10 @@
 //!     the 9x9 footprint around q) are fitted by least squares so that, for light of unit power
 //!     at any texel s in those supports, local plus global response at q's texel c matches the
 //!     reference Rbar(|x_c - x_s|) (the 9x9 reference kernel, taken over the whole supports and
-//!     across seams): min sum_s (K_c(s)/A_s + sum_p u_p phi_p(s) - Rbar_cs)^2
-//!     + lambda sum_p (u_p - F_pq/A_p)^2, W_pq = u_p A_p. The direct term conserves energy
-//!     the same way: beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t).
+//!     across seams): minimise sum_s (K_c(s)/A_s + sum_p u_p phi_p(s) - Rbar_cs)^2 plus
+//!     lambda sum_p (u_p - F_pq/A_p)^2, and set W_pq = u_p A_p. Sources outside the fitted
+//!     set keep their F entries, which the fit takes as given. The direct term conserves
+//!     energy the same way: beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t).
 //!   * local only: B^l; global only: F with its diagonal.
 
 use super::atlas::Atlas;
@@ -108,7 +109,10 @@ impl Csr {
     /// Entries of row `r`.
     pub fn row(&self, r: usize) -> impl Iterator<Item = (u32, [f32; 3])> + '_ {
         let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
-        self.cols[a..b].iter().copied().zip(self.vals[a..b].iter().copied())
+        self.cols[a..b]
+            .iter()
+            .copied()
+            .zip(self.vals[a..b].iter().copied())
     }
 
     /// Sum of row `r` per channel.
@@ -163,6 +167,8 @@ pub struct Operators {
     pub direct_optimized: Vec<[f32; 3]>,
     /// What pruning dropped.
     pub prune: PruneReport,
+    /// Seconds spent on kernels, global F and the near-field fit.
+    pub seconds: [f64; 3],
 }
 
 /// Compressed sparse rows with scalar values.
@@ -195,7 +201,10 @@ impl Csr1 {
     /// Entries of row `r`.
     pub fn row(&self, r: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
         let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
-        self.cols[a..b].iter().copied().zip(self.vals[a..b].iter().copied())
+        self.cols[a..b]
+            .iter()
+            .copied()
+            .zip(self.vals[a..b].iter().copied())
     }
 
     /// Number of rows.
@@ -220,13 +229,16 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64;
         // Sub-samples per side: 6 next to the receiver, 3 further out.
         let m = if r < 1.5 * h { 6 } else { 3 };
         let chart = &atlas.charts[ts.chart as usize];
-        let (u, v) = (chart.axes.0.as_dvec3(), chart.axes.1.as_dvec3());
+        let (u, v) = chart.axes;
         let mut acc = [0.0; 3];
         let step = h / m as f64;
         let weight = 1.0 / (m * m) as f64;
         for j in 0..m {
             for i in 0..m {
-                let (a, b) = ((i as f64 + 0.5) * step - 0.5 * h, (j as f64 + 0.5) * step - 0.5 * h);
+                let (a, b) = (
+                    (i as f64 + 0.5) * step - 0.5 * h,
+                    (j as f64 + 0.5) * step - 0.5 * h,
+                );
                 let ry = x.distance(xs + u * a + v * b);
                 for c in 0..3 {
                     acc[c] += dipoles[c].rd(ry) * weight;
@@ -306,7 +318,14 @@ fn cholesky_solve(m: &mut [f64], b: &mut [f64], n: usize) -> bool {
 
 impl Operators {
     /// Builds all operators. `prune_tolerance` bounds the fraction of each row of F dropped.
-    pub fn build(atlas: &Atlas, nodes: &Nodes, material: &Material, kernel_size: u32, prune_tolerance: f64, progress: Progress<'_>) -> Operators {
+    pub fn build(
+        atlas: &Atlas,
+        nodes: &Nodes,
+        material: &Material,
+        kernel_size: u32,
+        prune_tolerance: f64,
+        progress: Progress<'_>,
+    ) -> Operators {
         let dipoles = material.dipoles();
         let n_nodes = nodes.positions.len();
         let n_texels = atlas.texels.len();
@@ -321,20 +340,34 @@ impl Operators {
         }
         let node_area: Vec<f64> = supports
             .iter()
-            .map(|s| s.iter().map(|(t, w)| *w as f64 * atlas.texels[*t as usize].area as f64).sum())
+            .map(|s| {
+                s.iter()
+                    .map(|(t, w)| *w as f64 * atlas.texels[*t as usize].area as f64)
+                    .sum()
+            })
             .collect();
         let gather: Vec<Vec<(u32, f32)>> = supports
             .iter()
             .zip(&node_area)
             .map(|(s, a)| {
                 s.iter()
-                    .map(|(t, w)| (*t, if *a > 0.0 { (*w as f64 * atlas.texels[*t as usize].area as f64 / a) as f32 } else { 0.0 }))
+                    .map(|(t, w)| {
+                        (
+                            *t,
+                            if *a > 0.0 {
+                                (*w as f64 * atlas.texels[*t as usize].area as f64 / a) as f32
+                            } else {
+                                0.0
+                            },
+                        )
+                    })
                     .collect()
             })
             .collect();
         progress("basis", 1, 1);
 
         // Local kernels.
+        let clock = std::time::Instant::now();
         let k = kernel_size as i64;
         let half = k / 2;
         let done = std::sync::atomic::AtomicU64::new(0);
@@ -357,13 +390,15 @@ impl Operators {
                     }
                 }
                 let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if n % 4096 == 0 {
+                if n.is_multiple_of(4096) {
                     progress("kernels", n, n_texels as u64);
                 }
                 out
             })
             .collect();
         progress("kernels", n_texels as u64, n_texels as u64);
+        let kernels_s = clock.elapsed().as_secs_f64();
+        let clock = std::time::Instant::now();
 
         // Global F, one receiver row at a time, pruned. Far pairs: second-order quadrature of
         // the node's support, A_p (R_d(|c_p - x|) + m_p/2 Laplacian R_d), with c_p the support's
@@ -377,10 +412,24 @@ impl Operators {
                 if a <= 0.0 {
                     return (x, 0.0);
                 }
-                let c = s.iter().map(|(t, w)| atlas.texels[*t as usize].position.as_dvec3() * (*w as f64 * atlas.texels[*t as usize].area as f64)).sum::<DVec3>() / a;
+                let c = s
+                    .iter()
+                    .map(|(t, w)| {
+                        atlas.texels[*t as usize].position.as_dvec3()
+                            * (*w as f64 * atlas.texels[*t as usize].area as f64)
+                    })
+                    .sum::<DVec3>()
+                    / a;
                 let m2 = s
                     .iter()
-                    .map(|(t, w)| atlas.texels[*t as usize].position.as_dvec3().distance_squared(c) * *w as f64 * atlas.texels[*t as usize].area as f64)
+                    .map(|(t, w)| {
+                        atlas.texels[*t as usize]
+                            .position
+                            .as_dvec3()
+                            .distance_squared(c)
+                            * *w as f64
+                            * atlas.texels[*t as usize].area as f64
+                    })
                     .sum::<f64>()
                     / a;
                 (c, 0.5 * m2 + atlas.texel_mm * atlas.texel_mm / 12.0)
@@ -388,14 +437,16 @@ impl Operators {
             .collect();
         let near = NEAR_SPACINGS * nodes.spacing_mm;
         let done = std::sync::atomic::AtomicU64::new(0);
-        let rows: Vec<(Vec<(u32, [f32; 3])>, f64)> = (0..n_nodes)
+        let rows: Vec<PrunedRow> = (0..n_nodes)
             .into_par_iter()
             .map(|q| {
                 let xq = positions[q];
                 // The near field is integrated as seen from the centre of q's own texel (where
                 // phi_q peaks), so that the peak of R_d falls on that texel's exact disc mean
                 // rather than between sub-samples, the same way as in the kernels.
-                let xc = receiver_texel(&supports[q]).map(|c| atlas.texels[c].position.as_dvec3()).unwrap_or(xq);
+                let xc = receiver_texel(&supports[q])
+                    .map(|c| atlas.texels[c].position.as_dvec3())
+                    .unwrap_or(xq);
                 let mut row: Vec<(u32, [f64; 3])> = Vec::with_capacity(n_nodes);
                 for p in 0..n_nodes {
                     let r = positions[p].distance(xq);
@@ -420,7 +471,7 @@ impl Operators {
                     row.push((p as u32, f));
                 }
                 let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if n % 256 == 0 {
+                if n.is_multiple_of(256) {
                     progress("global", n, n_nodes as u64);
                 }
                 prune_row(row, prune_tolerance, q as u32)
@@ -434,6 +485,8 @@ impl Operators {
             mean_dropped: rows.iter().map(|r| r.1).sum::<f64>() / n_nodes.max(1) as f64,
         };
         let global = Csr::from_rows(rows.into_iter().map(|r| r.0).collect());
+        let global_s = clock.elapsed().as_secs_f64();
+        let clock = std::time::Instant::now();
 
         let mut ops = Operators {
             kernel_size,
@@ -446,8 +499,10 @@ impl Operators {
             direct_simple: Vec::new(),
             direct_optimized: Vec::new(),
             prune,
+            seconds: [kernels_s, global_s, 0.0],
         };
         ops.optimized = ops.fit_near_field(atlas, nodes, &dipoles, &supports, progress);
+        ops.seconds[2] = clock.elapsed().as_secs_f64();
         let simple_sums: Vec<[f64; 3]> = (0..n_nodes)
             .map(|q| {
                 let mut s = ops.global.row_sum(q);
@@ -459,7 +514,8 @@ impl Operators {
                 s
             })
             .collect();
-        let optimized_sums: Vec<[f64; 3]> = (0..n_nodes).map(|q| ops.optimized.row_sum(q)).collect();
+        let optimized_sums: Vec<[f64; 3]> =
+            (0..n_nodes).map(|q| ops.optimized.row_sum(q)).collect();
         ops.direct_simple = ops.direct_term(&simple_sums);
         ops.direct_optimized = ops.direct_term(&optimized_sums);
         progress("blending", 1, 1);
@@ -469,12 +525,14 @@ impl Operators {
     /// Sum of texel `t`'s kernel per channel (P_win).
     pub fn kernel_sum(&self, t: usize) -> [f64; 3] {
         let kk = (self.kernel_size * self.kernel_size) as usize;
-        self.kernels[t * kk..(t + 1) * kk].iter().fold([0.0; 3], |mut s, w| {
-            for c in 0..3 {
-                s[c] += w[c] as f64;
-            }
-            s
-        })
+        self.kernels[t * kk..(t + 1) * kk]
+            .iter()
+            .fold([0.0; 3], |mut s, w| {
+                for c in 0..3 {
+                    s[c] += w[c] as f64;
+                }
+                s
+            })
     }
 
     /// beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t): under locally uniform
@@ -496,7 +554,14 @@ impl Operators {
     }
 
     /// Fits the near-field entries of every receiver row (optimized blending).
-    fn fit_near_field(&self, atlas: &Atlas, nodes: &Nodes, dipoles: &[Dipole; 3], supports: &[Vec<(u32, f32)>], progress: Progress<'_>) -> Csr {
+    fn fit_near_field(
+        &self,
+        atlas: &Atlas,
+        nodes: &Nodes,
+        dipoles: &[Dipole; 3],
+        supports: &[Vec<(u32, f32)>],
+        progress: Progress<'_>,
+    ) -> Csr {
         let n_nodes = nodes.positions.len();
         let k = self.kernel_size as i64;
         let half = k / 2;
@@ -515,14 +580,20 @@ impl Operators {
                 let c = c as u32;
                 let tc = &atlas.texels[c as usize];
                 let xc = tc.position.as_dvec3();
-                let near: Vec<u32> = (0..n_nodes as u32).filter(|&p| positions[p as usize].distance(xc) < reach).collect();
-                let mut texels: Vec<u32> = near.iter().flat_map(|&p| supports[p as usize].iter().map(|s| s.0)).collect();
+                let near: Vec<u32> = (0..n_nodes as u32)
+                    .filter(|&p| positions[p as usize].distance(xc) < reach)
+                    .collect();
+                let mut texels: Vec<u32> = near
+                    .iter()
+                    .flat_map(|&p| supports[p as usize].iter().map(|s| s.0))
+                    .collect();
                 texels.sort_unstable();
                 texels.dedup();
                 let n = near.len();
                 let mut m = vec![0.0; n * n];
                 let mut rhs = vec![[0.0f64; 3]; n];
-                let col_of = |p: u32| near.iter().position(|&x| x == p);
+                // `near` and `row` are sorted by node index.
+                let col_of = |p: u32| near.binary_search(&p).ok();
                 let mut phi = Vec::with_capacity(4);
                 for &s in &texels {
                     let ts = &atlas.texels[s as usize];
@@ -539,7 +610,8 @@ impl Operators {
                     for (p, w) in self.texel_nodes.row(s as usize) {
                         if let Some(i) = col_of(p) {
                             phi.push((i, w as f64));
-                        } else if let Some((_, f)) = row.iter().find(|e| e.0 == p) {
+                        } else if let Ok(j) = row.binary_search_by_key(&p, |e| e.0) {
+                            let f = row[j].1;
                             // Sources outside the fitted set keep their F entry: part of the
                             // model's response that the fitted entries must not repeat.
                             let a = self.node_area[p as usize].max(1e-30) as f64;
@@ -562,7 +634,10 @@ impl Operators {
                 let prior: Vec<[f64; 3]> = near
                     .iter()
                     .map(|&p| {
-                        let f = row.iter().find(|e| e.0 == p).map(|e| e.1).unwrap_or([0.0; 3]);
+                        let f = row
+                            .binary_search_by_key(&p, |e| e.0)
+                            .map(|j| row[j].1)
+                            .unwrap_or([0.0; 3]);
                         let a = self.node_area[p as usize].max(1e-30) as f64;
                         f.map(|x| x as f64 / a)
                     })
@@ -573,7 +648,8 @@ impl Operators {
                     for i in 0..n {
                         mm[i * n + i] += lambda;
                     }
-                    let mut b: Vec<f64> = (0..n).map(|i| rhs[i][ch] + lambda * prior[i][ch]).collect();
+                    let mut b: Vec<f64> =
+                        (0..n).map(|i| rhs[i][ch] + lambda * prior[i][ch]).collect();
                     if !cholesky_solve(&mut mm, &mut b, n) {
                         return row;
                     }
@@ -581,14 +657,14 @@ impl Operators {
                         solved[i][ch] = b[i];
                     }
                 }
-                row.retain(|e| !near.contains(&e.0));
+                row.retain(|e| near.binary_search(&e.0).is_err());
                 for (i, &p) in near.iter().enumerate() {
                     let a = self.node_area[p as usize] as f64;
                     row.push((p, solved[i].map(|u| (u * a) as f32)));
                 }
                 row.sort_by_key(|e| e.0);
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if d % 256 == 0 {
+                if d.is_multiple_of(256) {
                     progress("fit", d, n_nodes as u64);
                 }
                 row
@@ -601,19 +677,33 @@ impl Operators {
 
 /// The texel that represents node `q` as a receiver: where phi_q peaks.
 fn receiver_texel(support: &[(u32, f32)]) -> Option<usize> {
-    support.iter().max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0))).map(|s| s.0 as usize)
+    support
+        .iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+        .map(|s| s.0 as usize)
 }
+
+/// A pruned row of F and the fraction of its mass that was dropped.
+type PrunedRow = (Vec<(u32, [f32; 3])>, f64);
 
 /// Drops the smallest entries of a row while the dropped mass stays within `tolerance` of
 /// the row's sum in every channel. Returns the kept entries and the dropped fraction.
-fn prune_row(mut row: Vec<(u32, [f64; 3])>, tolerance: f64, diagonal: u32) -> (Vec<(u32, [f32; 3])>, f64) {
+fn prune_row(
+    mut row: Vec<(u32, [f64; 3])>,
+    tolerance: f64,
+    diagonal: u32,
+) -> (Vec<(u32, [f32; 3])>, f64) {
     let sums = row.iter().fold([0.0f64; 3], |mut s, e| {
         for c in 0..3 {
             s[c] += e.1[c];
         }
         s
     });
-    let frac = |e: &[f64; 3]| (0..3).map(|c| if sums[c] > 0.0 { e[c] / sums[c] } else { 0.0 }).fold(0.0, f64::max);
+    let frac = |e: &[f64; 3]| {
+        (0..3)
+            .map(|c| if sums[c] > 0.0 { e[c] / sums[c] } else { 0.0 })
+            .fold(0.0, f64::max)
+    };
     row.sort_by(|a, b| frac(&a.1).total_cmp(&frac(&b.1)));
     let mut dropped = [0.0f64; 3];
     let mut keep = vec![true; row.len()];
@@ -628,8 +718,21 @@ fn prune_row(mut row: Vec<(u32, [f64; 3])>, tolerance: f64, diagonal: u32) -> (V
         dropped = next;
         keep[i] = false;
     }
-    let worst = (0..3).map(|c| if sums[c] > 0.0 { dropped[c] / sums[c] } else { 0.0 }).fold(0.0, f64::max);
-    let mut kept: Vec<(u32, [f32; 3])> = row.iter().zip(&keep).filter(|(_, k)| **k).map(|(e, _)| (e.0, e.1.map(|x| x as f32))).collect();
+    let worst = (0..3)
+        .map(|c| {
+            if sums[c] > 0.0 {
+                dropped[c] / sums[c]
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0, f64::max);
+    let mut kept: Vec<(u32, [f32; 3])> = row
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(e, _)| (e.0, e.1.map(|x| x as f32)))
+        .collect();
     kept.sort_by_key(|e| e.0);
     (kept, worst)
 }
@@ -640,7 +743,14 @@ mod tests {
 
     #[test]
     fn pruning_respects_the_tolerance_and_keeps_the_diagonal() {
-        let row: Vec<(u32, [f64; 3])> = (0..100).map(|i| (i, [1.0 / (1.0 + i as f64).powi(2), 0.01, 1.0 / (1.0 + i as f64)])).collect();
+        let row: Vec<(u32, [f64; 3])> = (0..100)
+            .map(|i| {
+                (
+                    i,
+                    [1.0 / (1.0 + i as f64).powi(2), 0.01, 1.0 / (1.0 + i as f64)],
+                )
+            })
+            .collect();
         for tol in [0.0, 0.005, 0.05, 0.3] {
             let (kept, dropped) = prune_row(row.clone(), tol, 0);
             assert!(dropped <= tol + 1e-12, "{dropped} > {tol}");
@@ -663,7 +773,9 @@ mod tests {
         let mut m = vec![4.0, 2.0, 0.6, 2.0, 5.0, 1.0, 0.6, 1.0, 3.0];
         let x = [1.0, -2.0, 0.5];
         let orig = m.clone();
-        let mut b: Vec<f64> = (0..3).map(|i| (0..3).map(|j| orig[i * 3 + j] * x[j]).sum()).collect();
+        let mut b: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| orig[i * 3 + j] * x[j]).sum())
+            .collect();
         assert!(cholesky_solve(&mut m, &mut b, 3));
         for i in 0..3 {
             assert!((b[i] - x[i]).abs() < 1e-12);

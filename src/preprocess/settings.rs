@@ -74,16 +74,28 @@ pub struct Choice {
 /// Validates user-given values.
 pub fn validate(o: &SettingsOverrides) -> anyhow::Result<()> {
     if let Some(h) = o.texel_mm {
-        anyhow::ensure!(h.is_finite() && h > 0.0, "texel size {h} mm must be positive");
+        anyhow::ensure!(
+            h.is_finite() && h > 0.0,
+            "texel size {h} mm must be positive"
+        );
     }
     if let Some(k) = o.kernel_size {
-        anyhow::ensure!(k % 2 == 1 && (1..=31).contains(&k), "kernel size {k} must be odd and between 1 and 31");
+        anyhow::ensure!(
+            k % 2 == 1 && (1..=31).contains(&k),
+            "kernel size {k} must be odd and between 1 and 31"
+        );
     }
     if let Some(s) = o.node_spacing_mm {
-        anyhow::ensure!(s.is_finite() && s > 0.0, "node spacing {s} mm must be positive");
+        anyhow::ensure!(
+            s.is_finite() && s > 0.0,
+            "node spacing {s} mm must be positive"
+        );
     }
     if let Some(t) = o.prune_tolerance {
-        anyhow::ensure!((0.0..0.5).contains(&t), "pruning tolerance {t} must lie in [0, 0.5)");
+        anyhow::ensure!(
+            (0.0..0.5).contains(&t),
+            "pruning tolerance {t} must lie in [0, 0.5)"
+        );
     }
     Ok(())
 }
@@ -107,7 +119,10 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
         }
         None => {
             let mut h = z_min;
-            let mut why = format!("texel {h:.3} mm = z_r of the {} channel (width of the R_d peak)", names[sharp]);
+            let mut why = format!(
+                "texel {h:.3} mm = z_r of the {} channel (width of the R_d peak)",
+                names[sharp]
+            );
             if h < scale.pixel_mm {
                 h = scale.pixel_mm;
                 why = format!("texel {h:.3} mm = one image pixel at the object (z_r = {z_min:.3} mm is finer than the image shows)");
@@ -116,14 +131,19 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             let budget_h = (2.0 * scale.area_mm2 / scale.max_texels).sqrt();
             if h < budget_h {
                 h = budget_h;
-                why = format!("texel {h:.3} mm: the texel budget of {:.0} texels for {:.0} mm^2 of surface", scale.max_texels, scale.area_mm2);
+                why = format!(
+                    "texel {h:.3} mm: the texel budget of {:.0} texels for {:.0} mm^2 of surface",
+                    scale.max_texels, scale.area_mm2
+                );
             }
             reasons.push(why);
             h
         }
     };
 
-    let holds = |k: u32, c: usize| dipoles[c].cumulative(k as f64 * texel / 2.0) / dipoles[c].total_reflectance().max(1e-300);
+    let holds = |k: u32, c: usize| {
+        dipoles[c].cumulative(k as f64 * texel / 2.0) / dipoles[c].total_reflectance().max(1e-300)
+    };
     let kernel = match o.kernel_size {
         Some(k) => {
             reasons.push(format!("kernel {k}x{k}: given"));
@@ -137,7 +157,9 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             while k > 3 && (0..3).all(|c| holds(k - 2, c) >= 0.99) {
                 k -= 2;
             }
-            let held: Vec<String> = (0..3).map(|c| format!("{:.0} %", 100.0 * holds(k, c))).collect();
+            let held: Vec<String> = (0..3)
+                .map(|c| format!("{:.0} %", 100.0 * holds(k, c)))
+                .collect();
             reasons.push(format!(
                 "kernel {k}x{k} (radius {:.2} mm) holds {} of R_total (R, G, B)",
                 k as f64 * texel / 2.0,
@@ -154,7 +176,9 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             s
         }
         None => {
-            let tail = (0..3).map(|c| 1.0 - holds(kernel, c)).fold(0.0f64, f64::max);
+            let tail = (0..3)
+                .map(|c| 1.0 - holds(kernel, c))
+                .fold(0.0f64, f64::max);
             // The global response carries the tail beyond the kernel; its error scales with
             // the tail, so a small tail tolerates proportionally coarser nodes (up to 4x).
             let relax = (0.25 / tail.max(1e-9)).sqrt().clamp(1.0, 4.0);
@@ -174,7 +198,10 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
         }
         None => {
             let t = (scale.target_error / 4.0).min(0.005);
-            reasons.push(format!("pruning tolerance {:.2} % of each row of F", 100.0 * t));
+            reasons.push(format!(
+                "pruning tolerance {:.2} % of each row of F",
+                100.0 * t
+            ));
             t
         }
     };
@@ -206,16 +233,42 @@ mod tests {
 
     #[test]
     fn materials_set_their_own_scales() {
-        let milk = derive(&Material::preset("skimmilk").unwrap(), &scale(), &Default::default()).settings;
-        let ketchup = derive(&Material::preset("ketchup").unwrap(), &scale(), &Default::default()).settings;
-        let cream = derive(&Material::preset("cream").unwrap(), &scale(), &Default::default()).settings;
+        let milk = derive(
+            &Material::preset("skimmilk").unwrap(),
+            &scale(),
+            &Default::default(),
+        )
+        .settings;
+        let ketchup = derive(
+            &Material::preset("ketchup").unwrap(),
+            &scale(),
+            &Default::default(),
+        )
+        .settings;
+        let cream = derive(
+            &Material::preset("cream").unwrap(),
+            &scale(),
+            &Default::default(),
+        )
+        .settings;
         // Texel = smallest z_r: skim milk blue 1/1.914, ketchup blue 1/1.48.
         assert!((milk.texel_mm - 1.0 / 1.9142).abs() < 1e-3);
         assert!((ketchup.texel_mm - 1.0 / 1.48).abs() < 1e-3);
         // Cream's z_r is finer than a pixel: the pixel wins.
         assert_eq!(cream.texel_mm, 0.15);
-        // Ketchup's reflectance is nearly all local: coarser global nodes than skim milk's.
-        assert!(ketchup.node_spacing_mm / ketchup.texel_mm > milk.node_spacing_mm / milk.texel_mm);
+        // A strongly absorbing medium keeps its reflectance local: the global response carries
+        // little and its nodes may be coarser, relative to the kernel, than skim milk's.
+        let ink = derive(
+            &Material::custom([1.0; 3], [5.0; 3], 1.3).unwrap(),
+            &scale(),
+            &Default::default(),
+        )
+        .settings;
+        let relative = |s: &Settings| s.node_spacing_mm / (s.texel_mm * s.kernel_size as f64);
+        assert!(
+            relative(&ink) > 1.5 * relative(&milk),
+            "{ink:?} vs {milk:?}"
+        );
         for s in [milk, ketchup, cream] {
             assert!(s.kernel_size % 2 == 1 && (3..=11).contains(&s.kernel_size));
             assert!(s.prune_tolerance <= 0.005);
@@ -224,13 +277,42 @@ mod tests {
 
     #[test]
     fn budget_and_overrides_win() {
-        let tight = ObjectScale { max_texels: 1000.0, ..scale() };
-        let s = derive(&Material::preset("skimmilk").unwrap(), &tight, &Default::default()).settings;
+        let tight = ObjectScale {
+            max_texels: 1000.0,
+            ..scale()
+        };
+        let s = derive(
+            &Material::preset("skimmilk").unwrap(),
+            &tight,
+            &Default::default(),
+        )
+        .settings;
         assert!((s.texel_mm - (2.0 * 8000.0 / 1000.0f64).sqrt()).abs() < 1e-9);
-        let o = SettingsOverrides { texel_mm: Some(2.0), kernel_size: Some(5), node_spacing_mm: Some(3.0), prune_tolerance: Some(0.0) };
+        let o = SettingsOverrides {
+            texel_mm: Some(2.0),
+            kernel_size: Some(5),
+            node_spacing_mm: Some(3.0),
+            prune_tolerance: Some(0.0),
+        };
         let s = derive(&Material::preset("skimmilk").unwrap(), &scale(), &o).settings;
-        assert_eq!((s.texel_mm, s.kernel_size, s.node_spacing_mm, s.prune_tolerance), (2.0, 5, 3.0, 0.0));
-        assert!(validate(&SettingsOverrides { kernel_size: Some(4), ..Default::default() }).is_err());
-        assert!(validate(&SettingsOverrides { texel_mm: Some(f64::NAN), ..Default::default() }).is_err());
+        assert_eq!(
+            (
+                s.texel_mm,
+                s.kernel_size,
+                s.node_spacing_mm,
+                s.prune_tolerance
+            ),
+            (2.0, 5, 3.0, 0.0)
+        );
+        assert!(validate(&SettingsOverrides {
+            kernel_size: Some(4),
+            ..Default::default()
+        })
+        .is_err());
+        assert!(validate(&SettingsOverrides {
+            texel_mm: Some(f64::NAN),
+            ..Default::default()
+        })
+        .is_err());
     }
 }

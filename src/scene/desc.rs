@@ -79,6 +79,8 @@ pub struct MeshDesc {
     pub size: Option<[f64; 3]>,
     /// Subdivisions along the longest edge (sphere: along the equator), built-ins only.
     pub segments: Option<u32>,
+    /// Midpoint subdivision steps applied to the mesh (each quadruples the triangles).
+    pub subdivide: Option<u32>,
 }
 
 /// `[transform]`.

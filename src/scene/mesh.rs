@@ -238,6 +238,32 @@ impl Mesh {
         }
     }
 
+    /// Midpoint subdivision: each triangle becomes four; new vertices at edge midpoints
+    /// (shared between the two triangles of an edge), with averaged normals and UVs. The
+    /// surface is unchanged; the vertex density roughly quadruples.
+    pub fn subdivide(&self) -> Mesh {
+        let mut m = self.clone();
+        let mut mids: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();
+        let mut indices = Vec::with_capacity(self.indices.len() * 4);
+        for t in self.indices.chunks(3) {
+            let mut mid = |a: u32, b: u32| {
+                *mids.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    let (a, b) = (a as usize, b as usize);
+                    m.positions
+                        .push(0.5 * (self.positions[a] + self.positions[b]));
+                    m.normals
+                        .push((self.normals[a] + self.normals[b]).normalize_or_zero());
+                    m.uvs.push(0.5 * (self.uvs[a] + self.uvs[b]));
+                    (m.positions.len() - 1) as u32
+                })
+            };
+            let (ab, bc, ca) = (mid(t[0], t[1]), mid(t[1], t[2]), mid(t[2], t[0]));
+            indices.extend([t[0], ab, ca, ab, t[1], bc, ca, bc, t[2], ab, bc, ca]);
+        }
+        m.indices = indices;
+        m
+    }
+
     /// A UV sphere of `radius` around the origin with `segments` around the equator.
     pub fn sphere(radius: f32, segments: u32) -> Mesh {
         let seg = segments.max(3);
@@ -367,6 +393,15 @@ mod tests {
                 (p.dot(*n) - (n.abs() * Vec3::new(20.0, 20.0, 5.0)).max_element()).abs() < 1e-4
             );
         }
+    }
+
+    #[test]
+    fn subdivision_keeps_the_surface() {
+        let b = Mesh::cuboid(Vec3::new(10.0, 20.0, 30.0), 3);
+        let s = b.subdivide();
+        assert_eq!(s.triangle_count(), 4 * b.triangle_count());
+        assert!((s.surface_area() - b.surface_area()).abs() < 1e-3);
+        assert!((signed_volume(&s) - signed_volume(&b)).abs() < 1e-2);
     }
 
     #[test]

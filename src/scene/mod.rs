@@ -13,6 +13,9 @@ use std::path::{Path, PathBuf};
 /// The Stanford bunny, about 50 mm tall (see the header of `assets/bunny.obj`).
 pub const BUNNY_OBJ: &str = include_str!("../../assets/bunny.obj");
 
+/// The most triangles a mesh may have.
+pub const MAX_TRIANGLES: usize = 4_000_000;
+
 /// The most lights a scene may have (the size of the light array in `glsl/frame.glsl`).
 pub const MAX_LIGHTS: usize = 8;
 
@@ -188,6 +191,19 @@ impl Scene {
                 }
             }
         };
+        let steps = *md.subdivide.get_or_insert(0);
+        if steps > 4 {
+            bail!("[mesh] subdivide = {steps}: at most 4 steps (each quadruples the triangles)");
+        }
+        for _ in 0..steps {
+            mesh = mesh.subdivide();
+        }
+        if mesh.triangle_count() > MAX_TRIANGLES {
+            bail!(
+                "the mesh has {} triangles; at most {MAX_TRIANGLES} are supported",
+                mesh.triangle_count()
+            );
+        }
         let texture = match &md.texture {
             Some(t) => {
                 if !mesh.has_uvs {
