@@ -20,7 +20,7 @@ struct Light {
 layout(std140, set = 0, binding = 0) uniform Frame {
     mat4 view_proj;        // world (mm) -> camera clip space
     vec4 camera_pos;       // xyz
-    vec4 albedo;           // rgb: diffuse albedo of the Lambert stand-in (the material's R_total)
+    vec4 material;         // x: relative index of refraction eta
     uvec4 counts;          // x: number of lights
     Light lights[MAX_LIGHTS];
 } frame;
@@ -44,6 +44,20 @@ void light_at(Light l, vec3 x, out vec3 wi, out vec3 irradiance) {
         float edge = l.params.x;
         irradiance *= smoothstep(edge, edge + 0.05 * (1.0 - edge), c);
     }
+}
+
+// Fresnel transmittance for unpolarised light entering a medium of relative index eta at an
+// angle with cosine cos_i (exact dielectric equations). Mirrors physics::fresnel_transmittance.
+float fresnel_transmittance(float eta, float cos_i) {
+    cos_i = clamp(cos_i, 0.0, 1.0);
+    float sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
+    if (sin_t2 >= 1.0) {
+        return 0.0;
+    }
+    float cos_t = sqrt(1.0 - sin_t2);
+    float rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    float rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    return clamp(1.0 - 0.5 * (rs * rs + rp * rp), 0.0, 1.0);
 }
 
 #endif

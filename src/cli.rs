@@ -3,8 +3,9 @@
 use crate::gpu::{list_devices, Gpu, GpuOptions};
 use crate::graph::timing::TimingReport;
 use crate::output;
+use crate::preprocess::operators::Blend;
 use crate::preprocess::{self, cache, settings::SettingsOverrides, CacheOutcome};
-use crate::renderer::Renderer;
+use crate::renderer::{Options, Renderer};
 use crate::scene::{Overrides, Scene};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
@@ -119,6 +120,43 @@ pub struct RenderArgs {
     /// Image height in pixels.
     #[arg(long)]
     pub height: Option<u32>,
+    /// Blending of local and global responses: local, global, simple or optimized.
+    #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
+    pub mode: ModeArg,
+    /// Move the lights a full turn around the object over the frames (no preprocessing).
+    #[arg(long)]
+    pub orbit_light: bool,
+    /// Write every frame as frame_NNNN.png.
+    #[arg(long)]
+    pub save_frames: bool,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
+/// `--mode` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
+pub enum ModeArg {
+    /// Local kernels only.
+    Local,
+    /// Global response only.
+    Global,
+    /// Simple blending (F without its diagonal plus the direct term).
+    Simple,
+    /// Optimized blending (fitted near field plus the direct term).
+    #[default]
+    Optimized,
+}
+
+impl From<ModeArg> for Blend {
+    fn from(m: ModeArg) -> Blend {
+        match m {
+            ModeArg::Local => Blend::Local,
+            ModeArg::Global => Blend::Global,
+            ModeArg::Simple => Blend::Simple,
+            ModeArg::Optimized => Blend::Optimized,
+        }
+    }
 }
 
 fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
@@ -138,13 +176,52 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     );
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
+    for r in &choice.reasons {
+        println!("# {r}");
+    }
+    let bars = Bars::new();
+    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
+    let (pre, outcome) =
+        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
+    if let CacheOutcome::Hit(p) = &outcome {
+        println!("# preprocessing loaded from {}", p.display());
+    }
     let gpu = Gpu::new(&GpuOptions {
         validate: cli.validate,
         device: cli.device.clone(),
     })?;
     let resolved = scene.resolved.to_toml();
-    let mut renderer = Renderer::new(&gpu, scene)?;
-    let result = renderer.render(args.frames)?;
+    let mode: Blend = args.mode.into();
+    let mut renderer = Renderer::new(
+        &gpu,
+        scene,
+        &pre,
+        Options {
+            mode,
+            capture: false,
+        },
+    )?;
+    let mut timings = Vec::with_capacity(args.frames);
+    for f in 0..args.frames {
+        let angle = if args.orbit_light {
+            std::f32::consts::TAU * f as f32 / args.frames as f32
+        } else {
+            0.0
+        };
+        let lights = renderer.orbit_lights(angle);
+        timings.push(renderer.frame(&lights)?);
+        if args.save_frames {
+            let o = renderer.output(Vec::new())?;
+            output::write_png(
+                &args.out.join(format!("frame_{f:04}.png")),
+                o.width,
+                o.height,
+                &o.display,
+            )?;
+        }
+    }
+    let result = renderer.output(timings)?;
     let report = TimingReport::new(
         &gpu.info.name,
         &gpu.info.driver,

@@ -1,11 +1,20 @@
-//! Assembles the render graph for a scene and runs it: shadow -> shade -> tonemap -> readback.
+//! Assembles the render graph of the method for a scene and runs it:
+//!
+//! ```text
+//! shadow -> illum -> dilate -> local ----------------------------> composite -> tonemap -> readback
+//!                           \-> gather -> global (node radiosity) -/
+//! ```
+//!
+//! Only the light changes between frames: every pass reads precomputed data uploaded once.
 
 use crate::gpu::{Buffer, Gpu, Image};
-use crate::graph::{timing::FrameTiming, Access, FrameGraph, ImageDesc, RenderGraph};
-use crate::passes::{self, frame::FrameUniforms, MeshBuffers};
-use crate::scene::Scene;
+use crate::graph::{timing::FrameTiming, Access, FrameGraph, ImageDesc, RenderGraph, Stage};
+use crate::passes::{self, compute, data::SubsurfaceData, frame::FrameUniforms};
+use crate::preprocess::{operators::Blend, Preprocessed};
+use crate::scene::{Light, Scene};
 use anyhow::{Context, Result};
 use ash::vk;
+use glam::{Quat, Vec3};
 use gpu_allocator::MemoryLocation;
 use std::sync::Arc;
 
@@ -26,6 +35,37 @@ pub struct RenderOutput {
     pub frames: Vec<FrameTiming>,
 }
 
+/// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
+#[derive(Debug, Clone, Default)]
+pub struct Captured {
+    /// The illumination map after dilation, RGBA per atlas texel.
+    pub irradiance: Vec<[f32; 4]>,
+    /// The local response, RGBA per atlas texel.
+    pub local: Vec<[f32; 4]>,
+    /// Gathered node irradiance.
+    pub node_irradiance: Vec<[f32; 4]>,
+    /// Global node radiosity.
+    pub node_radiosity: Vec<[f32; 4]>,
+}
+
+/// How to render.
+#[derive(Debug, Clone, Copy)]
+pub struct Options {
+    /// Blending of local and global responses.
+    pub mode: Blend,
+    /// Also read back the intermediate results every frame.
+    pub capture: bool,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            mode: Blend::Optimized,
+            capture: false,
+        }
+    }
+}
+
 /// A scene on the GPU with its compiled frame graph.
 pub struct Renderer {
     gpu: Arc<Gpu>,
@@ -34,17 +74,38 @@ pub struct Renderer {
     uniforms: Arc<Buffer>,
     hdr_readback: Arc<Buffer>,
     display_readback: Arc<Buffer>,
+    capture: Option<[Arc<Buffer>; 4]>,
+    uploaded_bytes: u64,
+}
+
+fn host_buffer(gpu: &Arc<Gpu>, name: &str, bytes: u64) -> Result<Arc<Buffer>> {
+    Ok(Arc::new(Buffer::new(
+        gpu,
+        name,
+        bytes,
+        vk::BufferUsageFlags::TRANSFER_DST,
+        MemoryLocation::GpuToCpu,
+    )?))
+}
+
+fn read_back<T: bytemuck::Pod>(buffer: &Buffer, count: usize) -> Result<Vec<T>> {
+    let bytes = buffer
+        .mapped()
+        .context("readback buffer is not host-visible")?;
+    Ok(bytemuck::cast_slice(&bytes[..count * std::mem::size_of::<T>()]).to_vec())
 }
 
 impl Renderer {
-    /// Uploads the scene and builds its frame graph.
-    pub fn new(gpu: &Arc<Gpu>, scene: Scene) -> Result<Renderer> {
+    /// Uploads the scene's preprocessing and builds the frame graph.
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        scene: Scene,
+        pre: &Preprocessed,
+        options: Options,
+    ) -> Result<Renderer> {
         let (w, h) = (scene.width, scene.height);
-        let mesh = MeshBuffers::new(gpu, &scene.mesh).context("uploading the mesh")?;
-        let texture = match &scene.texture {
-            Some(t) => Image::from_rgba8(gpu, "albedo texture", t.width(), t.height(), t.as_raw())?,
-            None => Image::from_rgba8(gpu, "albedo texture (white)", 1, 1, &[255; 4])?,
-        };
+        let data = SubsurfaceData::upload(gpu, &scene, pre, options.mode)
+            .context("uploading the preprocessing")?;
         let uniforms = Arc::new(Buffer::new(
             gpu,
             "frame uniforms",
@@ -52,40 +113,53 @@ impl Renderer {
             vk::BufferUsageFlags::UNIFORM_BUFFER,
             MemoryLocation::CpuToGpu,
         )?);
-        let readback = |name: &str, bytes: u64| {
-            Buffer::new(
-                gpu,
-                name,
-                bytes,
-                vk::BufferUsageFlags::TRANSFER_DST,
-                MemoryLocation::GpuToCpu,
-            )
-            .map(Arc::new)
-        };
         let pixels = w as u64 * h as u64;
-        let hdr_readback = readback("radiance readback", pixels * 16)?;
-        let display_readback = readback("display readback", pixels * 4)?;
+        let hdr_readback = host_buffer(gpu, "radiance readback", pixels * 16)?;
+        let display_readback = host_buffer(gpu, "display readback", pixels * 4)?;
+        let (aw, ah) = data.atlas_size;
+        let local_image = Arc::new(Image::zeroed_storage(
+            gpu,
+            "local response",
+            vk::Format::R32G32B32A32_SFLOAT,
+            aw,
+            ah,
+        )?);
 
         let mut g = RenderGraph::new();
         let frame = g.import_buffer(uniforms.clone(), None);
-        let vertices = g.import_buffer(mesh.vertices.clone(), None);
-        let indices = g.import_buffer(mesh.indices.clone(), None);
-        let texture = g.import_image(Arc::new(texture), vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL);
+        let vertices = g.import_buffer(data.vertices.clone(), None);
+        let indices = g.import_buffer(data.indices.clone(), None);
+        let texels = g.import_buffer(data.texels.clone(), None);
+        let kernels = g.import_buffer(data.kernels.clone(), None);
+        let gather_rows = g.import_buffer(data.gather_rows.clone(), None);
+        let gather_entries = g.import_buffer(data.gather_entries.clone(), None);
+        let global_rows = g.import_buffer(data.global_rows.clone(), None);
+        let global_entries = g.import_buffer(data.global_entries.clone(), None);
+        let charts = g.import_image(data.charts.clone(), Access::Sampled(Stage::Compute));
+        let texture = g.import_image(data.texture.clone(), Access::Sampled(Stage::Fragment));
+        let local = g.import_image(local_image, Access::StorageRead(Stage::Fragment));
         let hdr_rb = g.import_buffer(hdr_readback.clone(), Some(Access::HostRead));
         let display_rb = g.import_buffer(display_readback.clone(), Some(Access::HostRead));
+
         let lights = scene.lights.len() as u32;
         let s = scene.shadow_map_size;
         let shadow_maps = g.image(
             "shadow maps",
             ImageDesc::layered(passes::shadow::FORMAT, s, s, lights),
         );
+        let map = g.image(
+            "illumination map",
+            ImageDesc::new(passes::illum::FORMAT, aw, ah),
+        );
+        let node_irradiance = g.buffer("node irradiance", data.node_count.max(1) as u64 * 16);
+        let node_radiosity = g.buffer("node radiosity", data.node_count.max(1) as u64 * 16);
         let hdr = g.image(
             "radiance",
-            ImageDesc::new(passes::lambert::HDR_FORMAT, w, h),
+            ImageDesc::new(passes::composite::HDR_FORMAT, w, h),
         );
         let depth = g.image(
             "camera depth",
-            ImageDesc::new(passes::lambert::DEPTH_FORMAT, w, h),
+            ImageDesc::new(passes::composite::DEPTH_FORMAT, w, h),
         );
         let display = g.image("display", ImageDesc::new(vk::Format::R8G8B8A8_UNORM, w, h));
 
@@ -95,26 +169,98 @@ impl Renderer {
                 frame,
                 vertices,
                 indices,
-                index_count: mesh.index_count,
+                index_count: data.index_count,
                 lights,
             },
             shadow_maps,
         );
-        passes::lambert::add(
+        passes::illum::add(
             &mut g,
-            passes::lambert::ShadeInputs {
+            passes::illum::IllumInputs {
                 frame,
                 vertices,
                 indices,
-                index_count: mesh.index_count,
+                index_count: data.index_count,
                 shadow_maps,
+            },
+            map,
+        );
+        compute::dilate(&mut g, texels, data.texel_count, charts, map);
+        compute::local(
+            &mut g,
+            compute::LocalInputs {
+                texels,
+                texel_count: data.texel_count,
+                kernels,
+                kernel_size: data.kernel_size,
+                map,
+            },
+            local,
+        );
+        let rows = |r, e| compute::SparseInputs {
+            rows: r,
+            entries: e,
+            row_count: data.node_count,
+        };
+        compute::gather(
+            &mut g,
+            rows(gather_rows, gather_entries),
+            map,
+            node_irradiance,
+        );
+        compute::global(
+            &mut g,
+            rows(global_rows, global_entries),
+            node_irradiance,
+            node_radiosity,
+        );
+        passes::composite::add(
+            &mut g,
+            passes::composite::CompositeInputs {
+                frame,
+                vertices,
+                indices,
+                index_count: data.index_count,
+                node_radiosity,
+                local,
                 texture,
             },
             hdr,
             depth,
         );
         passes::tonemap::add(&mut g, hdr, display, scene.exposure);
-        passes::readback::add(&mut g, vec![(hdr, hdr_rb), (display, display_rb)]);
+        passes::readback::add(
+            &mut g,
+            "readback",
+            vec![(hdr, hdr_rb), (display, display_rb)],
+        );
+        let capture = if options.capture {
+            let atlas_bytes = aw as u64 * ah as u64 * 16;
+            let node_bytes = data.node_count.max(1) as u64 * 16;
+            let bufs = [
+                host_buffer(gpu, "capture irradiance", atlas_bytes)?,
+                host_buffer(gpu, "capture local", atlas_bytes)?,
+                host_buffer(gpu, "capture node irradiance", node_bytes)?,
+                host_buffer(gpu, "capture node radiosity", node_bytes)?,
+            ];
+            let ids: Vec<_> = bufs
+                .iter()
+                .map(|b| g.import_buffer(b.clone(), Some(Access::HostRead)))
+                .collect();
+            passes::readback::add(
+                &mut g,
+                "capture",
+                vec![
+                    (map, ids[0]),
+                    (local, ids[1]),
+                    (node_irradiance, ids[2]),
+                    (node_radiosity, ids[3]),
+                ],
+            );
+            Some(bufs)
+        } else {
+            None
+        };
         let graph = g.build(gpu)?;
         Ok(Renderer {
             gpu: gpu.clone(),
@@ -123,6 +269,8 @@ impl Renderer {
             uniforms,
             hdr_readback,
             display_readback,
+            capture,
+            uploaded_bytes: data.bytes,
         })
     }
 
@@ -131,35 +279,72 @@ impl Renderer {
         self.graph.pass_names()
     }
 
-    /// Renders `frames` frames (at least one) and returns the last image with all timings.
-    pub fn render(&mut self, frames: usize) -> Result<RenderOutput> {
-        let uniforms = FrameUniforms::new(&self.scene, &self.scene.lights)?;
-        let mut timings = Vec::with_capacity(frames);
-        for _ in 0..frames.max(1) {
-            if !self.uniforms.write_mapped(bytemuck::bytes_of(&uniforms)) {
-                anyhow::bail!("the uniform buffer is not host-visible");
-            }
-            timings.push(self.graph.run_frame()?);
+    /// Bytes of precomputed data uploaded when the renderer was built. Nothing else is
+    /// uploaded afterwards except the frame uniforms.
+    pub fn uploaded_bytes(&self) -> u64 {
+        self.uploaded_bytes
+    }
+
+    /// The scene's lights rotated by `angle` radians about the vertical axis (the camera's up)
+    /// through the object's centre.
+    pub fn orbit_lights(&self, angle: f32) -> Vec<Light> {
+        let (center, _) = self.scene.bounds();
+        let q = Quat::from_axis_angle(self.scene.camera.up, angle);
+        self.scene
+            .lights
+            .iter()
+            .map(|l| Light {
+                position: center + q * (l.position - center),
+                direction: (q * l.direction).normalize_or(Vec3::ZERO),
+                ..*l
+            })
+            .collect()
+    }
+
+    /// Renders one frame with `lights` and returns its timing.
+    pub fn frame(&mut self, lights: &[Light]) -> Result<FrameTiming> {
+        let uniforms = FrameUniforms::new(&self.scene, lights)?;
+        if !self.uniforms.write_mapped(bytemuck::bytes_of(&uniforms)) {
+            anyhow::bail!("the uniform buffer is not host-visible");
         }
+        Ok(self.graph.run_frame()?)
+    }
+
+    /// The last frame's image.
+    pub fn output(&self, frames: Vec<FrameTiming>) -> Result<RenderOutput> {
         let pixels = (self.scene.width * self.scene.height) as usize;
-        let hdr_bytes = self
-            .hdr_readback
-            .mapped()
-            .context("radiance readback buffer is not host-visible")?;
-        let radiance: Vec<f32> = bytemuck::cast_slice(&hdr_bytes[..pixels * 16]).to_vec();
-        let display = self
-            .display_readback
-            .mapped()
-            .context("display readback buffer is not host-visible")?[..pixels * 4]
-            .to_vec();
         Ok(RenderOutput {
             width: self.scene.width,
             height: self.scene.height,
-            radiance,
-            display,
+            radiance: read_back(&self.hdr_readback, pixels * 4)?,
+            display: read_back(&self.display_readback, pixels * 4)?,
             pass_names: self.graph.pass_names(),
-            frames: timings,
+            frames,
         })
+    }
+
+    /// The last frame's intermediate results, if built with `capture`.
+    pub fn captured(&self, atlas_texels: usize, nodes: usize) -> Result<Option<Captured>> {
+        let Some(b) = &self.capture else {
+            return Ok(None);
+        };
+        Ok(Some(Captured {
+            irradiance: read_back(&b[0], atlas_texels)?,
+            local: read_back(&b[1], atlas_texels)?,
+            node_irradiance: read_back(&b[2], nodes)?,
+            node_radiosity: read_back(&b[3], nodes)?,
+        }))
+    }
+
+    /// Renders `frames` frames (at least one) with the scene's lights and returns the last
+    /// image with all timings.
+    pub fn render(&mut self, frames: usize) -> Result<RenderOutput> {
+        let lights = self.scene.lights.clone();
+        let mut timings = Vec::with_capacity(frames);
+        for _ in 0..frames.max(1) {
+            timings.push(self.frame(&lights)?);
+        }
+        self.output(timings)
     }
 
     /// The device this renderer runs on.

@@ -88,7 +88,9 @@ fn default_render_writes_all_outputs_validated() {
     assert!(trace["traceEvents"].as_array().unwrap().len() >= 3 * 4);
     // The written scene renders again.
     let o2 = bin()
-        .args(["render", "--frames", "1", "--out"])
+        .args(["render", "--frames", "1", "--cache"])
+        .arg(out.join("cache"))
+        .arg("--out")
         .arg(out.join("again"))
         .arg(out.join("scene.toml"))
         .args(["--width", "32", "--height", "32"])

@@ -166,6 +166,11 @@ pub const REQUIRED_FORMATS: &[(vk::Format, vk::FormatFeatureFlags, &str)] = &[
         "R32G32B32A32_SFLOAT colour attachment + storage image",
     ),
     (
+        vk::Format::R32_UINT,
+        vk::FormatFeatureFlags::SAMPLED_IMAGE,
+        "R32_UINT sampled image (chart ids)",
+    ),
+    (
         vk::Format::R8G8B8A8_UNORM,
         vk::FormatFeatureFlags::from_raw(
             vk::FormatFeatureFlags::STORAGE_IMAGE.as_raw()
@@ -174,6 +179,28 @@ pub const REQUIRED_FORMATS: &[(vk::Format, vk::FormatFeatureFlags, &str)] = &[
                 | vk::FormatFeatureFlags::TRANSFER_DST.as_raw(),
         ),
         "R8G8B8A8_UNORM storage + sampled image",
+    ),
+];
+
+/// Texel-buffer formats the renderer needs, with the buffer features each must support.
+pub const REQUIRED_BUFFER_FORMATS: &[(vk::Format, vk::FormatFeatureFlags, &str)] = &[
+    (
+        vk::Format::R32_UINT,
+        vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER,
+        "R32_UINT uniform texel buffer",
+    ),
+    (
+        vk::Format::R32G32_SFLOAT,
+        vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER,
+        "R32G32_SFLOAT uniform texel buffer",
+    ),
+    (
+        vk::Format::R32G32B32A32_SFLOAT,
+        vk::FormatFeatureFlags::from_raw(
+            vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER.as_raw()
+                | vk::FormatFeatureFlags::STORAGE_TEXEL_BUFFER.as_raw(),
+        ),
+        "R32G32B32A32_SFLOAT uniform + storage texel buffer",
     ),
 ];
 
@@ -212,6 +239,12 @@ fn unsupported_reason(
     for (format, needed, what) in REQUIRED_FORMATS {
         let fp = unsafe { instance.get_physical_device_format_properties(pd, *format) };
         if !fp.optimal_tiling_features.contains(*needed) {
+            return Some(format!("format {what}"));
+        }
+    }
+    for (format, needed, what) in REQUIRED_BUFFER_FORMATS {
+        let fp = unsafe { instance.get_physical_device_format_properties(pd, *format) };
+        if !fp.buffer_features.contains(*needed) {
             return Some(format!("format {what}"));
         }
     }

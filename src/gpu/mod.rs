@@ -8,7 +8,7 @@ pub mod resources;
 pub use device::{list_devices, DeviceInfo, Gpu, GpuOptions, ValidationLog};
 pub use error::{GpuError, GpuResult, VkCall};
 pub use pipeline::{Binding, GraphicsDesc, Pipeline};
-pub use resources::{aspect_of, Buffer, Image, ImageInfo, Sampler};
+pub use resources::{aspect_of, Buffer, Image, ImageInfo, Sampler, TexelView};
 
 /// SPIR-V of every shader in `glsl/`, compiled by `build.rs`.
 pub mod shaders {

@@ -22,6 +22,8 @@ pub enum Binding {
     StorageImage(vk::ImageView),
     /// A uniform texel buffer (`samplerBuffer` / `textureBuffer`).
     TexelBuffer(vk::BufferView),
+    /// A storage texel buffer (`imageBuffer`).
+    StorageTexelBuffer(vk::BufferView),
 }
 
 impl Binding {
@@ -32,6 +34,7 @@ impl Binding {
             Binding::Sampled(..) => vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
             Binding::StorageImage(_) => vk::DescriptorType::STORAGE_IMAGE,
             Binding::TexelBuffer(_) => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
+            Binding::StorageTexelBuffer(_) => vk::DescriptorType::STORAGE_TEXEL_BUFFER,
         }
     }
 }
@@ -171,7 +174,7 @@ impl Pipeline {
         let texel_views: Vec<[vk::BufferView; 1]> = bindings
             .iter()
             .map(|b| match b {
-                Binding::TexelBuffer(v) => [*v],
+                Binding::TexelBuffer(v) | Binding::StorageTexelBuffer(v) => [*v],
                 _ => [vk::BufferView::null()],
             })
             .collect();
@@ -188,7 +191,9 @@ impl Pipeline {
                     Binding::Sampled(..) | Binding::StorageImage(_) => {
                         w.image_info(&image_infos[i])
                     }
-                    Binding::TexelBuffer(_) => w.texel_buffer_view(&texel_views[i]),
+                    Binding::TexelBuffer(_) | Binding::StorageTexelBuffer(_) => {
+                        w.texel_buffer_view(&texel_views[i])
+                    }
                 }
             })
             .collect();
@@ -354,21 +359,28 @@ impl Pipeline {
         }
     }
 
+    /// Pushes 32-bit words as constants.
+    pub fn push_words(&self, cmd: vk::CommandBuffer, words: &[u32]) {
+        if !words.is_empty() {
+            self.push_bytes(cmd, bytemuck::cast_slice(words));
+        }
+    }
+
     /// Pushes constants visible to every stage of this pipeline.
     pub fn push<T: bytemuck::Pod>(&self, cmd: vk::CommandBuffer, value: &T) {
+        self.push_bytes(cmd, bytemuck::bytes_of(value));
+    }
+
+    fn push_bytes(&self, cmd: vk::CommandBuffer, bytes: &[u8]) {
         let stages = if self.bind_point == vk::PipelineBindPoint::COMPUTE {
             vk::ShaderStageFlags::COMPUTE
         } else {
             vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT
         };
         unsafe {
-            self.gpu.device.cmd_push_constants(
-                cmd,
-                self.layout,
-                stages,
-                0,
-                bytemuck::bytes_of(value),
-            )
+            self.gpu
+                .device
+                .cmd_push_constants(cmd, self.layout, stages, 0, bytes)
         };
     }
 }

@@ -336,12 +336,25 @@ impl Image {
         height: u32,
         pixels: &[u8],
     ) -> GpuResult<Image> {
-        assert_eq!(pixels.len(), (width * height * 4) as usize);
+        Self::from_pixels(gpu, name, vk::Format::R8G8B8A8_UNORM, width, height, pixels)
+    }
+
+    /// Creates a sampled image of `format` from tightly packed pixels, left in
+    /// `SHADER_READ_ONLY_OPTIMAL`.
+    pub fn from_pixels(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        format: vk::Format,
+        width: u32,
+        height: u32,
+        pixels: &[u8],
+    ) -> GpuResult<Image> {
+        assert_eq!(pixels.len() % (width * height).max(1) as usize, 0);
         let image = Image::new(
             gpu,
             name,
             ImageInfo {
-                format: vk::Format::R8G8B8A8_UNORM,
+                format,
                 extent: vk::Extent2D { width, height },
                 layers: 1,
                 usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
@@ -403,6 +416,107 @@ impl Image {
     }
 }
 
+impl Image {
+    /// A storage image cleared to zero and left in `GENERAL` layout (for images that keep
+    /// their contents across frames, such as the local response with its zero gutters).
+    pub fn zeroed_storage(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        format: vk::Format,
+        width: u32,
+        height: u32,
+    ) -> GpuResult<Image> {
+        let image = Image::new(
+            gpu,
+            name,
+            ImageInfo {
+                format,
+                extent: vk::Extent2D { width, height },
+                layers: 1,
+                usage: vk::ImageUsageFlags::STORAGE
+                    | vk::ImageUsageFlags::TRANSFER_DST
+                    | vk::ImageUsageFlags::TRANSFER_SRC,
+            },
+            false,
+        )?;
+        let range = image.range();
+        gpu.one_shot(|cmd| unsafe {
+            let to_general = [vk::ImageMemoryBarrier2::default()
+                .dst_stage_mask(vk::PipelineStageFlags2::CLEAR)
+                .dst_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::GENERAL)
+                .image(image.raw)
+                .subresource_range(range)];
+            gpu.device.cmd_pipeline_barrier2(
+                cmd,
+                &vk::DependencyInfo::default().image_memory_barriers(&to_general),
+            );
+            gpu.device.cmd_clear_color_image(
+                cmd,
+                image.raw,
+                vk::ImageLayout::GENERAL,
+                &vk::ClearColorValue { float32: [0.0; 4] },
+                &[range],
+            );
+            let done = [vk::MemoryBarrier2::default()
+                .src_stage_mask(vk::PipelineStageFlags2::CLEAR)
+                .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+                .dst_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+                .dst_access_mask(vk::AccessFlags2::MEMORY_READ | vk::AccessFlags2::MEMORY_WRITE)];
+            gpu.device
+                .cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().memory_barriers(&done));
+        })?;
+        Ok(image)
+    }
+}
+
+/// A formatted view of a buffer for texel-buffer access (`samplerBuffer`, `imageBuffer`).
+pub struct TexelView {
+    gpu: Arc<Gpu>,
+    /// The view.
+    pub raw: vk::BufferView,
+    /// The buffer it views (kept alive).
+    pub buffer: Arc<Buffer>,
+}
+
+impl TexelView {
+    /// Views the whole of `buffer` as elements of `format` (`bytes_per_element` each).
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        buffer: &Arc<Buffer>,
+        format: vk::Format,
+        bytes_per_element: u64,
+    ) -> GpuResult<TexelView> {
+        let elements = buffer.size / bytes_per_element;
+        if elements > gpu.info.max_texel_buffer_elements {
+            return Err(GpuError::Limit {
+                what: format!("texel buffer '{}'", buffer.name),
+                limit: "maxTexelBufferElements",
+                value: elements,
+                max: gpu.info.max_texel_buffer_elements,
+            });
+        }
+        let info = vk::BufferViewCreateInfo::default()
+            .buffer(buffer.raw)
+            .format(format)
+            .offset(0)
+            .range(elements.max(1) * bytes_per_element);
+        let raw = unsafe { gpu.device.create_buffer_view(&info, None) }.vk("vkCreateBufferView")?;
+        Ok(TexelView {
+            gpu: gpu.clone(),
+            raw,
+            buffer: buffer.clone(),
+        })
+    }
+}
+
+impl Drop for TexelView {
+    fn drop(&mut self) {
+        unsafe { self.gpu.device.destroy_buffer_view(self.raw, None) };
+    }
+}
+
 impl Drop for Image {
     fn drop(&mut self) {
         unsafe {
@@ -431,6 +545,11 @@ impl Sampler {
     /// Bilinear sampler, repeating or clamped to the edge.
     pub fn linear(gpu: &Arc<Gpu>, repeat: bool) -> GpuResult<Sampler> {
         Self::create(gpu, vk::Filter::LINEAR, repeat, false)
+    }
+
+    /// Nearest-texel sampler, clamped (integer images, exact fetches).
+    pub fn nearest(gpu: &Arc<Gpu>) -> GpuResult<Sampler> {
+        Self::create(gpu, vk::Filter::NEAREST, false, false)
     }
 
     /// Depth-comparison sampler (`LESS_OR_EQUAL`) for shadow maps. Nearest filtering: not

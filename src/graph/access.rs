@@ -43,6 +43,8 @@ pub enum Access {
     StorageReadWrite(Stage),
     /// Uniform texel buffer read.
     TexelRead(Stage),
+    /// Storage texel buffer written (`imageBuffer`).
+    TexelWrite(Stage),
     /// Colour attachment, written (cleared or overwritten).
     ColorAttachment,
     /// Depth attachment, tested and written.
@@ -98,6 +100,7 @@ impl Access {
                 true,
             ),
             Access::TexelRead(s) => (s.flags(), A::SHADER_SAMPLED_READ, L::UNDEFINED, false),
+            Access::TexelWrite(s) => (s.flags(), A::SHADER_STORAGE_WRITE, L::UNDEFINED, true),
             Access::ColorAttachment => (
                 S::COLOR_ATTACHMENT_OUTPUT,
                 A::COLOR_ATTACHMENT_READ | A::COLOR_ATTACHMENT_WRITE,
@@ -154,6 +157,7 @@ impl Access {
                 U::STORAGE_BUFFER
             }
             Access::TexelRead(_) => U::UNIFORM_TEXEL_BUFFER,
+            Access::TexelWrite(_) => U::STORAGE_TEXEL_BUFFER,
             Access::TransferRead => U::TRANSFER_SRC,
             Access::TransferWrite => U::TRANSFER_DST,
             _ => U::empty(),
@@ -168,6 +172,7 @@ impl Access {
                 | Access::IndexBuffer
                 | Access::Uniform(_)
                 | Access::TexelRead(_)
+                | Access::TexelWrite(_)
                 | Access::HostRead
         )
     }

@@ -96,6 +96,11 @@ impl Resources {
         }
     }
 
+    /// The image or buffer behind `id`.
+    pub fn physical(&self, id: ResourceId) -> &Physical {
+        &self.physical[id.0]
+    }
+
     /// The buffer behind `id`. Panics if `id` is an image.
     pub fn buffer(&self, id: ResourceId) -> &Arc<Buffer> {
         match &self.physical[id.0] {
@@ -213,15 +218,16 @@ impl RenderGraph {
         )
     }
 
-    /// An existing image, in `layout` when each frame starts.
-    pub fn import_image(&mut self, image: Arc<Image>, layout: vk::ImageLayout) -> ResourceId {
+    /// An existing image, ready for `ready_for` (and in its layout) when each frame starts;
+    /// the graph returns it to that state at the end of the frame.
+    pub fn import_image(&mut self, image: Arc<Image>, ready_for: Access) -> ResourceId {
         self.add(
             ResourceDecl {
                 name: image.name.clone(),
                 kind: ResourceKind::Image,
                 imported: true,
-                initial_layout: layout,
-                export: None,
+                initial_layout: ready_for.info().layout,
+                export: Some(ready_for),
             },
             Source::ImportedImage(image),
         )

@@ -22,7 +22,7 @@ pub struct GpuLight {
 pub struct FrameUniforms {
     view_proj: [[f32; 4]; 4],
     camera_pos: [f32; 4],
-    albedo: [f32; 4],
+    material: [f32; 4],
     counts: [u32; 4],
     lights: [GpuLight; MAX_LIGHTS],
 }
@@ -111,14 +111,13 @@ impl FrameUniforms {
     pub fn new(scene: &Scene, lights: &[Light]) -> Result<FrameUniforms> {
         let (center, radius) = scene.bounds();
         let aspect = scene.width as f32 / scene.height as f32;
-        let albedo = scene.material.total_reflectance();
         let mut u = FrameUniforms::zeroed();
         u.view_proj = scene
             .camera
             .view_proj(aspect, center, radius)
             .to_cols_array_2d();
         u.camera_pos = scene.camera.position.extend(1.0).to_array();
-        u.albedo = [albedo[0] as f32, albedo[1] as f32, albedo[2] as f32, 1.0];
+        u.material = [scene.material.eta as f32, 0.0, 0.0, 0.0];
         u.counts = [lights.len() as u32, 0, 0, 0];
         for (slot, light) in u.lights.iter_mut().zip(lights) {
             let shadow = shadow_projection(light, center, radius, scene.shadow_map_size)?;

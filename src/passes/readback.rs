@@ -1,45 +1,58 @@
-//! `readback`: copies images into host-visible buffers for writing files and for tests.
+//! `readback`: copies images and buffers into host-visible buffers, for files and tests.
 
-use crate::graph::{Access, RenderGraph, ResourceId};
+use crate::graph::{Access, Physical, RenderGraph, ResourceId};
 use ash::vk;
 
-/// Declares the `readback` pass copying each `(image, buffer)` pair. The buffers must be
-/// imported with a `HostRead` export so that the graph makes the copies visible to the host.
-pub fn add(graph: &mut RenderGraph, pairs: Vec<(ResourceId, ResourceId)>) {
-    let mut pass = graph.pass("readback");
+/// Declares a pass named `name` copying each `(source, buffer)` pair; a source is an image
+/// or a buffer. The destination buffers must be imported with a `HostRead` export so that
+/// the graph makes the copies visible to the host.
+pub fn add(graph: &mut RenderGraph, name: &str, pairs: Vec<(ResourceId, ResourceId)>) {
+    let mut pass = graph.pass(name);
     for (image, buffer) in &pairs {
         pass = pass
             .access(*image, Access::TransferRead)
             .access(*buffer, Access::TransferWrite);
     }
     pass.setup(move |_gpu, res| {
-        let copies: Vec<_> = pairs
+        let copies: Vec<(Physical, vk::Buffer)> = pairs
             .iter()
-            .map(|(i, b)| (res.image(*i).clone(), res.buffer(*b).raw))
+            .map(|(s, b)| (res.physical(*s).clone(), res.buffer(*b).raw))
             .collect();
         Ok(Box::new(move |rec| {
-            for (image, buffer) in &copies {
-                let region = [vk::BufferImageCopy::default()
-                    .image_subresource(vk::ImageSubresourceLayers {
-                        aspect_mask: vk::ImageAspectFlags::COLOR,
-                        mip_level: 0,
-                        base_array_layer: 0,
-                        layer_count: 1,
-                    })
-                    .image_extent(vk::Extent3D {
-                        width: image.info.extent.width,
-                        height: image.info.extent.height,
-                        depth: 1,
-                    })];
-                unsafe {
-                    rec.gpu.device.cmd_copy_image_to_buffer(
-                        rec.cmd,
-                        image.raw,
-                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                        *buffer,
-                        &region,
-                    )
-                };
+            for (source, buffer) in &copies {
+                match source {
+                    Physical::Image(image) => {
+                        let region = [vk::BufferImageCopy::default()
+                            .image_subresource(vk::ImageSubresourceLayers {
+                                aspect_mask: vk::ImageAspectFlags::COLOR,
+                                mip_level: 0,
+                                base_array_layer: 0,
+                                layer_count: 1,
+                            })
+                            .image_extent(vk::Extent3D {
+                                width: image.info.extent.width,
+                                height: image.info.extent.height,
+                                depth: 1,
+                            })];
+                        unsafe {
+                            rec.gpu.device.cmd_copy_image_to_buffer(
+                                rec.cmd,
+                                image.raw,
+                                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                                *buffer,
+                                &region,
+                            )
+                        };
+                    }
+                    Physical::Buffer(src) => {
+                        let region = [vk::BufferCopy::default().size(src.size)];
+                        unsafe {
+                            rec.gpu
+                                .device
+                                .cmd_copy_buffer(rec.cmd, src.raw, *buffer, &region)
+                        };
+                    }
+                }
             }
         }))
     });

@@ -1,6 +1,7 @@
 //! `shadow`: depth from each light's view into one layer of the shadow-map array.
 
-use super::{set_viewport, VERTEX_ATTRIBUTES, VERTEX_BINDINGS};
+use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
+use super::set_viewport;
 use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use ash::vk;
@@ -12,7 +13,7 @@ pub const FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 pub struct ShadowInputs {
     /// Frame uniforms (light transforms).
     pub frame: ResourceId,
-    /// Interleaved vertices.
+    /// Atlas mesh vertices (positions are read).
     pub vertices: ResourceId,
     /// Indices.
     pub indices: ResourceId,
@@ -37,8 +38,8 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                 &GraphicsDesc {
                     vertex: shaders::SHADOW_VERT,
                     fragment: None,
-                    vertex_bindings: &VERTEX_BINDINGS,
-                    vertex_attributes: &VERTEX_ATTRIBUTES[..1],
+                    vertex_bindings: &ATLAS_VERTEX_BINDINGS,
+                    vertex_attributes: &ATLAS_VERTEX_ATTRIBUTES[..1],
                     color_formats: &[],
                     depth_format: FORMAT,
                     cull: vk::CullModeFlags::NONE,

@@ -18,6 +18,14 @@ use serde::{Deserialize, Serialize};
 use settings::{Choice, ObjectScale, Settings, SettingsOverrides};
 use std::time::Instant;
 
+static BUILDS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// How many times [`Preprocessed::build`] has run in this process (cache loads not counted):
+/// lets tests show that relighting needs no preprocessing.
+pub fn builds() -> usize {
+    BUILDS.load(std::sync::atomic::Ordering::SeqCst)
+}
+
 /// Most texels an atlas may have unless told otherwise (a 1024 x 1024 atlas).
 pub const DEFAULT_MAX_TEXELS: f64 = 1024.0 * 1024.0;
 
@@ -186,6 +194,7 @@ impl Preprocessed {
         choice: &Choice,
         progress: Progress<'_>,
     ) -> Preprocessed {
+        BUILDS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
         let s = choice.settings;
         let gutter = s.kernel_size / 2 + 1;
         let t0 = Instant::now();

@@ -5,6 +5,28 @@
 
 use std::sync::Arc;
 use translucent::gpu::{Gpu, GpuOptions};
+use translucent::preprocess::{self, settings::SettingsOverrides, Preprocessed};
+use translucent::renderer::{Options, RenderOutput, Renderer};
+use translucent::scene::Scene;
+
+fn quiet(_: &str, _: u64, _: u64) {}
+
+/// Preprocesses `scene` (no cache) with the given overrides of the derived settings.
+pub fn preprocess(scene: &Scene, overrides: SettingsOverrides) -> Preprocessed {
+    let choice = preprocess::choose(scene, &overrides, 0.02).unwrap();
+    Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet)
+}
+
+/// Renders `frames` frames of `scene` validated; panics on any validation message.
+pub fn render(scene: &Scene, pre: &Preprocessed, options: Options, frames: usize) -> RenderOutput {
+    let gpu = gpu();
+    let out = {
+        let mut r = Renderer::new(&gpu, scene.clone(), pre, options).expect("renderer");
+        r.render(frames).expect("render")
+    };
+    assert_no_validation_messages(&gpu);
+    out
+}
 
 /// Opens the test device with the Khronos validation layer on. Fails (does not skip) when the
 /// layer or a device is missing: tests must run validated.

@@ -1,8 +1,9 @@
-//! `shade`: the camera view with Lambertian shading and shadow-map visibility, into a linear
-//! HDR image whose alpha marks covered pixels. Stands in for the subsurface composite.
+//! `composite`: the camera view. B = (B^l + B^g) T and L = F_t(eta, w_o) B / pi into a linear
+//! HDR image whose alpha marks covered pixels.
 
-use super::{set_viewport, VERTEX_ATTRIBUTES, VERTEX_BINDINGS};
-use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler};
+use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
+use super::set_viewport;
+use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler, TexelView};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use ash::vk;
 
@@ -11,63 +12,70 @@ pub const HDR_FORMAT: vk::Format = vk::Format::R32G32B32A32_SFLOAT;
 /// Format of the camera depth buffer.
 pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 
-/// Resources the shading pass touches.
-pub struct ShadeInputs {
+/// Resources the composite reads.
+pub struct CompositeInputs {
     /// Frame uniforms.
     pub frame: ResourceId,
-    /// Interleaved vertices.
+    /// Atlas mesh vertices.
     pub vertices: ResourceId,
-    /// Indices.
+    /// Atlas mesh indices.
     pub indices: ResourceId,
-    /// Number of indices.
+    /// Index count.
     pub index_count: u32,
-    /// Shadow-map array.
-    pub shadow_maps: ResourceId,
-    /// Diffuse texture (sampled, imported).
+    /// Node radiosity (global response).
+    pub node_radiosity: ResourceId,
+    /// Local response image.
+    pub local: ResourceId,
+    /// Albedo texture.
     pub texture: ResourceId,
 }
 
-/// Declares the `shade` pass writing `hdr` (and `depth`).
-pub fn add(graph: &mut RenderGraph, inputs: ShadeInputs, hdr: ResourceId, depth: ResourceId) {
+/// Declares `composite`, writing `hdr` and `depth`.
+pub fn add(graph: &mut RenderGraph, i: CompositeInputs, hdr: ResourceId, depth: ResourceId) {
     graph
-        .pass("shade")
-        .access(inputs.frame, Access::Uniform(Stage::Vertex))
-        .access(inputs.vertices, Access::VertexBuffer)
-        .access(inputs.indices, Access::IndexBuffer)
-        .access(inputs.shadow_maps, Access::Sampled(Stage::Fragment))
-        .access(inputs.texture, Access::Sampled(Stage::Fragment))
+        .pass("composite")
+        .access(i.frame, Access::Uniform(Stage::Vertex))
+        .access(i.vertices, Access::VertexBuffer)
+        .access(i.indices, Access::IndexBuffer)
+        .access(i.node_radiosity, Access::TexelRead(Stage::Vertex))
+        .access(i.local, Access::StorageRead(Stage::Fragment))
+        .access(i.texture, Access::Sampled(Stage::Fragment))
         .access(hdr, Access::ColorAttachment)
         .access(depth, Access::DepthAttachment)
         .setup(move |gpu, res| {
-            let shadow_sampler = Sampler::shadow(gpu)?;
-            let texture_sampler = Sampler::linear(gpu, true)?;
+            let sampler = Sampler::linear(gpu, true)?;
+            let nodes = TexelView::new(
+                gpu,
+                res.buffer(i.node_radiosity),
+                vk::Format::R32G32B32A32_SFLOAT,
+                16,
+            )?;
             let pipeline = Pipeline::graphics(
                 gpu,
-                "shade",
+                "composite",
                 &GraphicsDesc {
-                    vertex: shaders::LAMBERT_VERT,
-                    fragment: Some(shaders::LAMBERT_FRAG),
-                    vertex_bindings: &VERTEX_BINDINGS,
-                    vertex_attributes: &VERTEX_ATTRIBUTES,
+                    vertex: shaders::COMPOSITE_VERT,
+                    fragment: Some(shaders::COMPOSITE_FRAG),
+                    vertex_bindings: &ATLAS_VERTEX_BINDINGS,
+                    vertex_attributes: &ATLAS_VERTEX_ATTRIBUTES,
                     color_formats: &[HDR_FORMAT],
                     depth_format: DEPTH_FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     depth_bias: None,
                 },
                 &[
-                    Binding::Uniform(res.buffer(inputs.frame).raw),
-                    Binding::Sampled(res.image(inputs.shadow_maps).view, shadow_sampler.raw),
-                    Binding::Sampled(res.image(inputs.texture).view, texture_sampler.raw),
+                    Binding::Uniform(res.buffer(i.frame).raw),
+                    Binding::TexelBuffer(nodes.raw),
+                    Binding::StorageImage(res.image(i.local).view),
+                    Binding::Sampled(res.image(i.texture).view, sampler.raw),
                 ],
                 0,
             )?;
             let hdr = res.image(hdr).clone();
             let depth = res.image(depth).clone();
-            let vertices = res.buffer(inputs.vertices).raw;
-            let indices = res.buffer(inputs.indices).raw;
+            let (vertices, indices) = (res.buffer(i.vertices).raw, res.buffer(i.indices).raw);
             Ok(Box::new(move |rec| {
-                // The samplers live as long as the pipeline that uses them.
-                let _ = (&shadow_sampler, &texture_sampler);
+                let _ = (&sampler, &nodes);
                 let d = &rec.gpu.device;
                 let color = [vk::RenderingAttachmentInfo::default()
                     .image_view(hdr.view)
@@ -102,7 +110,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadeInputs, hdr: ResourceId, depth:
                     set_viewport(rec.gpu, rec.cmd, hdr.info.extent);
                     d.cmd_bind_vertex_buffers(rec.cmd, 0, &[vertices], &[0]);
                     d.cmd_bind_index_buffer(rec.cmd, indices, 0, vk::IndexType::UINT32);
-                    d.cmd_draw_indexed(rec.cmd, inputs.index_count, 1, 0, 0, 0);
+                    d.cmd_draw_indexed(rec.cmd, i.index_count, 1, 0, 0, 0);
                     d.cmd_end_rendering(rec.cmd);
                 }
             }))

@@ -1,0 +1,31 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+// Camera view of the atlas mesh: the global response is interpolated from the nodes tied to
+// each vertex (its prolongation weights) and then across the triangle.
+#include "frame.glsl"
+
+layout(location = 0) in vec3 in_position;
+layout(location = 1) in vec3 in_normal;
+layout(location = 2) in vec2 in_uv;
+layout(location = 3) in vec2 in_atlas;
+layout(location = 4) in uvec3 in_nodes;
+layout(location = 5) in vec3 in_weights;
+
+layout(set = 0, binding = 1) uniform samplerBuffer node_radiosity;
+
+layout(location = 0) out vec3 out_position;
+layout(location = 1) out vec3 out_normal;
+layout(location = 2) out vec2 out_uv;
+layout(location = 3) out vec2 out_atlas;
+layout(location = 4) out vec3 out_global;
+
+void main() {
+    out_position = in_position;
+    out_normal = in_normal;
+    out_uv = in_uv;
+    out_atlas = in_atlas;
+    out_global = in_weights.x * texelFetch(node_radiosity, int(in_nodes.x)).rgb
+        + in_weights.y * texelFetch(node_radiosity, int(in_nodes.y)).rgb
+        + in_weights.z * texelFetch(node_radiosity, int(in_nodes.z)).rgb;
+    gl_Position = frame.view_proj * vec4(in_position, 1.0);
+}

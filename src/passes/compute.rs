@@ -1,0 +1,186 @@
+//! The compute passes of the subsurface pipeline: `dilate`, `local`, `gather`, `global`.
+//! Each dispatches one invocation per covered texel or per node, 64 to a workgroup.
+
+use crate::gpu::{shaders, Binding, Pipeline, TexelView};
+use crate::graph::{Access, RenderGraph, ResourceId, Stage};
+use ash::vk;
+use std::sync::Arc;
+
+/// Invocations per workgroup of the 1D compute shaders.
+const GROUP: u32 = 64;
+
+fn dispatch(rec: &crate::graph::RecordContext<'_>, pipeline: &Pipeline, push: &[u32], count: u32) {
+    pipeline.bind(rec.cmd);
+    pipeline.push_words(rec.cmd, push);
+    unsafe {
+        rec.gpu
+            .device
+            .cmd_dispatch(rec.cmd, count.div_ceil(GROUP).max(1), 1, 1)
+    };
+}
+
+fn view(
+    gpu: &Arc<crate::gpu::Gpu>,
+    res: &crate::graph::Resources,
+    id: ResourceId,
+    format: vk::Format,
+    bytes: u64,
+) -> anyhow::Result<TexelView> {
+    Ok(TexelView::new(gpu, res.buffer(id), format, bytes)?)
+}
+
+/// `dilate`: fills partly covered texels of `map` from rasterised neighbours of their chart.
+pub fn dilate(
+    graph: &mut RenderGraph,
+    texels: ResourceId,
+    texel_count: u32,
+    charts: ResourceId,
+    map: ResourceId,
+) {
+    graph
+        .pass("dilate")
+        .access(texels, Access::TexelRead(Stage::Compute))
+        .access(charts, Access::Sampled(Stage::Compute))
+        .access(map, Access::StorageReadWrite(Stage::Compute))
+        .setup(move |gpu, res| {
+            let texel_view = view(gpu, res, texels, vk::Format::R32_UINT, 4)?;
+            let sampler = crate::gpu::Sampler::nearest(gpu)?;
+            let pipeline = Pipeline::compute(
+                gpu,
+                "dilate",
+                shaders::DILATE_COMP,
+                &[
+                    Binding::TexelBuffer(texel_view.raw),
+                    Binding::Sampled(res.image(charts).view, sampler.raw),
+                    Binding::StorageImage(res.image(map).view),
+                ],
+                4,
+            )?;
+            Ok(Box::new(move |rec| {
+                let _ = (&texel_view, &sampler);
+                dispatch(rec, &pipeline, &[texel_count], texel_count);
+            }))
+        });
+}
+
+/// Resources of the local convolution.
+pub struct LocalInputs {
+    /// Covered texels.
+    pub texels: ResourceId,
+    /// Number of covered texels.
+    pub texel_count: u32,
+    /// Kernels and direct terms.
+    pub kernels: ResourceId,
+    /// Kernel edge.
+    pub kernel_size: u32,
+    /// The illumination map.
+    pub map: ResourceId,
+}
+
+/// `local`: B^l = K * E + beta E per covered texel, into `out`.
+pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
+    graph
+        .pass("local")
+        .access(i.texels, Access::TexelRead(Stage::Compute))
+        .access(i.kernels, Access::TexelRead(Stage::Compute))
+        .access(i.map, Access::StorageRead(Stage::Compute))
+        .access(out, Access::StorageWrite(Stage::Compute))
+        .setup(move |gpu, res| {
+            let texel_view = view(gpu, res, i.texels, vk::Format::R32_UINT, 4)?;
+            let kernel_view = view(gpu, res, i.kernels, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let pipeline = Pipeline::compute(
+                gpu,
+                "local",
+                shaders::LOCAL_COMP,
+                &[
+                    Binding::TexelBuffer(texel_view.raw),
+                    Binding::TexelBuffer(kernel_view.raw),
+                    Binding::StorageImage(res.image(i.map).view),
+                    Binding::StorageImage(res.image(out).view),
+                ],
+                8,
+            )?;
+            Ok(Box::new(move |rec| {
+                let _ = (&texel_view, &kernel_view);
+                dispatch(
+                    rec,
+                    &pipeline,
+                    &[i.texel_count, i.kernel_size],
+                    i.texel_count,
+                );
+            }))
+        });
+}
+
+/// Resources of a sparse row product (gather or global).
+pub struct SparseInputs {
+    /// Row starts (R32_UINT).
+    pub rows: ResourceId,
+    /// Entries.
+    pub entries: ResourceId,
+    /// Number of rows.
+    pub row_count: u32,
+}
+
+/// `gather`: E_p from the illumination map, into the node buffer `out`.
+pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: ResourceId) {
+    graph
+        .pass("gather")
+        .access(m.rows, Access::TexelRead(Stage::Compute))
+        .access(m.entries, Access::TexelRead(Stage::Compute))
+        .access(map, Access::StorageRead(Stage::Compute))
+        .access(out, Access::TexelWrite(Stage::Compute))
+        .setup(move |gpu, res| {
+            let rows = view(gpu, res, m.rows, vk::Format::R32_UINT, 4)?;
+            let entries = view(gpu, res, m.entries, vk::Format::R32G32_SFLOAT, 8)?;
+            let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let pipeline = Pipeline::compute(
+                gpu,
+                "gather",
+                shaders::GATHER_COMP,
+                &[
+                    Binding::TexelBuffer(rows.raw),
+                    Binding::TexelBuffer(entries.raw),
+                    Binding::StorageImage(res.image(map).view),
+                    Binding::StorageTexelBuffer(out_view.raw),
+                ],
+                4,
+            )?;
+            Ok(Box::new(move |rec| {
+                let _ = (&rows, &entries, &out_view);
+                dispatch(rec, &pipeline, &[m.row_count], m.row_count);
+            }))
+        });
+}
+
+/// `global`: B^g_q = sum_p W_pq E_p, from node buffer `input` into node buffer `out`.
+pub fn global(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, out: ResourceId) {
+    graph
+        .pass("global")
+        .access(m.rows, Access::TexelRead(Stage::Compute))
+        .access(m.entries, Access::TexelRead(Stage::Compute))
+        .access(input, Access::TexelRead(Stage::Compute))
+        .access(out, Access::TexelWrite(Stage::Compute))
+        .setup(move |gpu, res| {
+            let rows = view(gpu, res, m.rows, vk::Format::R32_UINT, 4)?;
+            let entries = view(gpu, res, m.entries, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let in_view = view(gpu, res, input, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let pipeline = Pipeline::compute(
+                gpu,
+                "global",
+                shaders::GLOBAL_COMP,
+                &[
+                    Binding::TexelBuffer(rows.raw),
+                    Binding::TexelBuffer(entries.raw),
+                    Binding::TexelBuffer(in_view.raw),
+                    Binding::StorageTexelBuffer(out_view.raw),
+                ],
+                4,
+            )?;
+            Ok(Box::new(move |rec| {
+                let _ = (&rows, &entries, &in_view, &out_view);
+                dispatch(rec, &pipeline, &[m.row_count], m.row_count);
+            }))
+        });
+}

@@ -1,0 +1,395 @@
+//! The preprocessing's results in device memory, in the layouts the passes read.
+//!
+//! Bulk data is read through texel buffers, not storage buffers: on lavapipe storage-buffer
+//! loads ran 40-70x slower than texel-buffer fetches of the same bytes (`shared/LAVAPIPE.md`).
+//! - atlas mesh: one vertex per (mesh vertex, chart) with position, normal, texture coordinate,
+//!   atlas coordinate (texels) and up to three (node, weight) pairs of its prolongation;
+//! - covered texels: `x | y << 16` (R32_UINT), and a chart-id image (R32_UINT, chart + 1);
+//! - kernels: per covered texel k*k RGBA32F taps then the direct term beta (RGBA32F);
+//! - gather: CSR rows (R32_UINT) and entries (texel bits, weight) (R32G32_SFLOAT);
+//! - global: CSR rows (R32_UINT) and entries (node bits, W rgb) (R32G32B32A32_SFLOAT).
+//!
+//! Texture modulation (Lensch et al. 2002, section 6) is folded into the data: kernels and
+//! direct terms are divided by the texture's mean over their texel, global rows by its mean
+//! over the receiving node's support; the composite multiplies by the full-resolution texture.
+//! So B^T = B / T_p at texel and node scale, and T restores the detail per fragment.
+
+use crate::gpu::{Buffer, Gpu, GpuResult, Image};
+use crate::preprocess::{operators::Blend, Preprocessed};
+use crate::scene::Scene;
+use ash::vk;
+use bytemuck::{Pod, Zeroable};
+use std::sync::Arc;
+
+/// One vertex of the atlas mesh (80 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+pub struct AtlasVertex {
+    /// Position, mm (location 0).
+    pub position: [f32; 3],
+    /// Unit normal (location 1).
+    pub normal: [f32; 3],
+    /// Texture coordinate (location 2).
+    pub uv: [f32; 2],
+    /// Atlas coordinate in texels (location 3).
+    pub atlas: [f32; 2],
+    /// Nodes of the prolongation (location 4).
+    pub nodes: [u32; 3],
+    /// Their weights (location 5).
+    pub weights: [f32; 3],
+}
+
+/// Vertex input binding of [`AtlasVertex`].
+pub const ATLAS_VERTEX_BINDINGS: [vk::VertexInputBindingDescription; 1] =
+    [vk::VertexInputBindingDescription {
+        binding: 0,
+        stride: std::mem::size_of::<AtlasVertex>() as u32,
+        input_rate: vk::VertexInputRate::VERTEX,
+    }];
+
+/// Attributes of [`AtlasVertex`].
+pub const ATLAS_VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 6] = [
+    vk::VertexInputAttributeDescription {
+        location: 0,
+        binding: 0,
+        format: vk::Format::R32G32B32_SFLOAT,
+        offset: 0,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 1,
+        binding: 0,
+        format: vk::Format::R32G32B32_SFLOAT,
+        offset: 12,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 2,
+        binding: 0,
+        format: vk::Format::R32G32_SFLOAT,
+        offset: 24,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 3,
+        binding: 0,
+        format: vk::Format::R32G32_SFLOAT,
+        offset: 32,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 4,
+        binding: 0,
+        format: vk::Format::R32G32B32_UINT,
+        offset: 40,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 5,
+        binding: 0,
+        format: vk::Format::R32G32B32_SFLOAT,
+        offset: 52,
+    },
+];
+
+/// Everything per-frame passes read that does not change with the light.
+pub struct SubsurfaceData {
+    /// Atlas mesh vertices.
+    pub vertices: Arc<Buffer>,
+    /// Atlas mesh indices.
+    pub indices: Arc<Buffer>,
+    /// Number of indices.
+    pub index_count: u32,
+    /// Atlas size in texels.
+    pub atlas_size: (u32, u32),
+    /// Covered texels, packed coordinates.
+    pub texels: Arc<Buffer>,
+    /// Number of covered texels.
+    pub texel_count: u32,
+    /// Chart id + 1 per atlas texel.
+    pub charts: Arc<Image>,
+    /// Kernels and direct terms.
+    pub kernels: Arc<Buffer>,
+    /// Kernel edge.
+    pub kernel_size: u32,
+    /// Gather rows.
+    pub gather_rows: Arc<Buffer>,
+    /// Gather entries.
+    pub gather_entries: Arc<Buffer>,
+    /// Global rows.
+    pub global_rows: Arc<Buffer>,
+    /// Global entries.
+    pub global_entries: Arc<Buffer>,
+    /// Number of nodes.
+    pub node_count: u32,
+    /// The texture (white 1x1 without one).
+    pub texture: Arc<Image>,
+    /// Bytes uploaded.
+    pub bytes: u64,
+}
+
+/// The sRGB transfer function, inverted (textures are sRGB-encoded; the GPU samples them
+/// through an `_SRGB` format, which decodes the same way).
+fn srgb_to_linear(c: f64) -> f64 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Bilinear sample of an sRGB RGBA8 image at `uv` (repeat), decoded to linear 0..1 before
+/// filtering, as the GPU does.
+fn sample(img: &image::RgbaImage, uv: glam::Vec2) -> [f64; 3] {
+    let (w, h) = (img.width() as f32, img.height() as f32);
+    let x = uv.x.rem_euclid(1.0) * w - 0.5;
+    let y = uv.y.rem_euclid(1.0) * h - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let px = |xi: f32, yi: f32| {
+        let p = img.get_pixel(
+            (xi as i64).rem_euclid(img.width() as i64) as u32,
+            (yi as i64).rem_euclid(img.height() as i64) as u32,
+        );
+        [0, 1, 2].map(|c| srgb_to_linear(p[c] as f64 / 255.0))
+    };
+    let (a, b, c, d) = (
+        px(x0, y0),
+        px(x0 + 1.0, y0),
+        px(x0, y0 + 1.0),
+        px(x0 + 1.0, y0 + 1.0),
+    );
+    [0, 1, 2].map(|k| {
+        let top = a[k] * (1.0 - fx as f64) + b[k] * fx as f64;
+        let bottom = c[k] * (1.0 - fx as f64) + d[k] * fx as f64;
+        top * (1.0 - fy as f64) + bottom * fy as f64
+    })
+}
+
+/// Texture means per texel and per node (all 1 without a texture).
+pub fn texture_means(scene: &Scene, pre: &Preprocessed) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+    let texel: Vec<[f64; 3]> = match &scene.texture {
+        None => vec![[1.0; 3]; pre.atlas.texels.len()],
+        Some(img) => pre
+            .atlas
+            .texels
+            .iter()
+            .map(|t| {
+                let uv: glam::Vec2 = t
+                    .vertices
+                    .iter()
+                    .map(|(v, w)| scene.mesh.uvs[*v as usize] * *w)
+                    .sum();
+                sample(img, uv).map(|c| c.max(1e-3))
+            })
+            .collect(),
+    };
+    let node = (0..pre.ops.gather.rows())
+        .map(|p| {
+            let mut m = [0.0; 3];
+            for (t, w) in pre.ops.gather.row(p) {
+                for c in 0..3 {
+                    m[c] += w as f64 * texel[t as usize][c];
+                }
+            }
+            m.map(|x| if x > 0.0 { x } else { 1.0 })
+        })
+        .collect();
+    (texel, node)
+}
+
+fn upload<T: Pod>(
+    gpu: &Arc<Gpu>,
+    name: &str,
+    data: &[T],
+    usage: vk::BufferUsageFlags,
+    bytes: &mut u64,
+) -> GpuResult<Arc<Buffer>> {
+    let raw: &[u8] = bytemuck::cast_slice(data);
+    *bytes += raw.len() as u64;
+    let padded;
+    let raw = if raw.is_empty() {
+        padded = [0u8; 16];
+        &padded[..]
+    } else {
+        raw
+    };
+    Ok(Arc::new(Buffer::with_data(gpu, name, raw, usage)?))
+}
+
+impl SubsurfaceData {
+    /// Uploads the preprocessing of `scene` for blending `mode`.
+    pub fn upload(
+        gpu: &Arc<Gpu>,
+        scene: &Scene,
+        pre: &Preprocessed,
+        mode: Blend,
+    ) -> GpuResult<SubsurfaceData> {
+        let atlas = &pre.atlas;
+        let ops = &pre.ops;
+        let mesh = &scene.mesh;
+        let mut bytes = 0;
+        let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+        let (texel_tex, node_tex) = texture_means(scene, pre);
+
+        let vertices: Vec<AtlasVertex> = atlas
+            .vertex_mesh
+            .iter()
+            .zip(&atlas.vertex_uv)
+            .map(|(&v, uv)| {
+                let v = v as usize;
+                let mut nodes = [0u32; 3];
+                let mut weights = [0f32; 3];
+                for (k, (n, w)) in pre.nodes.prolong[v].iter().take(3).enumerate() {
+                    nodes[k] = *n;
+                    weights[k] = *w;
+                }
+                AtlasVertex {
+                    position: mesh.positions[v].to_array(),
+                    normal: mesh.normals[v].to_array(),
+                    uv: mesh.uvs[v].to_array(),
+                    atlas: [uv.x as f32, uv.y as f32],
+                    nodes,
+                    weights,
+                }
+            })
+            .collect();
+        let vertices = upload(
+            gpu,
+            "atlas vertices",
+            &vertices,
+            vk::BufferUsageFlags::VERTEX_BUFFER,
+            &mut bytes,
+        )?;
+        let indices = upload(
+            gpu,
+            "atlas indices",
+            &atlas.indices,
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            &mut bytes,
+        )?;
+
+        let packed: Vec<u32> = atlas.texels.iter().map(|t| t.x | (t.y << 16)).collect();
+        let texels = upload(gpu, "covered texels", &packed, texel_usage, &mut bytes)?;
+        let mut chart_ids = vec![0u32; (atlas.width * atlas.height) as usize];
+        for t in &atlas.texels {
+            chart_ids[(t.y * atlas.width + t.x) as usize] = t.chart + 1;
+        }
+        bytes += chart_ids.len() as u64 * 4;
+        let charts = Arc::new(Image::from_pixels(
+            gpu,
+            "chart ids",
+            vk::Format::R32_UINT,
+            atlas.width,
+            atlas.height,
+            bytemuck::cast_slice(&chart_ids),
+        )?);
+
+        let kk = (ops.kernel_size * ops.kernel_size) as usize;
+        let (use_local, direct) = match mode {
+            Blend::Local => (true, None),
+            Blend::Global => (false, None),
+            Blend::Simple => (true, Some(&ops.direct_simple)),
+            Blend::Optimized => (true, Some(&ops.direct_optimized)),
+        };
+        let mut kernels = Vec::with_capacity(atlas.texels.len() * (kk + 1));
+        for t in 0..atlas.texels.len() {
+            let inv = texel_tex[t].map(|x| 1.0 / x);
+            for j in 0..kk {
+                let w = if use_local {
+                    ops.kernels[t * kk + j]
+                } else {
+                    [0.0; 3]
+                };
+                kernels.push([
+                    w[0] * inv[0] as f32,
+                    w[1] * inv[1] as f32,
+                    w[2] * inv[2] as f32,
+                    0.0,
+                ]);
+            }
+            let b = direct.map(|d| d[t]).unwrap_or([0.0; 3]);
+            kernels.push([
+                b[0] * inv[0] as f32,
+                b[1] * inv[1] as f32,
+                b[2] * inv[2] as f32,
+                0.0,
+            ]);
+        }
+        let kernels = upload(gpu, "kernels", &kernels, texel_usage, &mut bytes)?;
+
+        let gather_rows = upload(
+            gpu,
+            "gather rows",
+            &ops.gather.row_start,
+            texel_usage,
+            &mut bytes,
+        )?;
+        let gather_entries: Vec<[f32; 2]> = ops
+            .gather
+            .cols
+            .iter()
+            .zip(&ops.gather.vals)
+            .map(|(&t, &w)| [f32::from_bits(packed[t as usize]), w])
+            .collect();
+        let gather_entries = upload(
+            gpu,
+            "gather entries",
+            &gather_entries,
+            texel_usage,
+            &mut bytes,
+        )?;
+
+        let matrix = if mode == Blend::Optimized {
+            &ops.optimized
+        } else {
+            &ops.global
+        };
+        let mut rows = vec![0u32];
+        let mut entries: Vec<[f32; 4]> = Vec::with_capacity(matrix.nnz());
+        for q in 0..matrix.rows() {
+            if mode != Blend::Local {
+                let inv = node_tex[q].map(|x| 1.0 / x);
+                for (p, w) in matrix.row(q) {
+                    if mode == Blend::Simple && p as usize == q {
+                        continue;
+                    }
+                    entries.push([
+                        f32::from_bits(p),
+                        w[0] * inv[0] as f32,
+                        w[1] * inv[1] as f32,
+                        w[2] * inv[2] as f32,
+                    ]);
+                }
+            }
+            rows.push(entries.len() as u32);
+        }
+        let global_rows = upload(gpu, "global rows", &rows, texel_usage, &mut bytes)?;
+        let global_entries = upload(gpu, "global entries", &entries, texel_usage, &mut bytes)?;
+
+        let texture = match &scene.texture {
+            Some(t) => Image::from_pixels(
+                gpu,
+                "albedo texture",
+                vk::Format::R8G8B8A8_SRGB,
+                t.width(),
+                t.height(),
+                t.as_raw(),
+            )?,
+            None => Image::from_rgba8(gpu, "albedo texture (white)", 1, 1, &[255; 4])?,
+        };
+        Ok(SubsurfaceData {
+            vertices,
+            indices,
+            index_count: atlas.indices.len() as u32,
+            atlas_size: (atlas.width, atlas.height),
+            texels,
+            texel_count: atlas.texels.len() as u32,
+            charts,
+            kernels,
+            kernel_size: ops.kernel_size,
+            gather_rows,
+            gather_entries,
+            global_rows,
+            global_entries,
+            node_count: pre.nodes.positions.len() as u32,
+            texture: Arc::new(texture),
+            bytes,
+        })
+    }
+}
