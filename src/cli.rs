@@ -36,8 +36,44 @@ pub enum Command {
     Render(RenderArgs),
     /// Run the preprocessing (atlas, global response, kernels, blending) and cache it.
     Precompute(PrecomputeArgs),
+    /// Time every pass over many frames with a moving light, next to its bandwidth bound.
+    Bench(BenchArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
+}
+
+/// Arguments of `bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// Scene file (TOML); the default scene without one.
+    pub scene: Option<PathBuf>,
+    /// Frames to time after the warm-up.
+    #[arg(long, default_value_t = 30)]
+    pub frames: usize,
+    /// Warm-up frames (shader compilation, caches), not timed.
+    #[arg(long, default_value_t = 3)]
+    pub warmup: usize,
+    /// Output folder for bench.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// OBJ mesh replacing the scene's.
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Material preset replacing the scene's.
+    #[arg(long)]
+    pub material: Option<String>,
+    /// Image width.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Blending mode.
+    #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
+    pub mode: ModeArg,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
 }
 
 /// Preprocessing controls; every value left out is derived from the scene and printed.
@@ -350,6 +386,104 @@ fn precompute(args: &PrecomputeArgs) -> Result<()> {
     Ok(())
 }
 
+fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let overrides = Overrides {
+        mesh: args.mesh.clone(),
+        material: args.material.clone(),
+        width: args.width,
+        height: args.height,
+    };
+    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
+    let bars = Bars::new();
+    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
+    let (pre, _) =
+        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let gpu = Gpu::new(&GpuOptions {
+        validate: cli.validate,
+        device: cli.device.clone(),
+    })?;
+    let mode: Blend = args.mode.into();
+    let nonzeros = match mode {
+        Blend::Optimized => pre.ops.optimized.nnz(),
+        Blend::Local => 0,
+        _ => pre.ops.global.nnz(),
+    };
+    let mut renderer = Renderer::new(
+        &gpu,
+        scene.clone(),
+        &pre,
+        Options {
+            mode,
+            capture: false,
+        },
+    )?;
+    let total = args.warmup + args.frames;
+    let mut timings = Vec::with_capacity(args.frames);
+    for f in 0..total {
+        // The light moves every frame, so every pass has new work.
+        let lights = renderer.orbit_lights(std::f32::consts::TAU * f as f32 / total as f32);
+        let t = renderer.frame(&lights)?;
+        if f >= args.warmup {
+            timings.push(t);
+        }
+    }
+    let names = renderer.pass_names();
+    drop(renderer);
+    check_validation(&gpu)?;
+    let report = TimingReport::new(&gpu.info.name, &gpu.info.driver, &names, &timings);
+    let bandwidth = crate::bench::measure_bandwidth(256 << 20);
+    let b = crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, nonzeros);
+    output::write_atomic(&args.out.join("bench.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&b)?)?)
+    })?;
+    println!("device: {} ({})", b.device, b.driver);
+    println!(
+        "scene: {} vertices, {} nodes, {} texels in {}x{}, {} nonzeros, {k}x{k} kernels, {}x{} image",
+        b.scene.vertices,
+        b.scene.nodes,
+        b.scene.texels,
+        b.scene.atlas[0],
+        b.scene.atlas[1],
+        b.scene.nonzeros,
+        b.scene.image[0],
+        b.scene.image[1],
+        k = b.scene.kernel_size
+    );
+    println!(
+        "memory bandwidth (this run): read {:.1} GB/s, copy {:.1} GB/s",
+        bandwidth.read_gbps, bandwidth.copy_gbps
+    );
+    println!(
+        "{:<10} {:>9} {:>9} {:>9} {:>10} {:>8} {:>9} {:>7}",
+        "pass", "min ms", "median ms", "max ms", "MB read", "GB/s", "bound ms", "ratio"
+    );
+    for p in &b.passes {
+        println!(
+            "{:<10} {:>9.3} {:>9.3} {:>9.3} {:>10.2} {:>8.2} {:>9.3} {:>7.1}",
+            p.name,
+            p.stats.min_ms,
+            p.stats.median_ms,
+            p.stats.max_ms,
+            p.bytes_read as f64 / 1e6,
+            p.achieved_gbps,
+            p.bound_ms,
+            p.ratio
+        );
+    }
+    println!(
+        "frame: GPU median {:.3} ms, wall median {:.3} ms ({:.1} fps), bound {:.3} ms, over {} frames",
+        b.frame.gpu_median_ms, b.frame.wall_median_ms, b.frame.fps, b.frame.bound_ms, b.frames
+    );
+    println!("wrote {}", args.out.join("bench.json").display());
+    Ok(())
+}
+
 fn check_validation(gpu: &Gpu) -> Result<()> {
     let n = gpu.validation.count();
     if n > 0 {
@@ -405,6 +539,7 @@ pub fn main() -> ExitCode {
         ),
         Some(Command::Render(args)) => render(&cli, args),
         Some(Command::Precompute(args)) => precompute(args),
+        Some(Command::Bench(args)) => bench(&cli, args),
         Some(Command::Devices) => devices(),
     };
     match result {

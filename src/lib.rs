@@ -10,6 +10,7 @@
 // those loops read worse.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bench;
 pub mod cli;
 pub mod gpu;
 pub mod graph;

@@ -257,3 +257,55 @@ fn precompute_prints_its_choices_and_uses_the_cache() {
     fails_with(c, "kernel size 4 must be odd");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn bench_writes_per_pass_bounds() {
+    let dir = temp_dir("bench");
+    let o = bin()
+        .args([
+            "--validate",
+            "bench",
+            "--frames",
+            "2",
+            "--warmup",
+            "1",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--texel-mm",
+            "1.5",
+            "--cache",
+        ])
+        .arg(dir.join("cache"))
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let b: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(b["frames"], 2);
+    assert!(b["frame"]["gpu_median_ms"].as_f64().unwrap() > 0.0);
+    assert!(b["bandwidth"]["read_gbps"].as_f64().unwrap() > 0.1);
+    let passes = b["passes"].as_array().unwrap();
+    assert_eq!(passes.len(), 9);
+    for p in passes {
+        for key in [
+            "name",
+            "min_ms",
+            "median_ms",
+            "max_ms",
+            "bytes_read",
+            "bytes_written",
+            "achieved_gbps",
+            "bound_ms",
+            "ratio",
+        ] {
+            assert!(p.get(key).is_some(), "{key} missing in {p}");
+        }
+    }
+    let global = passes.iter().find(|p| p["name"] == "global").unwrap();
+    assert!(global["bytes_read"].as_u64().unwrap() > 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}

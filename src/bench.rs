@@ -1,0 +1,222 @@
+//! `translucent bench`: per-pass GPU times next to the lower bound that memory bandwidth sets.
+//!
+//! The bound of a pass is the bytes it must read divided by the read bandwidth of this machine's
+//! memory, measured in the same run (a multi-threaded sum over a buffer much larger than the
+//! caches), so that the ratio holds on a noisy machine. On a discrete GPU the host figure is not
+//! the device's bandwidth; the ratio is then reported against the host figure and says so.
+
+use crate::graph::timing::{Stats, TimingReport};
+use crate::preprocess::Preprocessed;
+use crate::scene::Scene;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::time::Instant;
+
+/// Memory bandwidth of this machine, measured.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Bandwidth {
+    /// Read bandwidth, GB/s (all threads summing a large buffer).
+    pub read_gbps: f64,
+    /// Copy bandwidth, GB/s (memcpy of a large buffer, counting bytes read).
+    pub copy_gbps: f64,
+}
+
+/// Measures read and copy bandwidth over `bytes` (median of five runs each).
+pub fn measure_bandwidth(bytes: usize) -> Bandwidth {
+    let words = bytes / 8;
+    let src: Vec<u64> = (0..words as u64).collect();
+    let mut dst = vec![0u64; words];
+    let mut reads = Vec::new();
+    let mut copies = Vec::new();
+    for _ in 0..5 {
+        let t = Instant::now();
+        let sum: u64 = src
+            .par_chunks(1 << 16)
+            .map(|c| c.iter().fold(0u64, |a, b| a.wrapping_add(*b)))
+            .reduce(|| 0, u64::wrapping_add);
+        std::hint::black_box(sum);
+        reads.push(bytes as f64 / t.elapsed().as_secs_f64() / 1e9);
+        let t = Instant::now();
+        dst.par_chunks_mut(1 << 16)
+            .zip(src.par_chunks(1 << 16))
+            .for_each(|(d, s)| d.copy_from_slice(s));
+        std::hint::black_box(&dst);
+        copies.push(bytes as f64 / t.elapsed().as_secs_f64() / 1e9);
+    }
+    Bandwidth {
+        read_gbps: Stats::of(&reads).median_ms,
+        copy_gbps: Stats::of(&copies).median_ms,
+    }
+}
+
+/// Bytes a pass must move at least, by the data it touches.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Traffic {
+    /// Bytes read.
+    pub read: u64,
+    /// Bytes written.
+    pub written: u64,
+}
+
+/// The data each pass must read and write, from the sizes of the scene's data:
+/// - shadow: the atlas mesh (vertices and indices) per light; writes the depth maps;
+/// - illum: the mesh and the shadow maps; writes the illumination map;
+/// - dilate: the covered-texel list and the map at those texels; writes nothing it must;
+/// - local: per covered texel its k*k+1 kernel taps and k*k map texels; writes its texel;
+/// - gather / global: row starts, entries, and one source value per entry; writes one value
+///   per node;
+/// - composite: mesh, node radiosity, one local-response texel per covered pixel; writes the
+///   radiance and depth of every pixel;
+/// - tonemap: the radiance image; writes the display image;
+/// - readback: both images, written to host memory.
+pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed) -> Traffic {
+    let a = &pre.atlas;
+    let o = &pre.ops;
+    let texels = a.texels.len() as u64;
+    let nodes = pre.nodes.positions.len() as u64;
+    let lights = scene.lights.len() as u64;
+    let mesh = a.vertex_mesh.len() as u64 * 80 + a.indices.len() as u64 * 4;
+    let shadow = (scene.shadow_map_size as u64).pow(2) * 4 * lights;
+    let atlas_px = a.width as u64 * a.height as u64;
+    let pixels = scene.width as u64 * scene.height as u64;
+    let kk = (o.kernel_size * o.kernel_size) as u64;
+    let global_nnz = o.global.nnz().max(o.optimized.nnz()) as u64;
+    let (read, written) = match pass {
+        "shadow" => (mesh * lights, shadow),
+        "illum" => (mesh + shadow, atlas_px * 16),
+        "dilate" => (texels * (4 + 16), 0),
+        "local" => (texels * (4 + (kk + 1) * 16 + kk * 16), texels * 16),
+        "gather" => (
+            4 * (nodes + 1) + o.gather.cols.len() as u64 * (8 + 16),
+            nodes * 16,
+        ),
+        "global" => (4 * (nodes + 1) + global_nnz * (16 + 16), nodes * 16),
+        "composite" => (mesh + nodes * 16 + pixels * 16, pixels * 20),
+        "tonemap" => (pixels * 16, pixels * 4),
+        "readback" | "capture" => (pixels * 20, pixels * 20),
+        _ => (0, 0),
+    };
+    Traffic { read, written }
+}
+
+/// One pass in `bench.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct PassBench {
+    /// Pass name.
+    pub name: String,
+    /// Min / median / max GPU time.
+    #[serde(flatten)]
+    pub stats: Stats,
+    /// Bytes read per frame.
+    pub bytes_read: u64,
+    /// Bytes written per frame.
+    pub bytes_written: u64,
+    /// Bytes read / median time, GB/s.
+    pub achieved_gbps: f64,
+    /// Bytes read / measured read bandwidth, ms.
+    pub bound_ms: f64,
+    /// Median time / bound.
+    pub ratio: f64,
+}
+
+/// `bench.json`: the fields of `timings.json` plus traffic, bounds and the bandwidth measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    /// Device name.
+    pub device: String,
+    /// Driver.
+    pub driver: String,
+    /// Frames measured (after warm-up).
+    pub frames: usize,
+    /// Per pass.
+    pub passes: Vec<PassBench>,
+    /// Whole frame.
+    pub frame: FrameBench,
+    /// Bandwidth measured in this run.
+    pub bandwidth: Bandwidth,
+    /// What was rendered.
+    pub scene: SceneSize,
+}
+
+/// Frame-level figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameBench {
+    /// Median GPU frame time.
+    pub gpu_median_ms: f64,
+    /// Median wall-clock frame time.
+    pub wall_median_ms: f64,
+    /// Frames per second at the median wall time.
+    pub fps: f64,
+    /// Sum of the pass bounds.
+    pub bound_ms: f64,
+}
+
+/// Sizes of the benchmarked scene.
+#[derive(Debug, Clone, Serialize)]
+pub struct SceneSize {
+    /// Render mesh vertices.
+    pub vertices: usize,
+    /// Global response nodes.
+    pub nodes: usize,
+    /// Covered atlas texels.
+    pub texels: usize,
+    /// Atlas size.
+    pub atlas: [u32; 2],
+    /// Nonzeros of the global matrix used.
+    pub nonzeros: usize,
+    /// Kernel edge.
+    pub kernel_size: u32,
+    /// Image size.
+    pub image: [u32; 2],
+}
+
+impl BenchReport {
+    /// Combines timings with traffic and the measured bandwidth.
+    pub fn new(
+        timings: &TimingReport,
+        scene: &Scene,
+        pre: &Preprocessed,
+        bandwidth: Bandwidth,
+        nonzeros: usize,
+    ) -> BenchReport {
+        let passes: Vec<PassBench> = timings
+            .passes
+            .iter()
+            .map(|p| {
+                let t = traffic(&p.name, scene, pre);
+                let bound_ms = t.read as f64 / (bandwidth.read_gbps * 1e9) * 1e3;
+                PassBench {
+                    name: p.name.clone(),
+                    stats: p.stats,
+                    bytes_read: t.read,
+                    bytes_written: t.written,
+                    achieved_gbps: t.read as f64 / (p.stats.median_ms * 1e-3) / 1e9,
+                    bound_ms,
+                    ratio: p.stats.median_ms / bound_ms.max(1e-9),
+                }
+            })
+            .collect();
+        BenchReport {
+            device: timings.device.clone(),
+            driver: timings.driver.clone(),
+            frames: timings.frames,
+            frame: FrameBench {
+                gpu_median_ms: timings.frame.gpu_median_ms,
+                wall_median_ms: timings.frame.wall_median_ms,
+                fps: 1e3 / timings.frame.wall_median_ms.max(1e-9),
+                bound_ms: passes.iter().map(|p| p.bound_ms).sum(),
+            },
+            passes,
+            bandwidth,
+            scene: SceneSize {
+                vertices: scene.mesh.positions.len(),
+                nodes: pre.nodes.positions.len(),
+                texels: pre.atlas.texels.len(),
+                atlas: [pre.atlas.width, pre.atlas.height],
+                nonzeros,
+                kernel_size: pre.ops.kernel_size,
+                image: [scene.width, scene.height],
+            },
+        }
+    }
+}
