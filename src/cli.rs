@@ -38,8 +38,58 @@ pub enum Command {
     Precompute(PrecomputeArgs),
     /// Time every pass over many frames with a moving light, next to its bandwidth bound.
     Bench(BenchArgs),
+    /// Brute-force reference: B = integral of E R_d over the whole surface (no atlas, no F).
+    Reference(ReferenceArgs),
+    /// Error of a render against a reference: figures, error image (EXR) and false colour (PNG).
+    Compare(CompareArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
+}
+
+/// Arguments of `reference`.
+#[derive(Debug, Args)]
+pub struct ReferenceArgs {
+    /// Scene file (TOML); the default scene without one.
+    pub scene: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// OBJ mesh replacing the scene's.
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Material preset replacing the scene's.
+    #[arg(long)]
+    pub material: Option<String>,
+    /// Image width.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Sample spacing in mm (default: half the smallest z_r).
+    #[arg(long)]
+    pub spacing_mm: Option<f64>,
+    /// Opening angle of the hierarchical sum (default 0.25).
+    #[arg(long)]
+    pub theta: Option<f64>,
+    /// Also compute with half the spacing and theta, and report how much the answer moves.
+    #[arg(long)]
+    pub refine: bool,
+}
+
+/// Arguments of `compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// The render (EXR, alpha = coverage).
+    pub render: PathBuf,
+    /// The reference (EXR).
+    pub reference: PathBuf,
+    /// Output folder for error.exr, error.png and error.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Relative error shown as full red in error.png.
+    #[arg(long, default_value_t = 0.1)]
+    pub full_scale: f32,
 }
 
 /// Arguments of `bench`.
@@ -484,6 +534,124 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+fn reference(args: &ReferenceArgs) -> Result<()> {
+    use crate::reference::{metrics, Reference, ReferenceSettings};
+    let overrides = Overrides {
+        mesh: args.mesh.clone(),
+        material: args.material.clone(),
+        width: args.width,
+        height: args.height,
+    };
+    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let mut settings = ReferenceSettings::for_scene(&scene);
+    if let Some(s) = args.spacing_mm {
+        if !(s.is_finite() && s > 0.0) {
+            bail!("--spacing-mm {s} must be positive");
+        }
+        settings.spacing_mm = s;
+    }
+    if let Some(t) = args.theta {
+        if !(t > 0.0 && t < 1.0) {
+            bail!("--theta {t} must lie in (0, 1)");
+        }
+        settings.theta = t;
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let start = std::time::Instant::now();
+    let r = Reference::compute(&scene, settings);
+    let seconds = start.elapsed().as_secs_f64();
+    println!(
+        "reference: spacing {:.3} mm, theta {:.2}: {} surface samples ({} lit), {:.1} s",
+        settings.spacing_mm, settings.theta, r.samples, r.lit_samples, seconds
+    );
+    let out = &args.out;
+    output::write_exr(&out.join("reference.exr"), r.width, r.height, &r.radiance)?;
+    output::write_png(
+        &out.join("reference.png"),
+        r.width,
+        r.height,
+        &output::tonemap(&r.radiance, scene.exposure),
+    )?;
+    let mut csv = String::from("x,y,z,B_r,B_g,B_b\n");
+    for (p, b) in scene.mesh.positions.iter().zip(&r.vertex_b) {
+        csv.push_str(&format!(
+            "{},{},{},{:e},{:e},{:e}\n",
+            p.x, p.y, p.z, b[0], b[1], b[2]
+        ));
+    }
+    output::write_atomic(&out.join("vertices.csv"), |p| Ok(std::fs::write(p, &csv)?))?;
+    let mut info = serde_json::json!({
+        "spacing_mm": settings.spacing_mm, "theta": settings.theta, "samples": r.samples,
+        "lit_samples": r.lit_samples, "seconds": seconds,
+    });
+    if args.refine {
+        let fine = Reference::compute(&scene, settings.refined());
+        let (e, _) = metrics::compare(&r.radiance, &fine.radiance, None);
+        println!(
+            "refined (spacing {:.3} mm, theta {:.3}): the answer moves by {:.3} % RMS, {:.3} % at the 99th percentile",
+            settings.spacing_mm / 2.0,
+            settings.theta / 2.0,
+            100.0 * e.rel_rms,
+            100.0 * e.channels.iter().map(|c| c.p99).fold(0.0, f64::max)
+        );
+        info["refinement"] = serde_json::to_value(&e)?;
+    }
+    output::write_atomic(&out.join("reference.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
+    })?;
+    println!(
+        "wrote reference.exr, reference.png, vertices.csv, reference.json to {}",
+        out.display()
+    );
+    Ok(())
+}
+
+fn compare(args: &CompareArgs) -> Result<()> {
+    use crate::reference::metrics;
+    let (w, h, a) = output::read_exr(&args.render)?;
+    let (w2, h2, b) = output::read_exr(&args.reference)?;
+    if (w, h) != (w2, h2) {
+        bail!("the images differ in size: {w}x{h} vs {w2}x{h2}");
+    }
+    let (report, per_pixel) = metrics::compare(&a, &b, None);
+    if report.pixels == 0 {
+        bail!("no pixel is covered in both images");
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let grey: Vec<f32> = per_pixel
+        .iter()
+        .flat_map(|&e| {
+            if e.is_nan() {
+                [0.0, 0.0, 0.0, 0.0]
+            } else {
+                [e, e, e, 1.0]
+            }
+        })
+        .collect();
+    output::write_exr(&args.out.join("error.exr"), w, h, &grey)?;
+    output::write_png(
+        &args.out.join("error.png"),
+        w,
+        h,
+        &metrics::false_colour(&per_pixel, args.full_scale),
+    )?;
+    output::write_atomic(&args.out.join("error.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&report)?)?)
+    })?;
+    println!("{} pixels compared", report.pixels);
+    for (name, c) in ["red", "green", "blue"].iter().zip(&report.channels) {
+        println!(
+            "{name:>5}: relative RMS {:.3} %, 99th percentile {:.3} %, max {:.3} %",
+            100.0 * c.rel_rms,
+            100.0 * c.p99,
+            100.0 * c.max
+        );
+    }
+    Ok(())
+}
+
 fn check_validation(gpu: &Gpu) -> Result<()> {
     let n = gpu.validation.count();
     if n > 0 {
@@ -540,6 +708,8 @@ pub fn main() -> ExitCode {
         Some(Command::Render(args)) => render(&cli, args),
         Some(Command::Precompute(args)) => precompute(args),
         Some(Command::Bench(args)) => bench(&cli, args),
+        Some(Command::Reference(args)) => reference(args),
+        Some(Command::Compare(args)) => compare(args),
         Some(Command::Devices) => devices(),
     };
     match result {

@@ -18,5 +18,6 @@ pub mod output;
 pub mod passes;
 pub mod physics;
 pub mod preprocess;
+pub mod reference;
 pub mod renderer;
 pub mod scene;

@@ -79,6 +79,30 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     ))
 }
 
+/// Linear radiance to sRGB RGBA8 with `exposure`, as `glsl/tonemap.comp` does (alpha kept).
+pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
+    let encode = |c: f32| {
+        let c = (c * exposure).clamp(0.0, 1.0);
+        let s = if c <= 0.0031308 {
+            12.92 * c
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0 + 0.5) as u8
+    };
+    radiance
+        .chunks(4)
+        .flat_map(|p| {
+            [
+                encode(p[0]),
+                encode(p[1]),
+                encode(p[2]),
+                (p[3].clamp(0.0, 1.0) * 255.0 + 0.5) as u8,
+            ]
+        })
+        .collect()
+}
+
 /// Writes `timings.json`.
 pub fn write_timings(path: &Path, report: &TimingReport) -> Result<()> {
     write_atomic(path, |tmp| {

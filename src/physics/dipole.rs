@@ -75,11 +75,11 @@ impl Dipole {
         self.albedo / (4.0 * PI) * (term(self.z_r, d_r) + term(self.z_v, d_v))
     }
 
-    /// R_d(r) and its Laplacian in the plane, (d^2/dr^2 + (1/r) d/dr) R_d, in closed form.
-    /// With g(d) = (s d + 1) e^(-s d) / d^3: g'/g = -s + s/(s d + 1) - 3/d, and for each pole
-    /// (d = sqrt(r^2 + z^2)) the Laplacian of z g(d(r)) is z (g'' r^2/d^2 + g' (2/d - r^2/d^3)).
-    /// Used for the second-order quadrature of F over a node's support.
-    pub fn rd_and_laplacian(&self, r: f64) -> (f64, f64) {
+    /// R_d(r) and its first and second derivatives in r, in closed form. With
+    /// g(d) = (s d + 1) e^(-s d) / d^3: g'/g = -s + s/(s d + 1) - 3/d and
+    /// g'' = g' (g'/g) + g (-s^2/(s d + 1)^2 + 3/d^2); for each pole (d = sqrt(r^2 + z^2)),
+    /// d/dr z g(d) = z g' r/d and d^2/dr^2 z g(d) = z (g'' r^2/d^2 + g' (1/d - r^2/d^3)).
+    pub fn rd_derivatives(&self, r: f64) -> (f64, f64, f64) {
         let s = self.sigma_tr;
         let k = self.albedo / (4.0 * PI);
         let pole = |z: f64| {
@@ -88,12 +88,22 @@ impl Dipole {
             let l = -s + s / (s * d + 1.0) - 3.0 / d;
             let g1 = g * l;
             let g2 = g1 * l + g * (-s * s / ((s * d + 1.0) * (s * d + 1.0)) + 3.0 / (d * d));
-            let lap = g2 * r * r / (d * d) + g1 * (2.0 / d - r * r / (d * d * d));
-            (z * g, z * lap)
+            let f1 = g1 * r / d;
+            let f2 = g2 * r * r / (d * d) + g1 * (1.0 / d - r * r / (d * d * d));
+            (z * g, z * f1, z * f2)
         };
-        let (a, la) = pole(self.z_r);
-        let (b, lb) = pole(self.z_v);
-        (k * (a + b), k * (la + lb))
+        let (a, a1, a2) = pole(self.z_r);
+        let (b, b1, b2) = pole(self.z_v);
+        (k * (a + b), k * (a1 + b1), k * (a2 + b2))
+    }
+
+    /// R_d(r) and its Laplacian in the plane, (d^2/dr^2 + (1/r) d/dr) R_d (see
+    /// [`Dipole::rd_derivatives`]). Used for the second-order quadrature of F over a node's
+    /// support.
+    pub fn rd_and_laplacian(&self, r: f64) -> (f64, f64) {
+        let (f, f1, f2) = self.rd_derivatives(r);
+        let lap = if r > 0.0 { f2 + f1 / r } else { 2.0 * f2 };
+        (f, lap)
     }
 
     /// Total diffuse reflectance R_total = integral of 2 pi r R_d(r) dr, closed form:
