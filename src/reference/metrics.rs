@@ -50,7 +50,7 @@ pub fn compare(
     if used.is_empty() {
         return (report, per_pixel);
     }
-    let mut rel: Vec<Vec<f64>> = vec![Vec::with_capacity(used.len()); 3];
+    let mut rel: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(used.len())).collect();
     for c in 0..3 {
         let mean = used
             .iter()
