@@ -4,6 +4,7 @@
 #define FRAME_GLSL
 
 #define MAX_LIGHTS 8
+#define MAX_SHADOW_LAYERS 48
 #define LIGHT_DIRECTIONAL 0u
 #define LIGHT_POINT 1u
 #define LIGHT_SPOT 2u
@@ -14,15 +15,16 @@ struct Light {
     vec4 direction;        // xyz: direction the light travels (directional, spot axis)
     vec4 radiance;         // rgb: colour * intensity (irradiance at normal incidence, at 1 mm for point/spot)
     vec4 params;           // x: cos(spot half-angle), y: normal-offset bias (mm), z: depth bias, w: kind
-    mat4 shadow_view_proj; // world (mm) -> shadow-map clip space
+    uvec4 layers;          // x: first shadow-map layer, y: layers (1, or 6 cube faces for a point light)
 };
 
 layout(std140, set = 0, binding = 0) uniform Frame {
     mat4 view_proj;        // world (mm) -> camera clip space
     vec4 camera_pos;       // xyz
     vec4 material;         // x: relative index of refraction eta
-    uvec4 counts;          // x: number of lights
+    uvec4 counts;          // x: number of lights, y: number of shadow-map layers
     Light lights[MAX_LIGHTS];
+    mat4 shadow_view_proj[MAX_SHADOW_LAYERS]; // world (mm) -> shadow-map clip space, per layer
 } frame;
 
 // Direction towards the light (normalised) and the irradiance it delivers at x, before the

@@ -5,9 +5,9 @@
 layout(location = 0) in vec3 in_position;
 
 layout(push_constant) uniform Push {
-    uint light;
+    uint layer;
 } push;
 
 void main() {
-    gl_Position = frame.lights[push.light].shadow_view_proj * vec4(in_position, 1.0);
+    gl_Position = frame.shadow_view_proj[push.layer] * vec4(in_position, 1.0);
 }

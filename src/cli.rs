@@ -42,6 +42,9 @@ pub enum Command {
     Reference(ReferenceArgs),
     /// Error of a render against a reference: figures, error image (EXR) and false colour (PNG).
     Compare(CompareArgs),
+    /// Speed against accuracy: sweep the method's knobs, time each point, compare each with the
+    /// reference; writes chart.csv, chart.svg, chart.png.
+    Chart(ChartArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
 }
@@ -75,6 +78,37 @@ pub struct ReferenceArgs {
     /// Also compute with half the spacing and theta, and report how much the answer moves.
     #[arg(long)]
     pub refine: bool,
+}
+
+/// Arguments of `chart`.
+#[derive(Debug, Args)]
+pub struct ChartArgs {
+    /// Scene file (TOML); the default scene without one.
+    pub scene: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long, default_value = "out/chart")]
+    pub out: PathBuf,
+    /// Material preset replacing the scene's.
+    #[arg(long)]
+    pub material: Option<String>,
+    /// Image width.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Timed frames per point (after 2 warm-up frames).
+    #[arg(long, default_value_t = 5)]
+    pub frames: usize,
+    /// A few settings only (for CI).
+    #[arg(long)]
+    pub quick: bool,
+    /// Target relative error for the automatic setting.
+    #[arg(long, default_value_t = 0.02)]
+    pub target_error: f64,
+    /// Cache folder for the preprocessing.
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
 }
 
 /// Arguments of `compare`.
@@ -121,9 +155,21 @@ pub struct BenchArgs {
     /// Blending mode.
     #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
     pub mode: ModeArg,
+    /// How the global pass reads its matrix: texel buffers or storage buffers.
+    #[arg(long, value_enum, default_value_t = LayoutArg::Texel)]
+    pub global_layout: LayoutArg,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
+}
+
+/// `--global-layout` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LayoutArg {
+    /// Uniform texel buffers.
+    Texel,
+    /// Storage buffers.
+    Storage,
 }
 
 /// Preprocessing controls; every value left out is derived from the scene and printed.
@@ -285,7 +331,7 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         &pre,
         Options {
             mode,
-            capture: false,
+            ..Default::default()
         },
     )?;
     let mut timings = Vec::with_capacity(args.frames);
@@ -470,7 +516,11 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
         &pre,
         Options {
             mode,
-            capture: false,
+            global_layout: match args.global_layout {
+                LayoutArg::Texel => crate::passes::compute::GlobalLayout::Texel,
+                LayoutArg::Storage => crate::passes::compute::GlobalLayout::Storage,
+            },
+            ..Default::default()
         },
     )?;
     let total = args.warmup + args.frames;
@@ -652,6 +702,131 @@ fn compare(args: &CompareArgs) -> Result<()> {
     Ok(())
 }
 
+fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
+    use crate::reference::{Reference, ReferenceSettings};
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let overrides = Overrides {
+        material: args.material.clone(),
+        width: args.width,
+        height: args.height,
+        ..Default::default()
+    };
+    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
+    println!("automatic setting:");
+    for r in &auto.reasons {
+        println!("  {r}");
+    }
+    let start = std::time::Instant::now();
+    let reference = Reference::compute(&scene, ReferenceSettings::for_scene(&scene));
+    println!(
+        "reference: {} samples, {:.1} s",
+        reference.samples,
+        start.elapsed().as_secs_f64()
+    );
+    output::write_exr(
+        &args.out.join("reference.exr"),
+        reference.width,
+        reference.height,
+        &reference.radiance,
+    )?;
+    let gpu = Gpu::new(&GpuOptions {
+        validate: cli.validate,
+        device: cli.device.clone(),
+    })?;
+    let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
+    let quiet = |_: &str, _: u64, _: u64| {};
+    let mut points = Vec::new();
+    for (label, o) in crate::chart::sweep(&auto.settings, args.quick) {
+        let choice = preprocess::choose(&scene, &o, args.target_error)?;
+        let (pre, _) = preprocess::prepare(&scene, &choice, Some(&cache_dir), &quiet)?;
+        for mode in Blend::ALL {
+            let mut r = Renderer::new(
+                &gpu,
+                scene.clone(),
+                &pre,
+                Options {
+                    mode,
+                    ..Default::default()
+                },
+            )?;
+            let mut times = Vec::new();
+            for f in 0..args.frames + 2 {
+                let t = r.frame(&scene.lights)?;
+                if f >= 2 {
+                    times.push(t.gpu_ms);
+                }
+            }
+            let out = r.output(Vec::new())?;
+            let gpu_ms = crate::graph::timing::Stats::of(&times).median_ms;
+            let p = crate::chart::point(
+                &label,
+                mode,
+                &pre,
+                choice.settings.node_spacing_mm,
+                gpu_ms,
+                &out.radiance,
+                &reference.radiance,
+                label == "auto",
+            );
+            println!(
+                "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS",
+                label,
+                mode.name(),
+                gpu_ms,
+                100.0 * p.rel_rms
+            );
+            points.push(p);
+        }
+    }
+    check_validation(&gpu)?;
+    crate::chart::mark_pareto(&mut points);
+    output::write_atomic(&args.out.join("chart.csv"), |p| {
+        Ok(std::fs::write(p, crate::chart::csv(&points))?)
+    })?;
+    let name = scene
+        .resolved
+        .material
+        .preset
+        .clone()
+        .unwrap_or_else(|| "custom material".into());
+    let mesh = scene
+        .resolved
+        .mesh
+        .builtin
+        .clone()
+        .unwrap_or_else(|| "mesh".into());
+    crate::chart::plot(
+        &args.out,
+        &format!(
+            "{mesh} in {name}: error against frame time ({})",
+            gpu.info.name
+        ),
+        &points,
+    )?;
+    if let Some(a) = points.iter().find(|p| p.auto && p.mode == "optimized") {
+        println!(
+            "automatic setting (optimized): {:.2} ms, {:.3} % RMS, {}",
+            a.gpu_ms,
+            100.0 * a.rel_rms,
+            if a.pareto {
+                "on the Pareto front"
+            } else {
+                "not on the Pareto front"
+            }
+        );
+    }
+    println!(
+        "wrote chart.csv, chart.svg, chart.png, reference.exr to {}",
+        args.out.display()
+    );
+    Ok(())
+}
+
 fn check_validation(gpu: &Gpu) -> Result<()> {
     let n = gpu.validation.count();
     if n > 0 {
@@ -710,6 +885,7 @@ pub fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench(&cli, args),
         Some(Command::Reference(args)) => reference(args),
         Some(Command::Compare(args)) => compare(args),
+        Some(Command::Chart(args)) => chart(&cli, args),
         Some(Command::Devices) => devices(),
     };
     match result {

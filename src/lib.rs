@@ -11,6 +11,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod bench;
+pub mod chart;
 pub mod cli;
 pub mod gpu;
 pub mod graph;

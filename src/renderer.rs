@@ -55,6 +55,8 @@ pub struct Options {
     pub mode: Blend,
     /// Also read back the intermediate results every frame.
     pub capture: bool,
+    /// How the global pass reads its matrix.
+    pub global_layout: compute::GlobalLayout,
 }
 
 impl Default for Options {
@@ -62,6 +64,7 @@ impl Default for Options {
         Options {
             mode: Blend::Optimized,
             capture: false,
+            global_layout: compute::GlobalLayout::Texel,
         }
     }
 }
@@ -104,8 +107,14 @@ impl Renderer {
         options: Options,
     ) -> Result<Renderer> {
         let (w, h) = (scene.width, scene.height);
-        let data = SubsurfaceData::upload(gpu, &scene, pre, options.mode)
-            .context("uploading the preprocessing")?;
+        let data = SubsurfaceData::upload(
+            gpu,
+            &scene,
+            pre,
+            options.mode,
+            options.global_layout == compute::GlobalLayout::Storage,
+        )
+        .context("uploading the preprocessing")?;
         let uniforms = Arc::new(Buffer::new(
             gpu,
             "frame uniforms",
@@ -141,11 +150,11 @@ impl Renderer {
         let hdr_rb = g.import_buffer(hdr_readback.clone(), Some(Access::HostRead));
         let display_rb = g.import_buffer(display_readback.clone(), Some(Access::HostRead));
 
-        let lights = scene.lights.len() as u32;
+        let layers: u32 = scene.lights.iter().map(passes::frame::layers_of).sum();
         let s = scene.shadow_map_size;
         let shadow_maps = g.image(
             "shadow maps",
-            ImageDesc::layered(passes::shadow::FORMAT, s, s, lights),
+            ImageDesc::layered(passes::shadow::FORMAT, s, s, layers),
         );
         let map = g.image(
             "illumination map",
@@ -170,7 +179,7 @@ impl Renderer {
                 vertices,
                 indices,
                 index_count: data.index_count,
-                lights,
+                layers,
             },
             shadow_maps,
         );
@@ -213,6 +222,7 @@ impl Renderer {
             rows(global_rows, global_entries),
             node_irradiance,
             node_radiosity,
+            options.global_layout,
         );
         passes::composite::add(
             &mut g,

@@ -11,6 +11,7 @@ mod common;
 
 use glam::Vec3;
 use std::path::Path;
+use translucent::passes::compute::GlobalLayout;
 use translucent::physics::fresnel_transmittance;
 use translucent::preprocess::{apply, operators::Blend, settings::SettingsOverrides, Preprocessed};
 use translucent::renderer::{Options, Renderer};
@@ -41,6 +42,18 @@ fn capture(
     translucent::renderer::Captured,
     translucent::renderer::RenderOutput,
 ) {
+    capture_with(scene, pre, mode, GlobalLayout::Texel)
+}
+
+fn capture_with(
+    scene: &Scene,
+    pre: &Preprocessed,
+    mode: Blend,
+    global_layout: GlobalLayout,
+) -> (
+    translucent::renderer::Captured,
+    translucent::renderer::RenderOutput,
+) {
     let gpu = common::gpu();
     let (cap, out) = {
         let mut r = Renderer::new(
@@ -50,6 +63,7 @@ fn capture(
             Options {
                 mode,
                 capture: true,
+                global_layout,
             },
         )
         .unwrap();
@@ -189,6 +203,30 @@ fn compute_passes_match_the_cpu_operators() {
     }
 }
 
+/// The storage-buffer variant of the global pass (kept to measure layouts) computes the same.
+#[test]
+fn storage_buffer_global_pass_matches_the_cpu() {
+    let s = scene("[output]\nwidth = 64\nheight = 64\n");
+    let pre = common::preprocess(&s, coarse(1.5));
+    let (cap, _) = capture_with(&s, &pre, Blend::Global, GlobalLayout::Storage);
+    let node_e: Vec<[f64; 3]> = cap
+        .node_irradiance
+        .iter()
+        .map(|e| [e[0] as f64, e[1] as f64, e[2] as f64])
+        .collect();
+    let want = apply::global(&pre.ops.global, &node_e, false);
+    let scale = want.iter().map(|b| b[0]).fold(0.0, f64::max);
+    assert!(scale > 0.0);
+    for (q, b) in want.iter().enumerate() {
+        for c in 0..3 {
+            assert!(
+                close(cap.node_radiosity[q][c] as f64, b[c], scale, 1e-4),
+                "node {q} channel {c}"
+            );
+        }
+    }
+}
+
 #[test]
 fn slab_radiance_through_the_whole_pipeline() {
     // skin1 on a 100 x 20 x 100 mm slab, light and camera straight above the centre.
@@ -230,7 +268,7 @@ fn slab_radiance_through_the_whole_pipeline() {
             &pre,
             Options {
                 mode,
-                capture: false,
+                ..Default::default()
             },
             1,
         );

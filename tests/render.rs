@@ -170,12 +170,12 @@ fn bunny_silhouette_matches_cpu_projection_and_lit_side_is_brighter() {
     }
 }
 
-#[test]
-fn a_shadow_falls_where_an_occluder_blocks_the_light() {
+fn shadow_case(light: &str) {
     // A plate floating 22 mm above a wide slab, lit at 45 degrees from +x: the plate's shadow
     // falls on the slab 22 mm towards -x; the +x side stays lit. The medium scatters over
     // 0.17 mm only, so light does not creep into the shadow.
-    let text = r#"
+    let text = format!(
+        r#"
         [mesh]
         builtin = "box"
         size = [100.0, 4.0, 100.0]
@@ -185,9 +185,7 @@ fn a_shadow_falls_where_an_occluder_blocks_the_light() {
         target = [0.0, 0.0, 0.0]
         up = [0.0, 0.0, -1.0]
         fov_deg = 30.0
-        [[lights]]
-        kind = "directional"
-        direction = [-1.0, -1.0, 0.0]
+        {light}
         [material]
         sigma_s_prime = [10.0, 10.0, 10.0]
         sigma_a = [1.0, 1.0, 1.0]
@@ -195,9 +193,10 @@ fn a_shadow_falls_where_an_occluder_blocks_the_light() {
         width = 64
         height = 64
         shadow_map = 256
-    "#;
+    "#
+    );
     let scene = Scene::from_desc(
-        SceneDesc::parse(text).unwrap(),
+        SceneDesc::parse(&text).unwrap(),
         Path::new(""),
         &Overrides::default(),
     )
@@ -240,6 +239,18 @@ fn a_shadow_falls_where_an_occluder_blocks_the_light() {
         shadowed.radiance[under] < 0.05 * lit.radiance[under],
         "plate casts a shadow"
     );
+}
+
+#[test]
+fn a_shadow_falls_where_an_occluder_blocks_the_light() {
+    shadow_case("[[lights]]\nkind = \"directional\"\ndirection = [-1.0, -1.0, 0.0]");
+}
+
+/// The same with a point light close to the object (inside its bounding sphere): six cube
+/// faces of shadow map. From (60, 60, 0) the plate's shadow spans x = -60 to -12 on the slab.
+#[test]
+fn a_point_light_casts_shadows_through_its_cube_map() {
+    shadow_case("[[lights]]\nkind = \"point\"\nposition = [60.0, 60.0, 0.0]\nintensity = 7200.0");
 }
 
 #[test]

@@ -153,8 +153,56 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
         });
 }
 
+/// How the global pass reads its bulk data.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum GlobalLayout {
+    /// Uniform texel buffers (`samplerBuffer`): one 16-byte fetch per entry.
+    #[default]
+    Texel,
+    /// Storage buffers (`readonly buffer`), for comparison.
+    Storage,
+}
+
+/// `global` with storage-buffer reads (see [`GlobalLayout::Storage`]).
+fn global_storage(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, out: ResourceId) {
+    graph
+        .pass("global")
+        .access(m.rows, Access::StorageRead(Stage::Compute))
+        .access(m.entries, Access::StorageRead(Stage::Compute))
+        .access(input, Access::StorageRead(Stage::Compute))
+        .access(out, Access::TexelWrite(Stage::Compute))
+        .setup(move |gpu, res| {
+            let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let pipeline = Pipeline::compute(
+                gpu,
+                "global (storage buffers)",
+                shaders::GLOBAL_SSBO_COMP,
+                &[
+                    Binding::Storage(res.buffer(m.rows).raw),
+                    Binding::Storage(res.buffer(m.entries).raw),
+                    Binding::Storage(res.buffer(input).raw),
+                    Binding::StorageTexelBuffer(out_view.raw),
+                ],
+                4,
+            )?;
+            Ok(Box::new(move |rec| {
+                let _ = &out_view;
+                dispatch(rec, &pipeline, &[m.row_count], m.row_count);
+            }))
+        });
+}
+
 /// `global`: B^g_q = sum_p W_pq E_p, from node buffer `input` into node buffer `out`.
-pub fn global(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, out: ResourceId) {
+pub fn global(
+    graph: &mut RenderGraph,
+    m: SparseInputs,
+    input: ResourceId,
+    out: ResourceId,
+    layout: GlobalLayout,
+) {
+    if layout == GlobalLayout::Storage {
+        return global_storage(graph, m, input, out);
+    }
     graph
         .pass("global")
         .access(m.rows, Access::TexelRead(Stage::Compute))

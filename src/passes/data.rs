@@ -213,12 +213,14 @@ fn upload<T: Pod>(
 }
 
 impl SubsurfaceData {
-    /// Uploads the preprocessing of `scene` for blending `mode`.
+    /// Uploads the preprocessing of `scene` for blending `mode`; with `global_storage` the
+    /// global matrix is also usable as storage buffers (see `GlobalLayout::Storage`).
     pub fn upload(
         gpu: &Arc<Gpu>,
         scene: &Scene,
         pre: &Preprocessed,
         mode: Blend,
+        global_storage: bool,
     ) -> GpuResult<SubsurfaceData> {
         let atlas = &pre.atlas;
         let ops = &pre.ops;
@@ -359,8 +361,14 @@ impl SubsurfaceData {
             }
             rows.push(entries.len() as u32);
         }
-        let global_rows = upload(gpu, "global rows", &rows, texel_usage, &mut bytes)?;
-        let global_entries = upload(gpu, "global entries", &entries, texel_usage, &mut bytes)?;
+        // Storage usage only when asked: it subjects the buffers to maxStorageBufferRange.
+        let global_usage = if global_storage {
+            texel_usage | vk::BufferUsageFlags::STORAGE_BUFFER
+        } else {
+            texel_usage
+        };
+        let global_rows = upload(gpu, "global rows", &rows, global_usage, &mut bytes)?;
+        let global_entries = upload(gpu, "global entries", &entries, global_usage, &mut bytes)?;
 
         let texture = match &scene.texture {
             Some(t) => Image::from_pixels(

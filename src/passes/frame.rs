@@ -13,7 +13,7 @@ pub struct GpuLight {
     direction: [f32; 4],
     radiance: [f32; 4],
     params: [f32; 4],
-    shadow_view_proj: [[f32; 4]; 4],
+    layers: [u32; 4],
 }
 
 /// The `Frame` uniform block of `glsl/frame.glsl` (std140).
@@ -25,6 +25,19 @@ pub struct FrameUniforms {
     material: [f32; 4],
     counts: [u32; 4],
     lights: [GpuLight; MAX_LIGHTS],
+    shadow_view_proj: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
+}
+
+/// Shadow-map layers at most: a cube (6 faces) for each light.
+pub const MAX_SHADOW_LAYERS: usize = 6 * MAX_LIGHTS;
+
+/// Shadow-map layers `light` needs: 6 cube faces for a point light, else 1.
+pub fn layers_of(light: &Light) -> u32 {
+    if light.kind == LightKind::Point {
+        6
+    } else {
+        1
+    }
 }
 
 /// How a light's shadow map is projected.
@@ -46,15 +59,16 @@ fn any_perpendicular(d: Vec3) -> Vec3 {
     }
 }
 
-/// The shadow projection of `light` that covers the bounding sphere (`center`, `radius`)
-/// with a `size`-texel map: orthographic for directional lights, perspective for spot lights
-/// (their cone) and point lights (the sphere seen from the light).
-pub fn shadow_projection(
+/// The shadow projections of `light` that cover the bounding sphere (`center`, `radius`) with
+/// `size`-texel maps: orthographic for a directional light, the cone for a spot light, six
+/// 90-degree cube faces (+X, -X, +Y, -Y, +Z, -Z, a little wider for filtering) for a point
+/// light, wherever it is.
+pub fn shadow_projections(
     light: &Light,
     center: Vec3,
     radius: f32,
     size: u32,
-) -> Result<ShadowProjection> {
+) -> Vec<ShadowProjection> {
     let radius = radius.max(1e-3);
     match light.kind {
         LightKind::Directional => {
@@ -63,32 +77,16 @@ pub fn shadow_projection(
             let proj =
                 Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius);
             let texel = 2.0 * radius / size as f32;
-            Ok(ShadowProjection {
+            vec![ShadowProjection {
                 view_proj: proj * view,
                 texel_mm: texel,
                 depth_bias: 0.5 * texel / (2.0 * radius),
-            })
+            }]
         }
-        LightKind::Point | LightKind::Spot => {
-            let to_center = center - light.position;
-            let dist = to_center.length();
-            let (axis, half) = if light.kind == LightKind::Spot {
-                (
-                    light.direction,
-                    light.cos_cone.clamp(-1.0, 1.0).acos() * 1.02,
-                )
-            } else {
-                if dist < radius * 1.05 {
-                    bail!(
-                        "point light at {:?} lies inside the object's bounding sphere (centre {:?}, radius {radius:.1} mm): \
-                         a cube shadow map would be needed, which is not supported yet",
-                        light.position.to_array(),
-                        center.to_array()
-                    );
-                }
-                (to_center / dist, (radius / dist).asin() * 1.05)
-            };
-            let half = half.min(80f32.to_radians());
+        LightKind::Spot => {
+            let dist = (center - light.position).length();
+            let half = (light.cos_cone.clamp(-1.0, 1.0).acos() * 1.02).min(80f32.to_radians());
+            let axis = light.direction;
             let view = Mat4::look_at_rh(
                 light.position,
                 light.position + axis,
@@ -96,12 +94,34 @@ pub fn shadow_projection(
             );
             let far = dist + radius;
             let near = (dist - radius).max(far * 1e-3);
-            let proj = Mat4::perspective_rh(2.0 * half, 1.0, near, far);
-            Ok(ShadowProjection {
-                view_proj: proj * view,
+            vec![ShadowProjection {
+                view_proj: Mat4::perspective_rh(2.0 * half, 1.0, near, far) * view,
                 texel_mm: 2.0 * dist * half.tan() / size as f32,
                 depth_bias: 0.0,
-            })
+            }]
+        }
+        LightKind::Point => {
+            let dist = (center - light.position).length();
+            let far = dist + radius;
+            let near = (dist - radius).max(far * 1e-3);
+            let half = 1.05f32.atan();
+            let proj = Mat4::perspective_rh(2.0 * half, 1.0, near, far);
+            let faces = [
+                (Vec3::X, Vec3::NEG_Y),
+                (Vec3::NEG_X, Vec3::NEG_Y),
+                (Vec3::Y, Vec3::Z),
+                (Vec3::NEG_Y, Vec3::NEG_Z),
+                (Vec3::Z, Vec3::NEG_Y),
+                (Vec3::NEG_Z, Vec3::NEG_Y),
+            ];
+            faces
+                .iter()
+                .map(|&(dir, up)| ShadowProjection {
+                    view_proj: proj * Mat4::look_at_rh(light.position, light.position + dir, up),
+                    texel_mm: 2.0 * dist.max(near) * half.tan() / size as f32,
+                    depth_bias: 0.0,
+                })
+                .collect()
         }
     }
 }
@@ -118,9 +138,16 @@ impl FrameUniforms {
             .to_cols_array_2d();
         u.camera_pos = scene.camera.position.extend(1.0).to_array();
         u.material = [scene.material.eta as f32, 0.0, 0.0, 0.0];
-        u.counts = [lights.len() as u32, 0, 0, 0];
+        let mut layer = 0usize;
         for (slot, light) in u.lights.iter_mut().zip(lights) {
-            let shadow = shadow_projection(light, center, radius, scene.shadow_map_size)?;
+            let shadows = shadow_projections(light, center, radius, scene.shadow_map_size);
+            if layer + shadows.len() > MAX_SHADOW_LAYERS {
+                bail!("the lights need more than {MAX_SHADOW_LAYERS} shadow-map layers");
+            }
+            for (k, s) in shadows.iter().enumerate() {
+                u.shadow_view_proj[layer + k] = s.view_proj.to_cols_array_2d();
+            }
+            let shadow = shadows[0];
             let kind = match light.kind {
                 LightKind::Directional => 0.0,
                 LightKind::Point => 1.0,
@@ -136,9 +163,11 @@ impl FrameUniforms {
                     shadow.depth_bias,
                     kind,
                 ],
-                shadow_view_proj: shadow.view_proj.to_cols_array_2d(),
+                layers: [layer as u32, shadows.len() as u32, 0, 0],
             };
+            layer += shadows.len();
         }
+        u.counts = [lights.len() as u32, layer as u32, 0, 0];
         Ok(u)
     }
 }
@@ -157,7 +186,8 @@ mod tests {
         }
     }
 
-    /// Every point of the bounding sphere projects inside the shadow map's clip volume.
+    /// Every point of the bounding sphere projects inside the shadow map's clip volume
+    /// (for a point light: inside the cube face the shaders pick for it).
     #[test]
     fn shadow_projections_cover_the_object() {
         let (c, r) = (Vec3::new(1.0, 20.0, -3.0), 25.0);
@@ -168,9 +198,11 @@ mod tests {
                 Vec3::new(-1.0, -2.0, 0.5).normalize(),
             ),
             light(LightKind::Point, Vec3::new(0.0, 200.0, 100.0), Vec3::ZERO),
+            light(LightKind::Point, c + Vec3::new(3.0, -2.0, 1.0), Vec3::ZERO),
         ];
         for l in lights {
-            let p = shadow_projection(&l, c, r, 1024).unwrap();
+            let ps = shadow_projections(&l, c, r, 1024);
+            assert_eq!(ps.len(), if l.kind == LightKind::Point { 6 } else { 1 });
             for i in 0..200 {
                 let t = i as f32 * 0.7;
                 let d = Vec3::new(
@@ -178,22 +210,47 @@ mod tests {
                     (t * 0.3).sin(),
                     t.cos() * (t * 0.3).cos(),
                 );
-                let clip = p.view_proj * (c + d.normalize() * r * 0.99).extend(1.0);
+                let x = c + d.normalize() * r * 0.99;
+                let face = if ps.len() == 6 {
+                    let v = x - l.position;
+                    let a = v.abs();
+                    if a.x >= a.y && a.x >= a.z {
+                        if v.x > 0.0 {
+                            0
+                        } else {
+                            1
+                        }
+                    } else if a.y >= a.z {
+                        if v.y > 0.0 {
+                            2
+                        } else {
+                            3
+                        }
+                    } else if v.z > 0.0 {
+                        4
+                    } else {
+                        5
+                    }
+                } else {
+                    0
+                };
+                let clip = ps[face].view_proj * x.extend(1.0);
                 let ndc = clip.truncate() / clip.w;
                 assert!(clip.w > 0.0);
                 assert!(ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0, "{ndc:?}");
                 assert!((0.0..=1.0).contains(&ndc.z), "{ndc:?}");
             }
-            assert!(p.texel_mm > 0.0);
+            assert!(ps[0].texel_mm > 0.0);
         }
-        let inside = light(LightKind::Point, c, Vec3::ZERO);
-        assert!(shadow_projection(&inside, c, r, 1024).is_err());
     }
 
     #[test]
     fn uniform_layout_matches_std140() {
-        // mat4 + 3 vec4 + 8 lights of (4 vec4 + mat4) = 64 + 48 + 8 * 128.
-        assert_eq!(std::mem::size_of::<GpuLight>(), 128);
-        assert_eq!(std::mem::size_of::<FrameUniforms>(), 64 + 48 + 8 * 128);
+        // mat4 + 3 vec4 + 8 lights of (4 vec4 + uvec4) + 48 mat4.
+        assert_eq!(std::mem::size_of::<GpuLight>(), 80);
+        assert_eq!(
+            std::mem::size_of::<FrameUniforms>(),
+            64 + 48 + 8 * 80 + 48 * 64
+        );
     }
 }

@@ -1,4 +1,5 @@
-//! `shadow`: depth from each light's view into one layer of the shadow-map array.
+//! `shadow`: depth from each light's view (six cube faces for a point light) into the layers
+//! of the shadow-map array.
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::set_viewport;
@@ -19,8 +20,8 @@ pub struct ShadowInputs {
     pub indices: ResourceId,
     /// Number of indices to draw.
     pub index_count: u32,
-    /// Number of lights (= layers written).
-    pub lights: u32,
+    /// Shadow-map layers to render (one per light, six per point light).
+    pub layers: u32,
 }
 
 /// Declares the `shadow` pass writing every layer of `maps`.
@@ -53,7 +54,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
             let indices = res.buffer(inputs.indices).raw;
             Ok(Box::new(move |rec| {
                 let d = &rec.gpu.device;
-                for layer in 0..inputs.lights {
+                for layer in 0..inputs.layers {
                     let depth = vk::RenderingAttachmentInfo::default()
                         .image_view(maps.layer_views[layer as usize])
                         .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)

@@ -1,0 +1,351 @@
+//! `translucent chart`: speed against accuracy. A sweep over the method's knobs around the
+//! automatic setting (one knob at a time: kernel size, texel size, node spacing, pruning
+//! tolerance; every blending mode), each point timed on the device and compared with the
+//! brute-force reference. Writes `chart.csv`, `chart.svg` and `chart.png` (error against GPU
+//! frame time, one series per blending mode, the Pareto front, the automatic setting marked).
+
+use crate::preprocess::{operators::Blend, settings::SettingsOverrides, Preprocessed};
+use crate::reference::metrics;
+use anyhow::Result;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use serde::Serialize;
+use std::path::Path;
+
+/// One measured point.
+#[derive(Debug, Clone, Serialize)]
+pub struct Point {
+    /// Which knob moved ("auto" for the automatic setting).
+    pub setting: String,
+    /// Blending mode.
+    pub mode: String,
+    /// Texel edge, mm.
+    pub texel_mm: f64,
+    /// Kernel edge.
+    pub kernel: u32,
+    /// Node spacing asked for, mm.
+    pub node_spacing_mm: f64,
+    /// Pruning tolerance.
+    pub prune: f64,
+    /// Nodes of the global response.
+    pub nodes: usize,
+    /// Covered texels.
+    pub texels: usize,
+    /// Nonzeros of the global matrix.
+    pub nonzeros: usize,
+    /// Median GPU frame time, ms.
+    pub gpu_ms: f64,
+    /// Relative RMS error, worst channel.
+    pub rel_rms: f64,
+    /// 99th percentile of the per-pixel relative error, worst channel.
+    pub p99: f64,
+    /// Whether this is the automatic setting.
+    pub auto: bool,
+    /// Whether no other point is both faster and more accurate.
+    pub pareto: bool,
+}
+
+/// The settings to sweep: the automatic one, then one knob at a time.
+pub fn sweep(
+    auto: &crate::preprocess::settings::Settings,
+    quick: bool,
+) -> Vec<(String, SettingsOverrides)> {
+    let base = SettingsOverrides {
+        texel_mm: Some(auto.texel_mm),
+        kernel_size: Some(auto.kernel_size),
+        node_spacing_mm: Some(auto.node_spacing_mm),
+        prune_tolerance: Some(auto.prune_tolerance),
+    };
+    let mut out = vec![("auto".to_string(), base)];
+    let kernels: &[u32] = if quick { &[5] } else { &[5, 7, 9, 11] };
+    for &k in kernels.iter().filter(|k| **k != auto.kernel_size) {
+        out.push((
+            format!("kernel {k}"),
+            SettingsOverrides {
+                kernel_size: Some(k),
+                ..base
+            },
+        ));
+    }
+    let texels: &[f64] = if quick { &[2.0] } else { &[0.5, 0.7, 1.4, 2.0] };
+    for &f in texels {
+        out.push((
+            format!("texel x{f}"),
+            SettingsOverrides {
+                texel_mm: Some(auto.texel_mm * f),
+                ..base
+            },
+        ));
+    }
+    let spacings: &[f64] = if quick { &[] } else { &[0.5, 2.0] };
+    for &f in spacings {
+        out.push((
+            format!("nodes x{f}"),
+            SettingsOverrides {
+                node_spacing_mm: Some(auto.node_spacing_mm * f),
+                ..base
+            },
+        ));
+    }
+    let prunes: &[f64] = if quick { &[0.05] } else { &[0.001, 0.02, 0.05] };
+    for &p in prunes {
+        out.push((
+            format!("prune {p}"),
+            SettingsOverrides {
+                prune_tolerance: Some(p),
+                ..base
+            },
+        ));
+    }
+    out
+}
+
+/// Marks the points no other point dominates (faster and at least as accurate, or vice versa).
+pub fn mark_pareto(points: &mut [Point]) {
+    let copy: Vec<(f64, f64)> = points.iter().map(|p| (p.gpu_ms, p.rel_rms)).collect();
+    for (i, p) in points.iter_mut().enumerate() {
+        p.pareto = !copy.iter().enumerate().any(|(j, q)| {
+            j != i && q.0 <= p.gpu_ms && q.1 <= p.rel_rms && (q.0 < p.gpu_ms || q.1 < p.rel_rms)
+        });
+    }
+}
+
+/// A measured row from a preprocessing, a mode and a render compared with the reference.
+#[allow(clippy::too_many_arguments)]
+pub fn point(
+    setting: &str,
+    mode: Blend,
+    pre: &Preprocessed,
+    asked_spacing: f64,
+    gpu_ms: f64,
+    render: &[f32],
+    reference: &[f32],
+    auto: bool,
+) -> Point {
+    let (err, _) = metrics::compare(render, reference, None);
+    Point {
+        setting: setting.to_string(),
+        mode: mode.name().to_string(),
+        texel_mm: pre.settings.texel_mm,
+        kernel: pre.settings.kernel_size,
+        node_spacing_mm: asked_spacing,
+        prune: pre.settings.prune_tolerance,
+        nodes: pre.nodes.positions.len(),
+        texels: pre.atlas.texels.len(),
+        nonzeros: match mode {
+            Blend::Optimized => pre.ops.optimized.nnz(),
+            Blend::Local => 0,
+            _ => pre.ops.global.nnz(),
+        },
+        gpu_ms,
+        rel_rms: err.rel_rms,
+        p99: err.channels.iter().map(|c| c.p99).fold(0.0, f64::max),
+        auto,
+        pareto: false,
+    }
+}
+
+/// `chart.csv`.
+pub fn csv(points: &[Point]) -> String {
+    let mut s = String::from("setting,mode,texel_mm,kernel,node_spacing_mm,prune,nodes,texels,nonzeros,gpu_ms,rel_rms,p99,auto,pareto\n");
+    for p in points {
+        s.push_str(&format!(
+            "{},{},{:.4},{},{:.3},{},{},{},{},{:.3},{:.5},{:.5},{},{}\n",
+            p.setting,
+            p.mode,
+            p.texel_mm,
+            p.kernel,
+            p.node_spacing_mm,
+            p.prune,
+            p.nodes,
+            p.texels,
+            p.nonzeros,
+            p.gpu_ms,
+            p.rel_rms,
+            p.p99,
+            p.auto,
+            p.pareto
+        ));
+    }
+    s
+}
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // The font ships in the binary; a failure here would be a corrupt build.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            include_bytes!("../assets/fonts/DejaVuSans.ttf"),
+        );
+    });
+}
+
+fn colour(mode: &str) -> RGBColor {
+    match mode {
+        "local" => RGBColor(230, 120, 20),
+        "global" => RGBColor(40, 120, 200),
+        "simple" => RGBColor(120, 170, 40),
+        _ => RGBColor(200, 30, 90),
+    }
+}
+
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    title: &str,
+    points: &[Point],
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let xmax = points.iter().map(|p| p.gpu_ms).fold(0.0, f64::max) * 1.1;
+    let ymin = points
+        .iter()
+        .map(|p| p.rel_rms)
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-4)
+        * 100.0
+        * 0.7;
+    let ymax = points.iter().map(|p| p.rel_rms).fold(0.0, f64::max) * 100.0 * 1.4;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(
+            0.0..xmax.max(1e-3),
+            (ymin..ymax.max(ymin * 2.0)).log_scale(),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("median GPU frame time (ms)")
+        .y_desc("relative RMS error vs reference (%)")
+        .label_style(("sans-serif", 14))
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    for mode in ["local", "global", "simple", "optimized"] {
+        let c = colour(mode);
+        let series: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|p| p.mode == mode)
+            .map(|p| (p.gpu_ms, 100.0 * p.rel_rms))
+            .collect();
+        chart
+            .draw_series(
+                series
+                    .iter()
+                    .map(|&(x, y)| Circle::new((x, y), 4, c.filled())),
+            )
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .label(mode)
+            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+    }
+    let mut front: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|p| p.pareto)
+        .map(|p| (p.gpu_ms, 100.0 * p.rel_rms))
+        .collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    chart
+        .draw_series(LineSeries::new(front, BLACK.stroke_width(2)))
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(2)));
+    let autos: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|p| p.auto && p.mode == "optimized")
+        .map(|p| (p.gpu_ms, 100.0 * p.rel_rms))
+        .collect();
+    chart
+        .draw_series(
+            autos
+                .iter()
+                .map(|&(x, y)| Circle::new((x, y), 9, BLACK.stroke_width(2))),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?
+        .label("automatic setting")
+        .legend(|(x, y)| Circle::new((x, y), 7, BLACK.stroke_width(2)));
+    chart
+        .configure_series_labels()
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.9))
+        .label_font(("sans-serif", 14))
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    Ok(())
+}
+
+/// Writes `chart.svg` and `chart.png` into `dir`.
+pub fn plot(dir: &Path, title: &str, points: &[Point]) -> Result<()> {
+    register_font();
+    let (w, h) = (900u32, 600u32);
+    let svg_path = dir.join("chart.svg");
+    crate::output::write_atomic(&svg_path, |tmp| {
+        draw(
+            SVGBackend::new(tmp, (w, h)).into_drawing_area(),
+            title,
+            points,
+        )
+    })?;
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    draw(
+        BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area(),
+        title,
+        points,
+    )?;
+    let rgba: Vec<u8> = rgb
+        .chunks(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    crate::output::write_png(&dir.join("chart.png"), w, h, &rgba)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(mode: &str, t: f64, e: f64) -> Point {
+        Point {
+            setting: "s".into(),
+            mode: mode.into(),
+            texel_mm: 1.0,
+            kernel: 7,
+            node_spacing_mm: 2.0,
+            prune: 0.005,
+            nodes: 1,
+            texels: 1,
+            nonzeros: 1,
+            gpu_ms: t,
+            rel_rms: e,
+            p99: e,
+            auto: mode == "optimized",
+            pareto: false,
+        }
+    }
+
+    #[test]
+    fn pareto_front_and_files() {
+        let mut pts = vec![
+            p("local", 1.0, 0.2),
+            p("global", 2.0, 0.05),
+            p("simple", 3.0, 0.06),
+            p("optimized", 2.5, 0.01),
+        ];
+        mark_pareto(&mut pts);
+        let front: Vec<bool> = pts.iter().map(|p| p.pareto).collect();
+        assert_eq!(front, vec![true, true, false, true]);
+        let dir = std::env::temp_dir().join(format!("translucent-chart-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        plot(&dir, "test", &pts).unwrap();
+        let svg = std::fs::read_to_string(dir.join("chart.svg")).unwrap();
+        assert!(svg.contains("Pareto front") && svg.contains("optimized"));
+        let png = image::open(dir.join("chart.png")).unwrap();
+        assert_eq!(png.width(), 900);
+        assert!(csv(&pts).lines().count() == 5);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
