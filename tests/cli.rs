@@ -309,3 +309,90 @@ fn bench_writes_per_pass_bounds() {
     assert!(global["bytes_read"].as_u64().unwrap() > 0);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn chart_runs_on_a_small_scene() {
+    let dir = temp_dir("chart");
+    std::fs::write(
+        dir.join("scene.toml"),
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"ketchup\"\n[output]\nwidth = 48\nheight = 48\n",
+    )
+    .unwrap();
+    let o = bin()
+        .args(["--validate", "chart", "--quick", "--frames", "1", "--cache"])
+        .arg(dir.join("cache"))
+        .arg("--out")
+        .arg(&dir)
+        .arg(dir.join("scene.toml"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.join("chart.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    // auto, kernel 5, texel x2, prune 0.05: four settings, four modes each.
+    assert_eq!(rows.len(), 16, "{csv}");
+    assert!(
+        rows.iter().any(|r| r.contains(",true,")),
+        "no automatic row"
+    );
+    assert!(rows.iter().any(|r| r.ends_with(",true")), "no Pareto point");
+    for r in &rows {
+        let err: f64 = r.split(',').nth(10).unwrap().parse().unwrap();
+        assert!(err.is_finite() && err >= 0.0, "{r}");
+    }
+    assert!(std::fs::read_to_string(dir.join("chart.svg"))
+        .unwrap()
+        .contains("<svg"));
+    assert!(image::open(dir.join("chart.png")).is_ok());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn reference_and_compare_write_their_outputs() {
+    let dir = temp_dir("reference");
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"skin1\"\n[output]\nwidth = 32\nheight = 32\n").unwrap();
+    let o = bin()
+        .args(["reference", "--refine", "--out"])
+        .arg(&dir)
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("the answer moves by"));
+    for f in [
+        "reference.exr",
+        "reference.png",
+        "vertices.csv",
+        "reference.json",
+    ] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    let o = bin()
+        .args(["render", "--frames", "1", "--no-cache", "--out"])
+        .arg(dir.join("r"))
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = bin()
+        .arg("compare")
+        .arg(dir.join("r").join("render.exr"))
+        .arg(dir.join("reference.exr"))
+        .arg("--out")
+        .arg(dir.join("cmp"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cmp").join("error.json")).unwrap())
+            .unwrap();
+    let rms = e["rel_rms"].as_f64().unwrap();
+    assert!(rms > 0.0 && rms < 0.2, "render vs reference: {rms}");
+    let mut c = bin();
+    c.arg("compare")
+        .arg(dir.join("reference.exr"))
+        .arg(dir.join("missing.exr"));
+    fails_with(c, "missing.exr");
+    let _ = std::fs::remove_dir_all(&dir);
+}
