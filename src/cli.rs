@@ -308,21 +308,7 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     );
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
-    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
-    for r in &choice.reasons {
-        println!("# {r}");
-    }
-    let bars = Bars::new();
-    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
-    let (pre, outcome) =
-        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
-    if let CacheOutcome::Hit(p) = &outcome {
-        println!("# preprocessing loaded from {}", p.display());
-    }
-    let gpu = Gpu::new(&GpuOptions {
-        validate: cli.validate,
-        device: cli.device.clone(),
-    })?;
+    let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
     let resolved = scene.resolved.to_toml();
     let mode: Blend = args.mode.into();
     let mut renderer = Renderer::new(
@@ -493,17 +479,9 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
         height: args.height,
     };
     let scene = Scene::load(args.scene.as_deref(), &overrides)?;
-    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
-    let bars = Bars::new();
-    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
-    let (pre, _) =
-        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
-    let gpu = Gpu::new(&GpuOptions {
-        validate: cli.validate,
-        device: cli.device.clone(),
-    })?;
+    let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
     let mode: Blend = args.mode.into();
     let nonzeros = match mode {
         Blend::Optimized => pre.ops.optimized.nnz(),
@@ -825,6 +803,36 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// Opens the device, chooses the settings, checks the estimate against the device before any
+/// work, and loads or builds the preprocessing (printing the reasons when `verbose`).
+fn open_and_prepare(
+    cli: &Cli,
+    scene: &Scene,
+    pre: &PreprocessArgs,
+    verbose: bool,
+) -> Result<(std::sync::Arc<Gpu>, preprocess::Preprocessed)> {
+    let gpu = Gpu::new(&GpuOptions {
+        validate: cli.validate,
+        device: cli.device.clone(),
+    })?;
+    let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
+    let estimate = preprocess::estimate(&scene.mesh, &choice.settings);
+    if verbose {
+        for r in &choice.reasons {
+            println!("# {r}");
+        }
+        println!("# {}", estimate.describe());
+    }
+    estimate.check(&gpu.info)?;
+    let bars = Bars::new();
+    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
+    let (p, outcome) = preprocess::prepare(scene, &choice, pre.cache_dir().as_deref(), &progress)?;
+    if let (true, CacheOutcome::Hit(path)) = (verbose, &outcome) {
+        println!("# preprocessing loaded from {}", path.display());
+    }
+    Ok((gpu, p))
 }
 
 fn check_validation(gpu: &Gpu) -> Result<()> {

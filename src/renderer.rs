@@ -107,6 +107,8 @@ impl Renderer {
         options: Options,
     ) -> Result<Renderer> {
         let (w, h) = (scene.width, scene.height);
+        // Refuse before allocating anything what the device cannot hold.
+        passes::data::Requirements::of(&scene, pre, options.mode).check(&gpu.info)?;
         let data = SubsurfaceData::upload(
             gpu,
             &scene,

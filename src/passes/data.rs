@@ -212,6 +212,119 @@ fn upload<T: Pod>(
     Ok(Arc::new(Buffer::with_data(gpu, name, raw, usage)?))
 }
 
+/// Device memory a renderer needs, per resource, computed before anything is allocated.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct Requirements {
+    /// (resource, bytes).
+    pub items: Vec<(String, u64)>,
+    /// Sum of the items.
+    pub total: u64,
+    /// The most elements any texel buffer has.
+    pub largest_texel_buffer: u64,
+    /// The largest image side.
+    pub largest_image_side: u32,
+}
+
+impl Requirements {
+    /// What rendering `scene` with `pre` in `mode` allocates on the device.
+    pub fn of(scene: &Scene, pre: &Preprocessed, mode: Blend) -> Requirements {
+        let a = &pre.atlas;
+        let o = &pre.ops;
+        let texels = a.texels.len() as u64;
+        let nodes = pre.nodes.positions.len().max(1) as u64;
+        let kk = (o.kernel_size * o.kernel_size) as u64;
+        let atlas_px = a.width as u64 * a.height as u64;
+        let pixels = scene.width as u64 * scene.height as u64;
+        let layers: u64 = scene
+            .lights
+            .iter()
+            .map(|l| crate::passes::frame::layers_of(l) as u64)
+            .sum();
+        let nnz = match mode {
+            Blend::Optimized => o.optimized.nnz(),
+            Blend::Local => 0,
+            _ => o.global.nnz(),
+        } as u64;
+        let tex = scene
+            .texture
+            .as_ref()
+            .map(|t| t.width() as u64 * t.height() as u64 * 4)
+            .unwrap_or(4);
+        let items: Vec<(String, u64)> = vec![
+            ("atlas vertices".into(), a.vertex_mesh.len() as u64 * 80),
+            ("atlas indices".into(), a.indices.len() as u64 * 4),
+            ("covered texels".into(), texels * 4),
+            ("chart ids".into(), atlas_px * 4),
+            ("kernels".into(), texels * (kk + 1) * 16),
+            (
+                "gather".into(),
+                (nodes + 1) * 4 + o.gather.cols.len() as u64 * 8,
+            ),
+            ("global".into(), (nodes + 1) * 4 + nnz * 16),
+            ("texture".into(), tex),
+            ("illumination map".into(), atlas_px * 16),
+            ("local response".into(), atlas_px * 16),
+            ("node irradiance + radiosity".into(), 2 * nodes * 16),
+            (
+                "shadow maps".into(),
+                (scene.shadow_map_size as u64).pow(2) * 4 * layers,
+            ),
+            ("radiance + depth + display".into(), pixels * 24),
+            ("readbacks".into(), pixels * 20),
+        ];
+        Requirements {
+            total: items.iter().map(|i| i.1).sum(),
+            largest_texel_buffer: [texels * (kk + 1), nnz, o.gather.cols.len() as u64, texels]
+                .into_iter()
+                .max()
+                .unwrap_or(0),
+            largest_image_side: [
+                a.width,
+                a.height,
+                scene.width,
+                scene.height,
+                scene.shadow_map_size,
+            ]
+            .into_iter()
+            .max()
+            .unwrap_or(0),
+            items,
+        }
+    }
+
+    /// Refuses, naming the limit, what the device cannot hold.
+    pub fn check(&self, info: &crate::gpu::DeviceInfo) -> Result<(), crate::gpu::GpuError> {
+        use crate::gpu::GpuError;
+        if self.largest_texel_buffer > info.max_texel_buffer_elements {
+            return Err(GpuError::Limit {
+                what: "the largest texel buffer (kernels or the global matrix)".into(),
+                limit: "maxTexelBufferElements",
+                value: self.largest_texel_buffer,
+                max: info.max_texel_buffer_elements,
+            });
+        }
+        if self.largest_image_side > info.max_image_dimension_2d {
+            return Err(GpuError::Limit {
+                what: "the largest image (atlas, output or shadow map)".into(),
+                limit: "maxImageDimension2D",
+                value: self.largest_image_side as u64,
+                max: info.max_image_dimension_2d as u64,
+            });
+        }
+        // Leave a tenth of the device's memory to the driver and other programs.
+        let budget = info.device_local_bytes / 10 * 9;
+        if self.total > budget {
+            return Err(GpuError::Limit {
+                what: "the scene's device data (see the memory report)".into(),
+                limit: "90 % of device-local memory (bytes)",
+                value: self.total,
+                max: budget,
+            });
+        }
+        Ok(())
+    }
+}
+
 impl SubsurfaceData {
     /// Uploads the preprocessing of `scene` for blending `mode`; with `global_storage` the
     /// global matrix is also usable as storage buffers (see `GlobalLayout::Storage`).

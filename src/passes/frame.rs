@@ -93,7 +93,9 @@ pub fn shadow_projections(
                 any_perpendicular(axis),
             );
             let far = dist + radius;
-            let near = (dist - radius).max(far * 1e-3);
+            // The near plane bounds depth along the axis, which is the distance times the
+            // cosine of the angle off the axis.
+            let near = ((dist - radius) * half.cos()).max(far * 1e-3);
             vec![ShadowProjection {
                 view_proj: Mat4::perspective_rh(2.0 * half, 1.0, near, far) * view,
                 texel_mm: 2.0 * dist * half.tan() / size as f32,
@@ -103,7 +105,9 @@ pub fn shadow_projections(
         LightKind::Point => {
             let dist = (center - light.position).length();
             let far = dist + radius;
-            let near = (dist - radius).max(far * 1e-3);
+            // Depth along a face's axis is at least the distance times cos(54.7 degrees), the
+            // angle of the face's corners.
+            let near = ((dist - radius) * 0.57).max(far * 1e-3);
             let half = 1.05f32.atan();
             let proj = Mat4::perspective_rh(2.0 * half, 1.0, near, far);
             let faces = [

@@ -383,8 +383,11 @@ impl Atlas {
         let all: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
         let mut pending = vec![(all, max_angle_deg)];
         let mut done: Vec<(Chart, Vec<Cell>)> = Vec::new();
-        while !pending.is_empty() {
-            let groups: Vec<(Vec<u32>, f64)> = pending
+        let mut singles: Vec<u32> = Vec::new();
+        while !pending.is_empty() || !singles.is_empty() {
+            let mut groups: Vec<(Vec<u32>, f64)> =
+                singles.drain(..).map(|t| (vec![t], 0.0)).collect();
+            let grown: Vec<(Vec<u32>, f64)> = pending
                 .drain(..)
                 .flat_map(|(faces, angle)| {
                     grow_charts(&faces, &normals, &areas, &adj, angle.to_radians().cos())
@@ -392,6 +395,7 @@ impl Atlas {
                         .map(move |c| (c, angle))
                 })
                 .collect();
+            groups.extend(grown);
             let results: Vec<_> = groups
                 .into_par_iter()
                 .map(|(triangles, angle)| {
@@ -434,7 +438,15 @@ impl Atlas {
                 .collect();
             for (chart, cells, folded, angle) in results {
                 if folded && chart.triangles.len() > 1 {
-                    pending.push((chart.triangles, angle * 0.5));
+                    if angle > 1.0 {
+                        pending.push((chart.triangles, angle * 0.5));
+                    } else {
+                        // Still folded at a 1-degree bound: coincident (duplicate) triangles.
+                        // Each becomes a chart of its own.
+                        for t in chart.triangles {
+                            singles.push(t);
+                        }
+                    }
                 } else {
                     done.push((chart, cells));
                 }
@@ -621,6 +633,25 @@ mod tests {
         let bunny = Scene::load(None, &Overrides::default()).unwrap().mesh;
         let atlas = check(&bunny, 0.6, 4);
         assert!(atlas.charts.len() > 10);
+    }
+
+    #[test]
+    fn duplicate_triangles_get_charts_of_their_own() {
+        let mut m = Mesh::parse_obj(
+            "t",
+            "v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\nf 1 3 2\n",
+        )
+        .unwrap();
+        m.compute_normals();
+        let atlas = check(&m, 0.5, 3);
+        assert!(
+            atlas
+                .charts
+                .iter()
+                .filter(|c| c.triangles.len() == 1)
+                .count()
+                >= 2
+        );
     }
 
     #[test]

@@ -178,6 +178,43 @@ impl Bvh {
         best
     }
 
+    /// Number of surface crossings of the ray `o + t d`, t > 0.
+    pub fn crossings(&self, o: DVec3, d: DVec3) -> usize {
+        let mut n = 0;
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            let node = self.nodes[i];
+            if !Self::slab(node.lo, node.hi, o, d, f64::INFINITY) {
+                continue;
+            }
+            if node.count > 0 {
+                n += self.order[node.start as usize..(node.start + node.count) as usize]
+                    .iter()
+                    .filter(|&&t| self.triangle(t, o, d).is_some())
+                    .count();
+            } else {
+                stack.push(node.start as usize);
+                stack.push(node.start as usize + 1);
+            }
+        }
+        n
+    }
+
+    /// Whether `p` lies inside the (closed) surface: an odd number of crossings along most of
+    /// three skewed rays, so that one ray grazing an edge or leaving through a hole of an
+    /// open mesh does not decide alone.
+    pub fn contains(&self, p: DVec3) -> bool {
+        let dirs = [
+            DVec3::new(0.577, 0.593, 0.561),
+            DVec3::new(-0.613, 0.512, -0.601),
+            DVec3::new(0.541, -0.662, -0.519),
+        ];
+        dirs.iter()
+            .filter(|d| self.crossings(p, d.normalize()) % 2 == 1)
+            .count()
+            >= 2
+    }
+
     /// Whether anything blocks the segment from `o` along `d` up to `t_max`.
     pub fn occluded(&self, o: DVec3, d: DVec3, t_max: f64) -> bool {
         let mut stack = vec![0usize];
@@ -222,6 +259,8 @@ mod tests {
             .intersect(DVec3::new(0.0, 50.0, 0.0), DVec3::Y, f64::INFINITY)
             .is_none());
         assert!(bvh.occluded(DVec3::new(0.0, 0.0, 100.0), DVec3::NEG_Z, 90.0));
+        assert!(bvh.contains(DVec3::new(1.0, 2.0, 3.0)));
+        assert!(!bvh.contains(DVec3::new(1.0, 2.0, 30.0)));
         assert!(!bvh.occluded(DVec3::new(0.0, 0.0, 100.0), DVec3::NEG_Z, 80.0));
         // Brute force agrees on random rays.
         for i in 0..200 {

@@ -410,6 +410,33 @@ impl Scene {
             }
         };
 
+        // Where the camera and the lights stand relative to the object.
+        let bvh = crate::reference::bvh::Bvh::new(&mesh.positions, &mesh.indices);
+        if bvh.contains(camera.position.as_dvec3()) {
+            bail!("[camera] position {:?} lies inside the object", position);
+        }
+        let to_center = center - camera.position;
+        let view = (camera.target - camera.position).normalize();
+        let off_axis = to_center.normalize().dot(view).clamp(-1.0, 1.0).acos();
+        let reach = (radius / to_center.length().max(1e-6))
+            .clamp(0.0, 1.0)
+            .asin();
+        // Half the diagonal field of view.
+        let aspect = width as f32 / height as f32;
+        let half_fov = ((0.5 * camera.fov_y).tan() * (1.0 + aspect * aspect).sqrt()).atan();
+        if off_axis - reach > half_fov {
+            bail!("the object lies outside the camera's view ([camera] looks {:.0} degrees away from it)", off_axis.to_degrees());
+        }
+        for (i, l) in lights.iter().enumerate() {
+            if l.kind != LightKind::Directional && bvh.contains(l.position.as_dvec3()) {
+                bail!(
+                    "[[lights]] #{} at {:?} lies inside the object: it would light nothing",
+                    i + 1,
+                    l.position.to_array()
+                );
+            }
+        }
+
         Ok(Scene {
             mesh,
             texture,
