@@ -136,6 +136,8 @@ pub struct BenchReport {
     pub bandwidth: Bandwidth,
     /// What was rendered.
     pub scene: SceneSize,
+    /// Device memory per resource and in total.
+    pub memory: crate::passes::data::Requirements,
 }
 
 /// Frame-level figures.
@@ -178,6 +180,7 @@ impl BenchReport {
         pre: &Preprocessed,
         bandwidth: Bandwidth,
         nonzeros: usize,
+        memory: crate::passes::data::Requirements,
     ) -> BenchReport {
         let passes: Vec<PassBench> = timings
             .passes
@@ -208,6 +211,7 @@ impl BenchReport {
             },
             passes,
             bandwidth,
+            memory,
             scene: SceneSize {
                 vertices: scene.mesh.positions.len(),
                 nodes: pre.nodes.positions.len(),

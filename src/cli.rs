@@ -516,7 +516,8 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     check_validation(&gpu)?;
     let report = TimingReport::new(&gpu.info.name, &gpu.info.driver, &names, &timings);
     let bandwidth = crate::bench::measure_bandwidth(256 << 20);
-    let b = crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, nonzeros);
+    let memory = crate::passes::data::Requirements::of(&scene, &pre, mode);
+    let b = crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, nonzeros, memory);
     output::write_atomic(&args.out.join("bench.json"), |p| {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&b)?)?)
     })?;
@@ -557,6 +558,18 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     println!(
         "frame: GPU median {:.3} ms, wall median {:.3} ms ({:.1} fps), bound {:.3} ms, over {} frames",
         b.frame.gpu_median_ms, b.frame.wall_median_ms, b.frame.fps, b.frame.bound_ms, b.frames
+    );
+    println!("device memory:");
+    for (name, bytes) in &b.memory.items {
+        println!(
+            "  {name:<28} {:>9.2} MiB",
+            *bytes as f64 / (1u64 << 20) as f64
+        );
+    }
+    println!(
+        "  {:<28} {:>9.2} MiB",
+        "total",
+        b.memory.total as f64 / (1u64 << 20) as f64
     );
     println!("wrote {}", args.out.join("bench.json").display());
     Ok(())

@@ -305,6 +305,8 @@ fn bench_writes_per_pass_bounds() {
             assert!(p.get(key).is_some(), "{key} missing in {p}");
         }
     }
+    assert!(b["memory"]["total"].as_u64().unwrap() > 0);
+    assert!(b["memory"]["items"].as_array().unwrap().len() > 5);
     let global = passes.iter().find(|p| p["name"] == "global").unwrap();
     assert!(global["bytes_read"].as_u64().unwrap() > 0);
     let _ = std::fs::remove_dir_all(&dir);
