@@ -13,6 +13,9 @@ use std::path::{Path, PathBuf};
 /// The Stanford bunny, about 50 mm tall (see the header of `assets/bunny.obj`).
 pub const BUNNY_OBJ: &str = include_str!("../../assets/bunny.obj");
 
+/// The most subdivisions of a built-in mesh (a sphere of 2048 segments has 2 million vertices).
+pub const MAX_SEGMENTS: u32 = 2048;
+
 /// The most triangles a mesh may have.
 pub const MAX_TRIANGLES: usize = 4_000_000;
 
@@ -174,6 +177,9 @@ impl Scene {
                     "sphere" => {
                         let r = *md.radius.get_or_insert(25.0);
                         let s = *md.segments.get_or_insert(64);
+                        if !(3..=MAX_SEGMENTS).contains(&s) {
+                            bail!("[mesh] segments = {s} must lie between 3 and {MAX_SEGMENTS}");
+                        }
                         if !(r.is_finite() && r > 0.0) {
                             bail!("[mesh] radius = {r} must be positive");
                         }
@@ -182,6 +188,9 @@ impl Scene {
                     "box" => {
                         let size = *md.size.get_or_insert([50.0, 50.0, 50.0]);
                         let s = *md.segments.get_or_insert(16);
+                        if !(1..=MAX_SEGMENTS).contains(&s) {
+                            bail!("[mesh] segments = {s} must lie between 1 and {MAX_SEGMENTS}");
+                        }
                         if size.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
                             bail!("[mesh] size = {size:?} must be three positive lengths");
                         }
@@ -526,6 +535,12 @@ mod tests {
             ),
             ("[mesh]\nobj = \"does-not-exist.obj\"", "does not exist"),
             ("[mesh]\nbuiltin = \"teapot\"", "teapot"),
+            (
+                "[mesh]\nbuiltin = \"sphere\"\nsegments = 100000",
+                "segments",
+            ),
+            ("[mesh]\nbuiltin = \"box\"\nsegments = 0", "segments"),
+            ("[mesh]\nsubdivide = 9", "subdivide"),
             ("[[lights]]\nkind = \"point\"", "position"),
             (
                 "[[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, 0.0]",
