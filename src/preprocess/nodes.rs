@@ -132,7 +132,9 @@ impl Nodes {
             &adapter,
             target_indices,
             1.0,
-            meshopt::SimplifyOptions::empty(),
+            // Even triangle sizes: flat regions would otherwise collapse into a few large
+            // triangles, and the global response needs nodes spread at the spacing asked for.
+            meshopt::SimplifyOptions::Regularize,
             None,
         );
         // Node ids for the welded vertices the proxy keeps.

@@ -1,0 +1,244 @@
+//! Stability where the method is known to be weak (METHOD.md section 3): each case renders
+//! with optimized, simple and global-only blending on lavapipe (validation on) and compares
+//! with the brute-force reference. Every case must give a finite image; the optimized render's
+//! relative RMS must stay under the bound given. The bounds are ceilings set about 30 % above
+//! the figures measured when the suite was written, so a regression fails; where a figure is
+//! far from the 2 % goal the README's stability table says so and why. `cargo test --release
+//! --test stability -- --nocapture --test-threads 1` prints the table rows.
+
+mod common;
+
+use glam::{Mat4, Vec3};
+use std::path::Path;
+use translucent::preprocess::{operators::Blend, settings::SettingsOverrides};
+use translucent::reference::{metrics, Reference, ReferenceSettings};
+use translucent::renderer::Options;
+use translucent::scene::{desc::SceneDesc, mesh::Mesh, Overrides, Scene};
+
+fn scene(text: &str) -> Scene {
+    Scene::from_desc(
+        SceneDesc::parse(text).unwrap(),
+        Path::new(""),
+        &Overrides::default(),
+    )
+    .unwrap()
+}
+
+/// Appends `part` (moved by `t`) to the scene's mesh.
+fn add(scene: &mut Scene, mut part: Mesh, t: Mat4) {
+    part.transform(t);
+    let m = &mut scene.mesh;
+    let base = m.positions.len() as u32;
+    m.positions.extend(&part.positions);
+    m.normals.extend(&part.normals);
+    m.uvs.extend(&part.uvs);
+    m.indices.extend(part.indices.iter().map(|i| i + base));
+}
+
+/// Renders `scene` (optimized and simple blending) and returns the relative RMS per channel
+/// of each against the reference, after checking finiteness.
+fn measure(name: &str, scene: &Scene, o: SettingsOverrides, bound: f64) -> [f64; 3] {
+    let pre = common::preprocess(scene, o);
+    let reference = Reference::compute(scene, ReferenceSettings::for_scene(scene));
+    let mut worst = [0.0; 3];
+    let mut line = format!("| {name} |");
+    for mode in [Blend::Optimized, Blend::Simple, Blend::Global] {
+        let out = common::render(
+            scene,
+            &pre,
+            Options {
+                mode,
+                ..Default::default()
+            },
+            1,
+        );
+        assert!(
+            out.radiance.iter().all(|v| v.is_finite()),
+            "{name}: non-finite radiance"
+        );
+        let (e, _) = metrics::compare(&out.radiance, &reference.radiance, None);
+        assert!(e.pixels > 50, "{name}: only {} pixels compared", e.pixels);
+        let rms: Vec<String> = e
+            .channels
+            .iter()
+            .map(|c| format!("{:.1}", 100.0 * c.rel_rms))
+            .collect();
+        line.push_str(&format!(" {} |", rms.join(" / ")));
+        if mode == Blend::Optimized {
+            worst = [
+                e.channels[0].rel_rms,
+                e.channels[1].rel_rms,
+                e.channels[2].rel_rms,
+            ];
+            line.push_str(&format!(
+                " {:.1} |",
+                100.0 * e.channels.iter().map(|c| c.p99).fold(0.0, f64::max)
+            ));
+        }
+    }
+    println!("{line} {:.0} |", 100.0 * bound);
+    let max = worst.iter().copied().fold(0.0, f64::max);
+    assert!(
+        max < bound,
+        "{name}: relative RMS {:.2} % above the bound {:.0} %",
+        100.0 * max,
+        100.0 * bound
+    );
+    worst
+}
+
+const LIGHT_ABOVE: &str = "[[lights]]\nkind = \"directional\"\ndirection = [0.3, -1.0, -0.2]\n";
+const CAMERA_ABOVE: &str =
+    "[camera]\nposition = [0.0, 120.0, 60.0]\ntarget = [0.0, 0.0, 0.0]\nfov_deg = 35.0\n";
+const SMALL: &str = "[output]\nwidth = 64\nheight = 64\n";
+
+#[test]
+fn thin_slab_lit_from_behind() {
+    // 2 mm of skin1 lit from below, seen from above: light arrives only through the slab.
+    let s = scene(&format!(
+        "[mesh]\nbuiltin = \"box\"\nsize = [40.0, 2.0, 40.0]\nsegments = 40\n{CAMERA_ABOVE}[[lights]]\nkind = \"directional\"\ndirection = [0.0, 1.0, 0.0]\n[material]\npreset = \"skin1\"\n{SMALL}"
+    ));
+    measure(
+        "thin slab lit from behind (2 mm, skin1)",
+        &s,
+        SettingsOverrides::default(),
+        0.5,
+    );
+}
+
+#[test]
+fn two_surfaces_across_an_air_gap() {
+    // Two plates 1 mm apart, only the upper one lit from above: Euclidean distance carries
+    // light across the gap in both the reference and the method.
+    let mut s = scene(&format!(
+        "[mesh]\nbuiltin = \"box\"\nsize = [40.0, 4.0, 40.0]\nsegments = 20\n[transform]\ntranslate = [0.0, 2.5, 0.0]\n{CAMERA_ABOVE}{LIGHT_ABOVE}[material]\npreset = \"skimmilk\"\n{SMALL}"
+    ));
+    add(
+        &mut s,
+        Mesh::cuboid(Vec3::new(40.0, 4.0, 40.0), 20),
+        Mat4::from_translation(Vec3::new(10.0, -2.5, 0.0)),
+    );
+    measure(
+        "air gap of 1 mm (skim milk)",
+        &s,
+        SettingsOverrides::default(),
+        0.18,
+    );
+}
+
+#[test]
+fn concave_corner() {
+    // An L of two boxes: the inside corner sees itself.
+    let mut s = scene(&format!(
+        "[mesh]\nbuiltin = \"box\"\nsize = [40.0, 6.0, 30.0]\nsegments = 20\n{CAMERA_ABOVE}{LIGHT_ABOVE}[material]\npreset = \"marble\"\n{SMALL}"
+    ));
+    add(
+        &mut s,
+        Mesh::cuboid(Vec3::new(6.0, 30.0, 30.0), 15),
+        Mat4::from_translation(Vec3::new(-17.0, 18.0, 0.0)),
+    );
+    measure(
+        "concave corner (marble)",
+        &s,
+        SettingsOverrides::default(),
+        0.17,
+    );
+}
+
+#[test]
+fn low_and_high_albedo() {
+    for (preset, bound) in [("ketchup", 0.04), ("cream", 0.06)] {
+        let s = scene(&format!("[mesh]\nbuiltin = \"sphere\"\nradius = 15.0\nsegments = 48\n{LIGHT_ABOVE}[material]\npreset = \"{preset}\"\n{SMALL}"));
+        measure(
+            &format!("sphere r = 15 mm, {preset}"),
+            &s,
+            SettingsOverrides::default(),
+            bound,
+        );
+    }
+}
+
+#[test]
+fn texels_far_larger_and_far_smaller_than_the_peak() {
+    let s = scene(&format!("[mesh]\nbuiltin = \"sphere\"\nradius = 15.0\nsegments = 48\n{LIGHT_ABOVE}[material]\npreset = \"marble\"\n{SMALL}"));
+    let z = s
+        .material
+        .dipoles()
+        .iter()
+        .map(|d| d.z_r)
+        .fold(f64::INFINITY, f64::min);
+    let large = SettingsOverrides {
+        texel_mm: Some(10.0 * z),
+        ..Default::default()
+    };
+    measure("texel = 10 z_r (marble)", &s, large, 0.26);
+    let small = SettingsOverrides {
+        texel_mm: Some(0.5 * z),
+        ..Default::default()
+    };
+    measure("texel = z_r / 2 (marble)", &s, small, 0.03);
+}
+
+#[test]
+fn object_much_smaller_than_the_diffusion_length() {
+    // A 2 mm sphere of skim milk (diffusion length 18 mm in red).
+    let s = scene(&format!("[mesh]\nbuiltin = \"sphere\"\nradius = 2.0\nsegments = 32\n{LIGHT_ABOVE}[material]\npreset = \"skimmilk\"\n{SMALL}"));
+    measure(
+        "sphere r = 2 mm in skim milk",
+        &s,
+        SettingsOverrides::default(),
+        0.27,
+    );
+}
+
+#[test]
+fn coarse_mesh() {
+    let s = scene(&format!("[mesh]\nbuiltin = \"sphere\"\nradius = 15.0\nsegments = 8\n{LIGHT_ABOVE}[material]\npreset = \"skin1\"\n{SMALL}"));
+    measure(
+        "coarse sphere (8 segments, skin1)",
+        &s,
+        SettingsOverrides::default(),
+        0.16,
+    );
+}
+
+#[test]
+fn chart_seams_under_a_moving_light() {
+    // A cube: every edge is a chart seam. The light sweeps across the top edges.
+    for (k, dir) in ["[1.0, -0.2, 0.0]", "[0.0, -1.0, 0.0]", "[-1.0, -0.2, 0.3]"]
+        .iter()
+        .enumerate()
+    {
+        let s = scene(&format!(
+            "[mesh]\nbuiltin = \"box\"\nsize = [20.0, 20.0, 20.0]\nsegments = 16\n[camera]\nposition = [50.0, 50.0, 60.0]\ntarget = [0.0, 0.0, 0.0]\n[[lights]]\nkind = \"directional\"\ndirection = {dir}\n[material]\npreset = \"skimmilk\"\n{SMALL}"
+        ));
+        measure(
+            &format!("cube seams, light position {}", k + 1),
+            &s,
+            SettingsOverrides::default(),
+            0.27,
+        );
+    }
+}
+
+#[test]
+fn degenerate_and_sliver_triangles() {
+    // A UV sphere (slivers at the poles) with degenerate triangles and a needle added.
+    let mut s = scene(&format!("[mesh]\nbuiltin = \"sphere\"\nradius = 15.0\nsegments = 64\n{LIGHT_ABOVE}[material]\npreset = \"marble\"\n{SMALL}"));
+    let m = &mut s.mesh;
+    let base = m.positions.len() as u32;
+    m.positions.extend([
+        Vec3::new(0.0, 15.0, 0.0),
+        Vec3::new(0.0, 15.0, 0.0),
+        Vec3::new(0.001, 15.0, 0.0),
+    ]);
+    m.normals.extend([Vec3::Y; 3]);
+    m.uvs.extend([glam::Vec2::ZERO; 3]);
+    m.indices.extend([base, base + 1, base + 2, 0, 1, 1]);
+    measure(
+        "slivers and degenerate triangles (marble)",
+        &s,
+        SettingsOverrides::default(),
+        0.03,
+    );
+}
