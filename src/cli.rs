@@ -52,23 +52,12 @@ pub enum Command {
 /// Arguments of `reference`.
 #[derive(Debug, Args)]
 pub struct ReferenceArgs {
-    /// Scene file (TOML); the default scene without one.
-    pub scene: Option<PathBuf>,
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Output folder.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// OBJ mesh replacing the scene's.
-    #[arg(long)]
-    pub mesh: Option<PathBuf>,
-    /// Material preset replacing the scene's.
-    #[arg(long)]
-    pub material: Option<String>,
-    /// Image width.
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height.
-    #[arg(long)]
-    pub height: Option<u32>,
     /// Sample spacing in mm (default: half the smallest z_r).
     #[arg(long)]
     pub spacing_mm: Option<f64>,
@@ -83,20 +72,12 @@ pub struct ReferenceArgs {
 /// Arguments of `chart`.
 #[derive(Debug, Args)]
 pub struct ChartArgs {
-    /// Scene file (TOML); the default scene without one.
-    pub scene: Option<PathBuf>,
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Output folder.
     #[arg(long, default_value = "out/chart")]
     pub out: PathBuf,
-    /// Material preset replacing the scene's.
-    #[arg(long)]
-    pub material: Option<String>,
-    /// Image width.
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height.
-    #[arg(long)]
-    pub height: Option<u32>,
     /// Timed frames per point (after 2 warm-up frames).
     #[arg(long, default_value_t = 5)]
     pub frames: usize,
@@ -129,8 +110,9 @@ pub struct CompareArgs {
 /// Arguments of `bench`.
 #[derive(Debug, Args)]
 pub struct BenchArgs {
-    /// Scene file (TOML); the default scene without one.
-    pub scene: Option<PathBuf>,
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Frames to time after the warm-up.
     #[arg(long, default_value_t = 30)]
     pub frames: usize,
@@ -140,18 +122,6 @@ pub struct BenchArgs {
     /// Output folder for bench.json.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// OBJ mesh replacing the scene's.
-    #[arg(long)]
-    pub mesh: Option<PathBuf>,
-    /// Material preset replacing the scene's.
-    #[arg(long)]
-    pub material: Option<String>,
-    /// Image width.
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height.
-    #[arg(long)]
-    pub height: Option<u32>,
     /// Blending mode.
     #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
     pub mode: ModeArg,
@@ -170,6 +140,36 @@ pub enum LayoutArg {
     Texel,
     /// Storage buffers.
     Storage,
+}
+
+/// The scene to use and the command-line values that replace parts of it.
+#[derive(Debug, Args, Clone, Default)]
+pub struct SceneArgs {
+    /// Scene file (TOML); the default scene (the bunny in skim milk) without one.
+    pub scene: Option<PathBuf>,
+    /// OBJ mesh replacing the scene's.
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Material preset replacing the scene's (e.g. skimmilk, marble, ketchup).
+    #[arg(long)]
+    pub material: Option<String>,
+    /// Image width in pixels.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels.
+    #[arg(long)]
+    pub height: Option<u32>,
+}
+
+impl SceneArgs {
+    fn overrides(&self) -> Overrides {
+        Overrides {
+            mesh: self.mesh.clone(),
+            material: self.material.clone(),
+            width: self.width,
+            height: self.height,
+        }
+    }
 }
 
 /// Preprocessing controls; every value left out is derived from the scene and printed.
@@ -216,14 +216,9 @@ impl PreprocessArgs {
 /// Arguments of `precompute`.
 #[derive(Debug, Args, Default)]
 pub struct PrecomputeArgs {
-    /// Scene file (TOML); the default scene without one.
-    pub scene: Option<PathBuf>,
-    /// OBJ mesh replacing the scene's.
-    #[arg(long)]
-    pub mesh: Option<PathBuf>,
-    /// Material preset replacing the scene's.
-    #[arg(long)]
-    pub material: Option<String>,
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -232,26 +227,15 @@ pub struct PrecomputeArgs {
 /// Arguments of `render`.
 #[derive(Debug, Args, Default)]
 pub struct RenderArgs {
-    /// Scene file (TOML); the default scene (the bunny in skim milk) without one.
-    pub scene: Option<PathBuf>,
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Output folder.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Frames to render and time (the images are the last frame's).
     #[arg(long, default_value_t = 10)]
     pub frames: usize,
-    /// OBJ mesh replacing the scene's.
-    #[arg(long)]
-    pub mesh: Option<PathBuf>,
-    /// Material preset replacing the scene's (e.g. skimmilk, marble, ketchup).
-    #[arg(long)]
-    pub material: Option<String>,
-    /// Image width in pixels.
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height in pixels.
-    #[arg(long)]
-    pub height: Option<u32>,
     /// Blending of local and global responses: local, global, simple or optimized.
     #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
     pub mode: ModeArg,
@@ -295,13 +279,8 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let overrides = Overrides {
-        mesh: args.mesh.clone(),
-        material: args.material.clone(),
-        width: args.width,
-        height: args.height,
-    };
-    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let overrides = args.input.overrides();
+    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
     println!(
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
         scene.resolved.to_toml()
@@ -428,12 +407,8 @@ impl Bars {
 }
 
 fn precompute(args: &PrecomputeArgs) -> Result<()> {
-    let overrides = Overrides {
-        mesh: args.mesh.clone(),
-        material: args.material.clone(),
-        ..Default::default()
-    };
-    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let overrides = args.input.overrides();
+    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     println!(
         "mesh: {} vertices, {} triangles, {:.0} mm^2",
@@ -472,13 +447,8 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let overrides = Overrides {
-        mesh: args.mesh.clone(),
-        material: args.material.clone(),
-        width: args.width,
-        height: args.height,
-    };
-    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let overrides = args.input.overrides();
+    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
@@ -577,13 +547,8 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
 
 fn reference(args: &ReferenceArgs) -> Result<()> {
     use crate::reference::{metrics, Reference, ReferenceSettings};
-    let overrides = Overrides {
-        mesh: args.mesh.clone(),
-        material: args.material.clone(),
-        width: args.width,
-        height: args.height,
-    };
-    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let overrides = args.input.overrides();
+    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
     let mut settings = ReferenceSettings::for_scene(&scene);
     if let Some(s) = args.spacing_mm {
         if !(s.is_finite() && s > 0.0) {
@@ -698,13 +663,8 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let overrides = Overrides {
-        material: args.material.clone(),
-        width: args.width,
-        height: args.height,
-        ..Default::default()
-    };
-    let scene = Scene::load(args.scene.as_deref(), &overrides)?;
+    let overrides = args.input.overrides();
+    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
     let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;

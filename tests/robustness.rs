@@ -3,43 +3,13 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use common::{bin, fails_with, stderr, temp_dir};
+
+use std::path::Path;
 use std::process::{Command, Output};
 use translucent::preprocess::settings::SettingsOverrides;
 use translucent::renderer::Options;
 use translucent::scene::{desc::SceneDesc, Overrides, Scene};
-
-fn bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_translucent"));
-    c.env("RUST_LOG", "warn");
-    c
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("translucent-robust-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn fails_with(mut cmd: Command, needle: &str) {
-    let o = cmd.output().unwrap();
-    let err = stderr(&o);
-    assert!(!o.status.success(), "expected failure, got success: {err}");
-    assert!(
-        !err.contains("panicked"),
-        "panic instead of an error: {err}"
-    );
-    assert!(
-        err.contains(needle),
-        "error does not mention {needle:?}: {err}"
-    );
-    assert_eq!(o.status.code(), Some(1), "exit code: {err}");
-}
 
 fn render_obj(dir: &Path, name: &str, text: &str) -> Output {
     let path = dir.join(name);

@@ -3,6 +3,8 @@
 
 #![allow(dead_code)]
 
+use std::path::PathBuf;
+use std::process::{Command, Output};
 use std::sync::Arc;
 use translucent::gpu::{Gpu, GpuOptions};
 use translucent::preprocess::{self, settings::SettingsOverrides, Preprocessed};
@@ -47,4 +49,40 @@ pub fn assert_no_validation_messages(gpu: &Gpu) {
         messages.len(),
         messages.join("\n")
     );
+}
+
+/// The `translucent` binary with quiet logging.
+pub fn bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_translucent"));
+    c.env("RUST_LOG", "warn");
+    c
+}
+
+/// A fresh, empty temporary folder for one test.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("translucent-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The standard error of a finished command.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs `cmd` and expects exit code 1 with `needle` in the message and no panic.
+pub fn fails_with(mut cmd: Command, needle: &str) {
+    let o = cmd.output().unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success(), "expected failure, got success: {err}");
+    assert!(
+        !err.contains("panicked"),
+        "panic instead of an error: {err}"
+    );
+    assert!(
+        err.contains(needle),
+        "error does not mention {needle:?}: {err}"
+    );
+    assert_eq!(o.status.code(), Some(1), "exit code: {err}");
 }
