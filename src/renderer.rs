@@ -79,7 +79,12 @@ pub struct Renderer {
     display_readback: Arc<Buffer>,
     capture: Option<[Arc<Buffer>; 4]>,
     uploaded_bytes: u64,
+    last_lights: Option<Vec<Light>>,
 }
+
+/// The passes whose results depend only on the lights (and the precomputed data): a frame
+/// whose lights did not move can reuse them.
+pub const LIGHT_PASSES: [&str; 6] = ["shadow", "illum", "dilate", "local", "gather", "global"];
 
 fn host_buffer(gpu: &Arc<Gpu>, name: &str, bytes: u64) -> Result<Arc<Buffer>> {
     Ok(Arc::new(Buffer::new(
@@ -283,6 +288,7 @@ impl Renderer {
             display_readback,
             capture,
             uploaded_bytes: data.bytes,
+            last_lights: None,
         })
     }
 
@@ -313,13 +319,31 @@ impl Renderer {
             .collect()
     }
 
-    /// Renders one frame with `lights` and returns its timing.
+    /// Renders one frame with `lights` and returns its timing. Every pass runs.
     pub fn frame(&mut self, lights: &[Light]) -> Result<FrameTiming> {
+        self.write_uniforms(lights)?;
+        self.last_lights = Some(lights.to_vec());
+        Ok(self.graph.run_frame()?)
+    }
+
+    /// Renders one frame, skipping the passes of [`LIGHT_PASSES`] when `lights` are those of
+    /// the previous frame: their results (the local response, an imported image, and the node
+    /// radiosity, a buffer nothing else writes) still hold. For interactive use (a camera that
+    /// moves under a still light); not with `capture`, which reads their transient inputs.
+    pub fn frame_incremental(&mut self, lights: &[Light]) -> Result<FrameTiming> {
+        if self.capture.is_some() || self.last_lights.as_deref() != Some(lights) {
+            return self.frame(lights);
+        }
+        self.write_uniforms(lights)?;
+        Ok(self.graph.run_frame_skipping(&LIGHT_PASSES)?)
+    }
+
+    fn write_uniforms(&self, lights: &[Light]) -> Result<()> {
         let uniforms = FrameUniforms::new(&self.scene, lights)?;
         if !self.uniforms.write_mapped(bytemuck::bytes_of(&uniforms)) {
             anyhow::bail!("the uniform buffer is not host-visible");
         }
-        Ok(self.graph.run_frame()?)
+        Ok(())
     }
 
     /// The last frame's image.

@@ -410,3 +410,38 @@ fn moving_the_light_changes_the_image_without_preprocessing() {
     );
     common::assert_no_validation_messages(&gpu);
 }
+
+/// A frame whose lights did not move skips the passes that depend only on the lights and
+/// still shows the same image; moving the lights runs them again.
+#[test]
+fn a_still_light_skips_the_light_passes() {
+    let s = scene("[output]\nwidth = 64\nheight = 64\n");
+    let pre = common::preprocess(&s, coarse(1.5));
+    let gpu = common::gpu();
+    {
+        let mut r = Renderer::new(&gpu, s.clone(), &pre, Options::default()).unwrap();
+        let names = r.pass_names();
+        let lights = r.orbit_lights(0.0);
+        let first = r.frame_incremental(&lights).unwrap();
+        assert!(
+            first.pass_ms.iter().all(|t| *t > 0.0),
+            "the first frame runs every pass"
+        );
+        let a = r.output(Vec::new()).unwrap().radiance;
+        let still = r.frame_incremental(&lights).unwrap();
+        let b = r.output(Vec::new()).unwrap().radiance;
+        for (name, t) in names.iter().zip(&still.pass_ms) {
+            let skipped = translucent::renderer::LIGHT_PASSES.contains(&name.as_str());
+            assert_eq!(t.is_nan(), skipped, "{name}: {t}");
+        }
+        assert_eq!(a, b, "the still frame differs from the full one");
+        let moved = r.frame_incremental(&r.orbit_lights(1.0)).unwrap();
+        assert!(
+            moved.pass_ms.iter().all(|t| *t > 0.0),
+            "a moved light runs every pass"
+        );
+        let c = r.output(Vec::new()).unwrap().radiance;
+        assert_ne!(a, c);
+    }
+    common::assert_no_validation_messages(&gpu);
+}

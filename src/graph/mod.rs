@@ -436,6 +436,19 @@ impl FrameGraph {
 
     /// Records every pass, submits, waits, and returns the frame's timings.
     pub fn run_frame(&mut self) -> GpuResult<FrameTiming> {
+        self.run_frame_skipping(&[])
+    }
+
+    /// Like [`FrameGraph::run_frame`] but leaves out the passes named in `skip`: their outputs
+    /// keep the previous frame's contents, which is right only for outputs that persist
+    /// (imported resources, or transient buffers that no other pass of the frame overwrites)
+    /// and whose producers' inputs did not change. Skipped passes time as NaN.
+    pub fn run_frame_skipping(&mut self, skip: &[&str]) -> GpuResult<FrameTiming> {
+        let ran: Vec<bool> = self
+            .passes
+            .iter()
+            .map(|p| !skip.contains(&p.name.as_str()))
+            .collect();
         let gpu = self.gpu.clone();
         let d = &gpu.device;
         let wall_start = Instant::now();
@@ -449,6 +462,9 @@ impl FrameGraph {
             d.cmd_reset_query_pool(self.cmd, self.queries, 0, self.query_count());
         }
         for (i, pass) in self.passes.iter_mut().enumerate() {
+            if !ran[i] {
+                continue;
+            }
             if let Some(dbg) = &gpu.debug_device {
                 let label = vk::DebugUtilsLabelEXT::default().label_name(&pass.label);
                 unsafe { dbg.cmd_begin_debug_utils_label(self.cmd, &label) };
@@ -493,32 +509,49 @@ impl FrameGraph {
                 .vk("vkWaitForFences")?;
         }
         let wall_ms = wall_start.elapsed().as_secs_f64() * 1e3;
+        // Only the queries of the passes that ran were written; waiting on the others would
+        // never return.
         let mut stamps = vec![0u64; 2 * self.passes.len()];
-        if !stamps.is_empty() {
+        for (i, _) in ran.iter().enumerate().filter(|(_, r)| **r) {
             unsafe {
                 d.get_query_pool_results(
                     self.queries,
-                    0,
-                    &mut stamps,
+                    2 * i as u32,
+                    &mut stamps[2 * i..2 * i + 2],
                     vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
                 )
             }
             .vk("vkGetQueryPoolResults")?;
         }
-        let period = gpu.info.timestamp_period_ns * 1e-6;
-        let to_ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * period;
-        let passes = stamps.chunks(2).map(|c| to_ms(c[0], c[1])).collect();
-        let starts = stamps.chunks(2).map(|c| to_ms(stamps[0], c[0])).collect();
-        let gpu_ms = match (stamps.first(), stamps.last()) {
-            (Some(&a), Some(&b)) => to_ms(a, b),
-            _ => 0.0,
-        };
-        if stamps.contains(&0) {
+        let ran_stamps: Vec<u64> = stamps
+            .chunks(2)
+            .zip(&ran)
+            .filter(|(_, r)| **r)
+            .flat_map(|(c, _)| [c[0], c[1]])
+            .collect();
+        if ran_stamps.contains(&0) {
             return Err(GpuError::Vk {
                 call: "vkGetQueryPoolResults (a timestamp was never written)",
                 result: vk::Result::NOT_READY,
             });
         }
+        let period = gpu.info.timestamp_period_ns * 1e-6;
+        let to_ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * period;
+        let first = ran_stamps.first().copied().unwrap_or(0);
+        let passes = stamps
+            .chunks(2)
+            .zip(&ran)
+            .map(|(c, r)| if *r { to_ms(c[0], c[1]) } else { f64::NAN })
+            .collect();
+        let starts = stamps
+            .chunks(2)
+            .zip(&ran)
+            .map(|(c, r)| if *r { to_ms(first, c[0]) } else { f64::NAN })
+            .collect();
+        let gpu_ms = match (ran_stamps.first(), ran_stamps.last()) {
+            (Some(&a), Some(&b)) => to_ms(a, b),
+            _ => 0.0,
+        };
         Ok(FrameTiming {
             pass_ms: passes,
             pass_start_ms: starts,

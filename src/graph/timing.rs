@@ -5,7 +5,8 @@ use serde::Serialize;
 /// Timings of one frame, pass times in execution order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameTiming {
-    /// GPU time of each pass, ms (end timestamp minus begin timestamp).
+    /// GPU time of each pass, ms (end timestamp minus begin timestamp); NaN for a pass the
+    /// frame skipped.
     pub pass_ms: Vec<f64>,
     /// Start of each pass relative to the first pass's begin timestamp, ms.
     pub pass_start_ms: Vec<f64>,
@@ -27,8 +28,10 @@ pub struct Stats {
 }
 
 impl Stats {
-    /// Statistics of `values`; all zero for an empty series.
+    /// Statistics of `values` (NaN entries, skipped passes, left out); all zero for an empty
+    /// series.
     pub fn of(values: &[f64]) -> Stats {
+        let values: Vec<f64> = values.iter().copied().filter(|v| !v.is_nan()).collect();
         if values.is_empty() {
             return Stats {
                 min_ms: 0.0,
@@ -110,7 +113,10 @@ impl TimingReport {
             .collect();
         let gpu = Stats::of(&frames.iter().map(|f| f.gpu_ms).collect::<Vec<_>>());
         let wall = Stats::of(&frames.iter().map(|f| f.wall_ms).collect::<Vec<_>>());
-        let sums: Vec<f64> = frames.iter().map(|f| f.pass_ms.iter().sum()).collect();
+        let sums: Vec<f64> = frames
+            .iter()
+            .map(|f| f.pass_ms.iter().filter(|t| !t.is_nan()).sum())
+            .collect();
         TimingReport {
             device: device.into(),
             driver: driver.into(),
@@ -138,6 +144,9 @@ mod tests {
         let s = Stats::of(&[4.0, 1.0, 2.0, 3.0]);
         assert_eq!(s.median_ms, 2.5);
         assert_eq!(Stats::of(&[]).median_ms, 0.0);
+        // Skipped passes (NaN) are left out.
+        let s = Stats::of(&[f64::NAN, 2.0, 4.0, f64::NAN]);
+        assert_eq!((s.min_ms, s.median_ms, s.max_ms), (2.0, 3.0, 4.0));
     }
 
     #[test]

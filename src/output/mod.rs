@@ -123,7 +123,11 @@ pub fn write_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) -
             "name": format!("frame {f}"), "cat": "frame", "ph": "X", "pid": 1, "tid": 2,
             "ts": t0_us, "dur": frame.wall_ms * 1e3,
         }));
-        for (i, name) in pass_names.iter().enumerate() {
+        for (i, name) in pass_names
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !frame.pass_ms[*i].is_nan())
+        {
             events.push(serde_json::json!({
                 "name": name, "cat": "pass", "ph": "X", "pid": 1, "tid": 1,
                 "ts": t0_us + frame.pass_start_ms[i] * 1e3, "dur": frame.pass_ms[i] * 1e3,
