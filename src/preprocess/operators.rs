@@ -538,12 +538,15 @@ impl Operators {
     /// beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t): under locally uniform
     /// light, kernel + beta + W then give exactly what the full F gives.
     fn direct_term(&self, row_sums: &[[f64; 3]]) -> Vec<[f32; 3]> {
+        let full_sums: Vec<[f64; 3]> = (0..self.global.rows())
+            .map(|q| self.global.row_sum(q))
+            .collect();
         (0..self.kernels.len() / (self.kernel_size * self.kernel_size) as usize)
             .map(|t| {
                 let win = self.kernel_sum(t);
                 let mut g = [0.0; 3];
                 for (q, phi) in self.texel_nodes.row(t) {
-                    let full = self.global.row_sum(q as usize);
+                    let full = full_sums[q as usize];
                     for c in 0..3 {
                         g[c] += phi as f64 * (full[c] - row_sums[q as usize][c]);
                     }
