@@ -73,23 +73,31 @@ impl Blend {
     }
 }
 
-/// Compressed sparse rows with RGB values.
+/// Compressed sparse rows: entries of row r are `cols[row_start[r]..row_start[r + 1]]` with
+/// their `vals`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Csr {
+pub struct Sparse<T> {
     /// Start of each row in `cols`/`vals`; one more entry than rows.
     pub row_start: Vec<u32>,
     /// Column of each entry.
     pub cols: Vec<u32>,
     /// Value of each entry.
-    pub vals: Vec<[f32; 3]>,
+    pub vals: Vec<T>,
 }
 
-impl Csr {
+/// Sparse rows with RGB values (the global matrices).
+pub type Csr = Sparse<[f32; 3]>;
+
+/// Sparse rows with scalar weights (basis and gather).
+pub type Csr1 = Sparse<f32>;
+
+impl<T: Copy> Sparse<T> {
     /// Builds from per-row entry lists.
-    pub fn from_rows(rows: Vec<Vec<(u32, [f32; 3])>>) -> Csr {
-        let mut m = Csr {
+    pub fn from_rows(rows: Vec<Vec<(u32, T)>>) -> Sparse<T> {
+        let mut m = Sparse {
             row_start: vec![0],
-            ..Default::default()
+            cols: Vec::new(),
+            vals: Vec::new(),
         };
         for row in rows {
             for (c, v) in row {
@@ -107,7 +115,7 @@ impl Csr {
     }
 
     /// Entries of row `r`.
-    pub fn row(&self, r: usize) -> impl Iterator<Item = (u32, [f32; 3])> + '_ {
+    pub fn row(&self, r: usize) -> impl Iterator<Item = (u32, T)> + '_ {
         let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
         self.cols[a..b]
             .iter()
@@ -115,6 +123,13 @@ impl Csr {
             .zip(self.vals[a..b].iter().copied())
     }
 
+    /// Number of stored entries.
+    pub fn nnz(&self) -> usize {
+        self.cols.len()
+    }
+}
+
+impl Csr {
     /// Sum of row `r` per channel.
     pub fn row_sum(&self, r: usize) -> [f64; 3] {
         self.row(r).fold([0.0; 3], |mut s, (_, v)| {
@@ -123,11 +138,6 @@ impl Csr {
             }
             s
         })
-    }
-
-    /// Number of stored entries.
-    pub fn nnz(&self) -> usize {
-        self.cols.len()
     }
 }
 
@@ -169,48 +179,6 @@ pub struct Operators {
     pub prune: PruneReport,
     /// Seconds spent on kernels, global F and the near-field fit.
     pub seconds: [f64; 3],
-}
-
-/// Compressed sparse rows with scalar values.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Csr1 {
-    /// Start of each row; one more entry than rows.
-    pub row_start: Vec<u32>,
-    /// Column of each entry.
-    pub cols: Vec<u32>,
-    /// Value of each entry.
-    pub vals: Vec<f32>,
-}
-
-impl Csr1 {
-    fn from_rows(rows: Vec<Vec<(u32, f32)>>) -> Csr1 {
-        let mut m = Csr1 {
-            row_start: vec![0],
-            ..Default::default()
-        };
-        for row in rows {
-            for (c, v) in row {
-                m.cols.push(c);
-                m.vals.push(v);
-            }
-            m.row_start.push(m.cols.len() as u32);
-        }
-        m
-    }
-
-    /// Entries of row `r`.
-    pub fn row(&self, r: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
-        let (a, b) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
-        self.cols[a..b]
-            .iter()
-            .copied()
-            .zip(self.vals[a..b].iter().copied())
-    }
-
-    /// Number of rows.
-    pub fn rows(&self) -> usize {
-        self.row_start.len().saturating_sub(1)
-    }
 }
 
 /// Mean of R_d over texel `s` as seen from `x`, per channel: the exact disc mean when `x`
