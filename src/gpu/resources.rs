@@ -316,6 +316,33 @@ impl Image {
         Ok(image)
     }
 
+    /// Records a barrier over the whole image: (stages, accesses) before and after, and the
+    /// layout change (old, new).
+    pub fn transition(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        src: (vk::PipelineStageFlags2, vk::AccessFlags2),
+        dst: (vk::PipelineStageFlags2, vk::AccessFlags2),
+        layouts: (vk::ImageLayout, vk::ImageLayout),
+    ) {
+        let barrier = [vk::ImageMemoryBarrier2::default()
+            .src_stage_mask(src.0)
+            .src_access_mask(src.1)
+            .dst_stage_mask(dst.0)
+            .dst_access_mask(dst.1)
+            .old_layout(layouts.0)
+            .new_layout(layouts.1)
+            .image(self.raw)
+            .subresource_range(self.range())];
+        unsafe {
+            gpu.device.cmd_pipeline_barrier2(
+                cmd,
+                &vk::DependencyInfo::default().image_memory_barriers(&barrier),
+            )
+        };
+    }
+
     /// The full subresource range of this image.
     pub fn range(&self) -> vk::ImageSubresourceRange {
         vk::ImageSubresourceRange {
@@ -362,19 +389,19 @@ impl Image {
             false,
         )?;
         let staging = Buffer::staging(gpu, &format!("{name} (staging)"), pixels)?;
-        let range = image.range();
         gpu.one_shot(|cmd| unsafe {
-            let to_dst = [vk::ImageMemoryBarrier2::default()
-                .src_stage_mask(vk::PipelineStageFlags2::NONE)
-                .dst_stage_mask(vk::PipelineStageFlags2::COPY)
-                .dst_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                .image(image.raw)
-                .subresource_range(range)];
-            gpu.device.cmd_pipeline_barrier2(
+            image.transition(
+                gpu,
                 cmd,
-                &vk::DependencyInfo::default().image_memory_barriers(&to_dst),
+                (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
+                (
+                    vk::PipelineStageFlags2::COPY,
+                    vk::AccessFlags2::TRANSFER_WRITE,
+                ),
+                (
+                    vk::ImageLayout::UNDEFINED,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                ),
             );
             let region = [vk::BufferImageCopy::default()
                 .image_subresource(vk::ImageSubresourceLayers {
@@ -395,21 +422,22 @@ impl Image {
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
                 &region,
             );
-            let to_read = [vk::ImageMemoryBarrier2::default()
-                .src_stage_mask(vk::PipelineStageFlags2::COPY)
-                .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                .dst_stage_mask(
+            image.transition(
+                gpu,
+                cmd,
+                (
+                    vk::PipelineStageFlags2::COPY,
+                    vk::AccessFlags2::TRANSFER_WRITE,
+                ),
+                (
                     vk::PipelineStageFlags2::FRAGMENT_SHADER
                         | vk::PipelineStageFlags2::COMPUTE_SHADER,
-                )
-                .dst_access_mask(vk::AccessFlags2::SHADER_SAMPLED_READ)
-                .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                .new_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)
-                .image(image.raw)
-                .subresource_range(range)];
-            gpu.device.cmd_pipeline_barrier2(
-                cmd,
-                &vk::DependencyInfo::default().image_memory_barriers(&to_read),
+                    vk::AccessFlags2::SHADER_SAMPLED_READ,
+                ),
+                (
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+                ),
             );
         })?;
         Ok(image)
@@ -441,16 +469,15 @@ impl Image {
         )?;
         let range = image.range();
         gpu.one_shot(|cmd| unsafe {
-            let to_general = [vk::ImageMemoryBarrier2::default()
-                .dst_stage_mask(vk::PipelineStageFlags2::CLEAR)
-                .dst_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::GENERAL)
-                .image(image.raw)
-                .subresource_range(range)];
-            gpu.device.cmd_pipeline_barrier2(
+            image.transition(
+                gpu,
                 cmd,
-                &vk::DependencyInfo::default().image_memory_barriers(&to_general),
+                (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
+                (
+                    vk::PipelineStageFlags2::CLEAR,
+                    vk::AccessFlags2::TRANSFER_WRITE,
+                ),
+                (vk::ImageLayout::UNDEFINED, vk::ImageLayout::GENERAL),
             );
             gpu.device.cmd_clear_color_image(
                 cmd,
