@@ -78,7 +78,6 @@ pub struct Renderer {
     hdr_readback: Arc<Buffer>,
     display_readback: Arc<Buffer>,
     capture: Option<[Arc<Buffer>; 4]>,
-    uploaded_bytes: u64,
     last_lights: Option<Vec<Light>>,
 }
 
@@ -287,7 +286,6 @@ impl Renderer {
             hdr_readback,
             display_readback,
             capture,
-            uploaded_bytes: data.bytes,
             last_lights: None,
         })
     }
@@ -295,12 +293,6 @@ impl Renderer {
     /// Pass names in execution order.
     pub fn pass_names(&self) -> Vec<String> {
         self.graph.pass_names()
-    }
-
-    /// Bytes of precomputed data uploaded when the renderer was built. Nothing else is
-    /// uploaded afterwards except the frame uniforms.
-    pub fn uploaded_bytes(&self) -> u64 {
-        self.uploaded_bytes
     }
 
     /// The scene's lights rotated by `angle` radians about the vertical axis (the camera's up)

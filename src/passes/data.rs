@@ -119,8 +119,6 @@ pub struct SubsurfaceData {
     pub node_count: u32,
     /// The texture (white 1x1 without one).
     pub texture: Arc<Image>,
-    /// Bytes uploaded.
-    pub bytes: u64,
 }
 
 /// The sRGB transfer function, inverted (textures are sRGB-encoded; the GPU samples them
@@ -198,10 +196,8 @@ fn upload<T: Pod>(
     name: &str,
     data: &[T],
     usage: vk::BufferUsageFlags,
-    bytes: &mut u64,
 ) -> GpuResult<Arc<Buffer>> {
     let raw: &[u8] = bytemuck::cast_slice(data);
-    *bytes += raw.len() as u64;
     let padded;
     let raw = if raw.is_empty() {
         padded = [0u8; 16];
@@ -338,7 +334,6 @@ impl SubsurfaceData {
         let atlas = &pre.atlas;
         let ops = &pre.ops;
         let mesh = &scene.mesh;
-        let mut bytes = 0;
         let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
         let (texel_tex, node_tex) = texture_means(scene, pre);
 
@@ -369,23 +364,20 @@ impl SubsurfaceData {
             "atlas vertices",
             &vertices,
             vk::BufferUsageFlags::VERTEX_BUFFER,
-            &mut bytes,
         )?;
         let indices = upload(
             gpu,
             "atlas indices",
             &atlas.indices,
             vk::BufferUsageFlags::INDEX_BUFFER,
-            &mut bytes,
         )?;
 
         let packed: Vec<u32> = atlas.texels.iter().map(|t| t.x | (t.y << 16)).collect();
-        let texels = upload(gpu, "covered texels", &packed, texel_usage, &mut bytes)?;
+        let texels = upload(gpu, "covered texels", &packed, texel_usage)?;
         let mut chart_ids = vec![0u32; (atlas.width * atlas.height) as usize];
         for t in &atlas.texels {
             chart_ids[(t.y * atlas.width + t.x) as usize] = t.chart + 1;
         }
-        bytes += chart_ids.len() as u64 * 4;
         let charts = Arc::new(Image::from_pixels(
             gpu,
             "chart ids",
@@ -426,15 +418,9 @@ impl SubsurfaceData {
                 0.0,
             ]);
         }
-        let kernels = upload(gpu, "kernels", &kernels, texel_usage, &mut bytes)?;
+        let kernels = upload(gpu, "kernels", &kernels, texel_usage)?;
 
-        let gather_rows = upload(
-            gpu,
-            "gather rows",
-            &ops.gather.row_start,
-            texel_usage,
-            &mut bytes,
-        )?;
+        let gather_rows = upload(gpu, "gather rows", &ops.gather.row_start, texel_usage)?;
         let gather_entries: Vec<[f32; 2]> = ops
             .gather
             .cols
@@ -442,13 +428,7 @@ impl SubsurfaceData {
             .zip(&ops.gather.vals)
             .map(|(&t, &w)| [f32::from_bits(packed[t as usize]), w])
             .collect();
-        let gather_entries = upload(
-            gpu,
-            "gather entries",
-            &gather_entries,
-            texel_usage,
-            &mut bytes,
-        )?;
+        let gather_entries = upload(gpu, "gather entries", &gather_entries, texel_usage)?;
 
         let matrix = if mode == Blend::Optimized {
             &ops.optimized
@@ -480,8 +460,8 @@ impl SubsurfaceData {
         } else {
             texel_usage
         };
-        let global_rows = upload(gpu, "global rows", &rows, global_usage, &mut bytes)?;
-        let global_entries = upload(gpu, "global entries", &entries, global_usage, &mut bytes)?;
+        let global_rows = upload(gpu, "global rows", &rows, global_usage)?;
+        let global_entries = upload(gpu, "global entries", &entries, global_usage)?;
 
         let texture = match &scene.texture {
             Some(t) => Image::from_pixels(
@@ -510,7 +490,6 @@ impl SubsurfaceData {
             global_entries,
             node_count: pre.nodes.positions.len() as u32,
             texture: Arc::new(texture),
-            bytes,
         })
     }
 }
