@@ -2,7 +2,7 @@
 //! HDR image whose alpha marks covered pixels.
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
-use super::set_viewport;
+use super::{draw_mesh, DrawTarget, MeshDraw};
 use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler, TexelView};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use ash::vk;
@@ -73,46 +73,19 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, hdr: ResourceId, depth: 
             )?;
             let hdr = res.image(hdr).clone();
             let depth = res.image(depth).clone();
-            let (vertices, indices) = (res.buffer(i.vertices).raw, res.buffer(i.indices).raw);
+            let mesh = MeshDraw {
+                vertices: res.buffer(i.vertices).raw,
+                indices: res.buffer(i.indices).raw,
+                count: i.index_count,
+            };
             Ok(Box::new(move |rec| {
                 let _ = (&sampler, &nodes);
-                let d = &rec.gpu.device;
-                let color = [vk::RenderingAttachmentInfo::default()
-                    .image_view(hdr.view)
-                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(vk::ClearValue {
-                        color: vk::ClearColorValue { float32: [0.0; 4] },
-                    })];
-                let depth_att = vk::RenderingAttachmentInfo::default()
-                    .image_view(depth.view)
-                    .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                    .clear_value(vk::ClearValue {
-                        depth_stencil: vk::ClearDepthStencilValue {
-                            depth: 1.0,
-                            stencil: 0,
-                        },
-                    });
-                let info = vk::RenderingInfo::default()
-                    .render_area(vk::Rect2D {
-                        offset: vk::Offset2D::default(),
-                        extent: hdr.info.extent,
-                    })
-                    .layer_count(1)
-                    .color_attachments(&color)
-                    .depth_attachment(&depth_att);
-                unsafe {
-                    d.cmd_begin_rendering(rec.cmd, &info);
-                    pipeline.bind(rec.cmd);
-                    set_viewport(rec.gpu, rec.cmd, hdr.info.extent);
-                    d.cmd_bind_vertex_buffers(rec.cmd, 0, &[vertices], &[0]);
-                    d.cmd_bind_index_buffer(rec.cmd, indices, 0, vk::IndexType::UINT32);
-                    d.cmd_draw_indexed(rec.cmd, i.index_count, 1, 0, 0, 0);
-                    d.cmd_end_rendering(rec.cmd);
-                }
+                let target = DrawTarget {
+                    color: Some(hdr.view),
+                    depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),
+                    extent: hdr.info.extent,
+                };
+                draw_mesh(rec, &target, &pipeline, mesh, || {});
             }))
         });
 }

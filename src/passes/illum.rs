@@ -2,7 +2,7 @@
 //! the irradiance entering the surface there, with shadows from the shadow maps.
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
-use super::set_viewport;
+use super::{draw_mesh, DrawTarget, MeshDraw};
 use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use ash::vk;
@@ -60,39 +60,22 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                 8,
             )?;
             let map = res.image(map).clone();
-            let (vertices, indices) = (
-                res.buffer(inputs.vertices).raw,
-                res.buffer(inputs.indices).raw,
-            );
+            let mesh = MeshDraw {
+                vertices: res.buffer(inputs.vertices).raw,
+                indices: res.buffer(inputs.indices).raw,
+                count: inputs.index_count,
+            };
             let size = [map.info.extent.width as f32, map.info.extent.height as f32];
             Ok(Box::new(move |rec| {
                 let _ = &sampler;
-                let d = &rec.gpu.device;
-                let color = [vk::RenderingAttachmentInfo::default()
-                    .image_view(map.view)
-                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                    .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::STORE)
-                    .clear_value(vk::ClearValue {
-                        color: vk::ClearColorValue { float32: [0.0; 4] },
-                    })];
-                let info = vk::RenderingInfo::default()
-                    .render_area(vk::Rect2D {
-                        offset: vk::Offset2D::default(),
-                        extent: map.info.extent,
-                    })
-                    .layer_count(1)
-                    .color_attachments(&color);
-                unsafe {
-                    d.cmd_begin_rendering(rec.cmd, &info);
-                    pipeline.bind(rec.cmd);
-                    pipeline.push(rec.cmd, &size);
-                    set_viewport(rec.gpu, rec.cmd, map.info.extent);
-                    d.cmd_bind_vertex_buffers(rec.cmd, 0, &[vertices], &[0]);
-                    d.cmd_bind_index_buffer(rec.cmd, indices, 0, vk::IndexType::UINT32);
-                    d.cmd_draw_indexed(rec.cmd, inputs.index_count, 1, 0, 0, 0);
-                    d.cmd_end_rendering(rec.cmd);
-                }
+                let target = DrawTarget {
+                    color: Some(map.view),
+                    depth: None,
+                    extent: map.info.extent,
+                };
+                draw_mesh(rec, &target, &pipeline, mesh, || {
+                    pipeline.push(rec.cmd, &size)
+                });
             }))
         });
 }

@@ -11,7 +11,8 @@ pub mod readback;
 pub mod shadow;
 pub mod tonemap;
 
-use crate::gpu::Gpu;
+use crate::gpu::{Gpu, Pipeline};
+use crate::graph::RecordContext;
 use ash::vk;
 
 /// Sets a full-extent viewport and scissor.
@@ -31,5 +32,86 @@ pub fn set_viewport(gpu: &Gpu, cmd: vk::CommandBuffer, extent: vk::Extent2D) {
     unsafe {
         gpu.device.cmd_set_viewport(cmd, 0, &[viewport]);
         gpu.device.cmd_set_scissor(cmd, 0, &[scissor]);
+    }
+}
+
+/// Where a mesh pass draws: an optional colour attachment (cleared to zero) and an optional
+/// depth attachment (cleared to 1, stored or discarded), both of `extent`.
+pub struct DrawTarget {
+    /// Colour attachment view.
+    pub color: Option<vk::ImageView>,
+    /// Depth attachment view and what to do with the depth afterwards.
+    pub depth: Option<(vk::ImageView, vk::AttachmentStoreOp)>,
+    /// Size of the attachments.
+    pub extent: vk::Extent2D,
+}
+
+/// The indexed mesh a pass draws: vertex buffer, index buffer (u32), index count.
+#[derive(Clone, Copy)]
+pub struct MeshDraw {
+    /// Vertex buffer.
+    pub vertices: vk::Buffer,
+    /// Index buffer.
+    pub indices: vk::Buffer,
+    /// Number of indices.
+    pub count: u32,
+}
+
+/// Records one cleared draw of `mesh` with `pipeline` into `target`: begin rendering, bind,
+/// `push` (push constants), viewport, draw, end.
+pub fn draw_mesh(
+    rec: &RecordContext<'_>,
+    target: &DrawTarget,
+    pipeline: &Pipeline,
+    mesh: MeshDraw,
+    push: impl FnOnce(),
+) {
+    let d = &rec.gpu.device;
+    let color: Vec<vk::RenderingAttachmentInfo> = target
+        .color
+        .iter()
+        .map(|&view| {
+            vk::RenderingAttachmentInfo::default()
+                .image_view(view)
+                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .clear_value(vk::ClearValue {
+                    color: vk::ClearColorValue { float32: [0.0; 4] },
+                })
+        })
+        .collect();
+    let depth = target.depth.map(|(view, store)| {
+        vk::RenderingAttachmentInfo::default()
+            .image_view(view)
+            .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(store)
+            .clear_value(vk::ClearValue {
+                depth_stencil: vk::ClearDepthStencilValue {
+                    depth: 1.0,
+                    stencil: 0,
+                },
+            })
+    });
+    let mut info = vk::RenderingInfo::default()
+        .render_area(vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent: target.extent,
+        })
+        .layer_count(1)
+        .color_attachments(&color);
+    if let Some(depth) = depth.as_ref() {
+        info = info.depth_attachment(depth);
+    }
+    unsafe {
+        d.cmd_begin_rendering(rec.cmd, &info);
+        pipeline.bind(rec.cmd);
+        push();
+        set_viewport(rec.gpu, rec.cmd, target.extent);
+        d.cmd_bind_vertex_buffers(rec.cmd, 0, &[mesh.vertices], &[0]);
+        d.cmd_bind_index_buffer(rec.cmd, mesh.indices, 0, vk::IndexType::UINT32);
+        d.cmd_draw_indexed(rec.cmd, mesh.count, 1, 0, 0, 0);
+        d.cmd_end_rendering(rec.cmd);
     }
 }

@@ -2,7 +2,7 @@
 //! of the shadow-map array.
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
-use super::set_viewport;
+use super::{draw_mesh, DrawTarget, MeshDraw};
 use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use ash::vk;
@@ -50,39 +50,24 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                 4,
             )?;
             let maps = res.image(maps).clone();
-            let vertices = res.buffer(inputs.vertices).raw;
-            let indices = res.buffer(inputs.indices).raw;
+            let mesh = MeshDraw {
+                vertices: res.buffer(inputs.vertices).raw,
+                indices: res.buffer(inputs.indices).raw,
+                count: inputs.index_count,
+            };
             Ok(Box::new(move |rec| {
-                let d = &rec.gpu.device;
                 for layer in 0..inputs.layers {
-                    let depth = vk::RenderingAttachmentInfo::default()
-                        .image_view(maps.layer_views[layer as usize])
-                        .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-                        .load_op(vk::AttachmentLoadOp::CLEAR)
-                        .store_op(vk::AttachmentStoreOp::STORE)
-                        .clear_value(vk::ClearValue {
-                            depth_stencil: vk::ClearDepthStencilValue {
-                                depth: 1.0,
-                                stencil: 0,
-                            },
-                        });
-                    let info = vk::RenderingInfo::default()
-                        .render_area(vk::Rect2D {
-                            offset: vk::Offset2D::default(),
-                            extent: maps.info.extent,
-                        })
-                        .layer_count(1)
-                        .depth_attachment(&depth);
-                    unsafe {
-                        d.cmd_begin_rendering(rec.cmd, &info);
-                        pipeline.bind(rec.cmd);
-                        pipeline.push(rec.cmd, &layer);
-                        set_viewport(rec.gpu, rec.cmd, maps.info.extent);
-                        d.cmd_bind_vertex_buffers(rec.cmd, 0, &[vertices], &[0]);
-                        d.cmd_bind_index_buffer(rec.cmd, indices, 0, vk::IndexType::UINT32);
-                        d.cmd_draw_indexed(rec.cmd, inputs.index_count, 1, 0, 0, 0);
-                        d.cmd_end_rendering(rec.cmd);
-                    }
+                    let target = DrawTarget {
+                        color: None,
+                        depth: Some((
+                            maps.layer_views[layer as usize],
+                            vk::AttachmentStoreOp::STORE,
+                        )),
+                        extent: maps.info.extent,
+                    };
+                    draw_mesh(rec, &target, &pipeline, mesh, || {
+                        pipeline.push(rec.cmd, &layer)
+                    });
                 }
             }))
         });
