@@ -18,12 +18,15 @@ use serde::{Deserialize, Serialize};
 use settings::{Choice, ObjectScale, Settings, SettingsOverrides};
 use std::time::Instant;
 
-static BUILDS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+thread_local! {
+    static BUILDS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
 
-/// How many times [`Preprocessed::build`] has run in this process (cache loads not counted):
-/// lets tests show that relighting needs no preprocessing.
+/// How many times [`Preprocessed::build`] has been called on this thread (cache loads not
+/// counted): lets a test show that relighting needs no preprocessing, unaffected by tests
+/// running beside it on other threads.
 pub fn builds() -> usize {
-    BUILDS.load(std::sync::atomic::Ordering::SeqCst)
+    BUILDS.with(|b| b.get())
 }
 
 /// Most texels an atlas may have unless told otherwise (a 1024 x 1024 atlas).
@@ -271,7 +274,7 @@ impl Preprocessed {
         choice: &Choice,
         progress: Progress<'_>,
     ) -> Preprocessed {
-        BUILDS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        BUILDS.with(|b| b.set(b.get() + 1));
         let s = choice.settings;
         let gutter = s.kernel_size / 2 + 1;
         let t0 = Instant::now();
