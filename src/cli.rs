@@ -47,6 +47,33 @@ pub enum Command {
     Chart(ChartArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
+    /// Open a window: orbit, zoom and pan with the mouse, move the light, switch material and
+    /// blending live (keys listed in the overlay); `--script` drives it without input.
+    View(ViewArgs),
+}
+
+/// Arguments of `view`.
+#[derive(Debug, Args, Default)]
+pub struct ViewArgs {
+    /// The scene and what replaces parts of it (the window starts at the scene's image size).
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Folder for screenshots (key `p`).
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Starting blending mode.
+    #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
+    pub mode: ModeArg,
+    /// A script of viewer actions, as a file or inline text, e.g.
+    /// "frames 3; light 40 0; screenshot lit; quit" (see `src/viewer/script.rs`).
+    #[arg(long)]
+    pub script: Option<String>,
+    /// Present without waiting for vertical blank (mailbox or immediate where offered).
+    #[arg(long)]
+    pub no_vsync: bool,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
 }
 
 /// Arguments of `reference`.
@@ -688,6 +715,7 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     let gpu = Gpu::new(&GpuOptions {
         validate: cli.validate,
         device: cli.device.clone(),
+        ..Default::default()
     })?;
     let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
     let quiet = |_: &str, _: u64, _: u64| {};
@@ -789,6 +817,7 @@ fn open_and_prepare(
     let gpu = Gpu::new(&GpuOptions {
         validate: cli.validate,
         device: cli.device.clone(),
+        ..Default::default()
     })?;
     let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
     let estimate = preprocess::estimate(&scene.mesh, &choice.settings);
@@ -806,6 +835,45 @@ fn open_and_prepare(
         println!("# preprocessing loaded from {}", path.display());
     }
     Ok((gpu, p))
+}
+
+fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
+    // The script is checked before anything slow happens.
+    let script = match &args.script {
+        None => Vec::new(),
+        Some(s) => {
+            let path = std::path::Path::new(s);
+            let text = if path.is_file() {
+                std::fs::read_to_string(path)
+                    .with_context(|| format!("cannot read script '{}'", path.display()))?
+            } else {
+                s.clone()
+            };
+            crate::viewer::script::parse(&text)?
+        }
+    };
+    let scene = Scene::load(args.input.scene.as_deref(), &args.input.overrides())?;
+    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
+    for r in &choice.reasons {
+        println!("# {r}");
+    }
+    let bars = Bars::new();
+    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
+    let (pre, _) =
+        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
+    crate::viewer::run(crate::viewer::ViewConfig {
+        scene,
+        pre,
+        overrides: args.pre.overrides(),
+        target_error: args.pre.target_error,
+        cache: args.pre.cache_dir(),
+        mode: args.mode.into(),
+        out: args.out.clone(),
+        script,
+        vsync: !args.no_vsync,
+        validate: cli.validate,
+        device: cli.device.clone(),
+    })
 }
 
 fn check_validation(gpu: &Gpu) -> Result<()> {
@@ -868,6 +936,7 @@ pub fn main() -> ExitCode {
         Some(Command::Compare(args)) => compare(args),
         Some(Command::Chart(args)) => chart(&cli, args),
         Some(Command::Devices) => devices(),
+        Some(Command::View(args)) => view(&cli, args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

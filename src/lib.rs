@@ -22,3 +22,4 @@ pub mod preprocess;
 pub mod reference;
 pub mod renderer;
 pub mod scene;
+pub mod viewer;

@@ -57,6 +57,16 @@ pub struct Options {
     pub capture: bool,
     /// How the global pass reads its matrix.
     pub global_layout: compute::GlobalLayout,
+    /// Render for a window (the viewer): add the `overlay` pass that writes the window image,
+    /// and read the image back to the host only on request ([`Renderer::request_readback`]).
+    pub window: Option<WindowOutput>,
+}
+
+/// What the viewer's window needs from the graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WindowOutput {
+    /// The swapchain encodes sRGB itself: the window image holds linear values.
+    pub linear: bool,
 }
 
 impl Default for Options {
@@ -65,6 +75,7 @@ impl Default for Options {
             mode: Blend::Optimized,
             capture: false,
             global_layout: compute::GlobalLayout::Texel,
+            window: None,
         }
     }
 }
@@ -79,6 +90,8 @@ pub struct Renderer {
     display_readback: Arc<Buffer>,
     capture: Option<[Arc<Buffer>; 4]>,
     last_lights: Option<Vec<Light>>,
+    window: Option<(Arc<Image>, passes::overlay::Text)>,
+    readback_requested: bool,
 }
 
 /// The passes whose results depend only on the lights (and the precomputed data): a frame
@@ -93,6 +106,24 @@ fn host_buffer(gpu: &Arc<Gpu>, name: &str, bytes: u64) -> Result<Arc<Buffer>> {
         vk::BufferUsageFlags::TRANSFER_DST,
         MemoryLocation::GpuToCpu,
     )?))
+}
+
+/// IEEE half -> f32 (the window image's RGBA16F texels).
+fn half_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = ((h >> 10) & 0x1f) as i32;
+    let mant = (h & 0x3ff) as f32;
+    sign * match exp {
+        0 => mant * 2f32.powi(-24),
+        31 => {
+            if mant == 0.0 {
+                f32::INFINITY
+            } else {
+                f32::NAN
+            }
+        }
+        e => (1.0 + mant / 1024.0) * 2f32.powi(e - 15),
+    }
 }
 
 fn read_back<T: bytemuck::Pod>(buffer: &Buffer, count: usize) -> Result<Vec<T>> {
@@ -110,17 +141,38 @@ impl Renderer {
         pre: &Preprocessed,
         options: Options,
     ) -> Result<Renderer> {
-        let (w, h) = (scene.width, scene.height);
+        let data = Self::upload(gpu, &scene, pre, &options)?;
+        Self::with_data(gpu, scene, &data, options)
+    }
+
+    /// Checks that the device can hold the scene's data, then uploads it (what
+    /// [`Renderer::new`] does before building the graph; the viewer keeps it across resizes).
+    pub fn upload(
+        gpu: &Arc<Gpu>,
+        scene: &Scene,
+        pre: &Preprocessed,
+        options: &Options,
+    ) -> Result<SubsurfaceData> {
         // Refuse before allocating anything what the device cannot hold.
-        passes::data::Requirements::of(&scene, pre, options.mode).check(&gpu.info)?;
-        let data = SubsurfaceData::upload(
+        passes::data::Requirements::of(scene, pre, options.mode).check(&gpu.info)?;
+        SubsurfaceData::upload(
             gpu,
-            &scene,
+            scene,
             pre,
             options.mode,
             options.global_layout == compute::GlobalLayout::Storage,
         )
-        .context("uploading the preprocessing")?;
+        .context("uploading the preprocessing")
+    }
+
+    /// Builds the frame graph over data already uploaded (for `options.mode`).
+    pub fn with_data(
+        gpu: &Arc<Gpu>,
+        scene: Scene,
+        data: &SubsurfaceData,
+        options: Options,
+    ) -> Result<Renderer> {
+        let (w, h) = (scene.width, scene.height);
         let uniforms = Arc::new(Buffer::new(
             gpu,
             "frame uniforms",
@@ -245,6 +297,49 @@ impl Renderer {
             depth,
         );
         passes::tonemap::add(&mut g, hdr, display, scene.exposure);
+        // The overlay reads the display before the readback does: the readback, skipped in
+        // most window frames, is then the display's last user and changes no layout that a
+        // pass after it relies on (see `graph::compile::check_skip`).
+        let window = match options.window {
+            None => None,
+            Some(out) => {
+                let image = Arc::new(Image::new(
+                    gpu,
+                    "window image",
+                    crate::gpu::ImageInfo {
+                        format: passes::overlay::format(out.linear),
+                        extent: vk::Extent2D {
+                            width: w,
+                            height: h,
+                        },
+                        layers: 1,
+                        usage: vk::ImageUsageFlags::STORAGE | vk::ImageUsageFlags::TRANSFER_SRC,
+                    },
+                    false,
+                )?);
+                // Undefined -> the layout the graph expects at the start of each frame.
+                gpu.one_shot(|cmd| {
+                    image.transition(
+                        gpu,
+                        cmd,
+                        (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
+                        (
+                            vk::PipelineStageFlags2::ALL_COMMANDS,
+                            vk::AccessFlags2::TRANSFER_READ,
+                        ),
+                        (
+                            vk::ImageLayout::UNDEFINED,
+                            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                        ),
+                    )
+                })?;
+                let text = passes::overlay::Text::new(gpu, w, h)?;
+                let window_id = g.import_image(image.clone(), Access::TransferRead);
+                let text_id = g.import_buffer(text.buffer().clone(), None);
+                passes::overlay::add(&mut g, display, text_id, text.grid(), window_id, out.linear);
+                Some((image, text))
+            }
+        };
         passes::readback::add(
             &mut g,
             "readback",
@@ -287,6 +382,8 @@ impl Renderer {
             display_readback,
             capture,
             last_lights: None,
+            window,
+            readback_requested: false,
         })
     }
 
@@ -311,11 +408,10 @@ impl Renderer {
             .collect()
     }
 
-    /// Renders one frame with `lights` and returns its timing. Every pass runs.
+    /// Renders one frame with `lights` and returns its timing. Every pass runs (but the
+    /// readback of a window renderer, which runs on request).
     pub fn frame(&mut self, lights: &[Light]) -> Result<FrameTiming> {
-        self.write_uniforms(lights)?;
-        self.last_lights = Some(lights.to_vec());
-        Ok(self.graph.run_frame()?)
+        self.run(lights, false)
     }
 
     /// Renders one frame, skipping the passes of [`LIGHT_PASSES`] when `lights` are those of
@@ -323,11 +419,110 @@ impl Renderer {
     /// radiosity, a buffer nothing else writes) still hold. For interactive use (a camera that
     /// moves under a still light); not with `capture`, which reads their transient inputs.
     pub fn frame_incremental(&mut self, lights: &[Light]) -> Result<FrameTiming> {
-        if self.capture.is_some() || self.last_lights.as_deref() != Some(lights) {
-            return self.frame(lights);
-        }
+        let same = self.capture.is_none() && self.last_lights.as_deref() == Some(lights);
+        self.run(lights, same)
+    }
+
+    fn run(&mut self, lights: &[Light], skip_light_passes: bool) -> Result<FrameTiming> {
         self.write_uniforms(lights)?;
-        Ok(self.graph.run_frame_skipping(&LIGHT_PASSES)?)
+        self.last_lights = Some(lights.to_vec());
+        let mut skip: Vec<&str> = Vec::new();
+        if skip_light_passes {
+            skip.extend(LIGHT_PASSES);
+        }
+        if self.window.is_some() && !std::mem::take(&mut self.readback_requested) {
+            skip.push("readback");
+        }
+        Ok(self.graph.run_frame_skipping(&skip)?)
+    }
+
+    /// For a window renderer: read the next frame's images back to the host, for
+    /// [`Renderer::output`] (a screenshot). Other renderers read back every frame.
+    pub fn request_readback(&mut self) {
+        self.readback_requested = true;
+    }
+
+    /// For a window renderer: the image the `overlay` pass writes, in `TRANSFER_SRC_OPTIMAL`
+    /// between frames (the viewer blits it to the swapchain).
+    pub fn window_image(&self) -> Option<&Arc<Image>> {
+        self.window.as_ref().map(|(i, _)| i)
+    }
+
+    /// For a window renderer: the window image as RGBA f32 (top row first), read back with a
+    /// one-shot copy (tests and diagnostics; the viewer reads the presented image instead).
+    pub fn read_window_image(&self) -> Result<Vec<f32>> {
+        let image = self.window_image().context("not a window renderer")?;
+        let e = image.info.extent;
+        let texel = if image.info.format == vk::Format::R8G8B8A8_UNORM {
+            4
+        } else {
+            8
+        };
+        let buffer = host_buffer(
+            &self.gpu,
+            "window image readback",
+            e.width as u64 * e.height as u64 * texel,
+        )?;
+        self.gpu.one_shot(|cmd| {
+            let layers = vk::ImageSubresourceLayers {
+                aspect_mask: vk::ImageAspectFlags::COLOR,
+                mip_level: 0,
+                base_array_layer: 0,
+                layer_count: 1,
+            };
+            let copy = [vk::BufferImageCopy {
+                buffer_offset: 0,
+                buffer_row_length: 0,
+                buffer_image_height: 0,
+                image_subresource: layers,
+                image_offset: vk::Offset3D::default(),
+                image_extent: vk::Extent3D {
+                    width: e.width,
+                    height: e.height,
+                    depth: 1,
+                },
+            }];
+            unsafe {
+                self.gpu.device.cmd_copy_image_to_buffer(
+                    cmd,
+                    image.raw,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    buffer.raw,
+                    &copy,
+                );
+                let to_host = [vk::MemoryBarrier2::default()
+                    .src_stage_mask(vk::PipelineStageFlags2::COPY)
+                    .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+                    .dst_stage_mask(vk::PipelineStageFlags2::HOST)
+                    .dst_access_mask(vk::AccessFlags2::HOST_READ)];
+                self.gpu.device.cmd_pipeline_barrier2(
+                    cmd,
+                    &vk::DependencyInfo::default().memory_barriers(&to_host),
+                );
+            }
+        })?;
+        let bytes = buffer.mapped().context("readback is not host-visible")?;
+        Ok(if texel == 4 {
+            bytes.iter().map(|&b| b as f32 / 255.0).collect()
+        } else {
+            bytemuck::cast_slice::<u8, u16>(&bytes[..(e.width * e.height * 8) as usize])
+                .iter()
+                .map(|&h| half_to_f32(h))
+                .collect()
+        })
+    }
+
+    /// For a window renderer: replaces the overlay text (between frames).
+    pub fn set_overlay(&mut self, lines: &[String]) -> Result<()> {
+        match &mut self.window {
+            Some((_, text)) => text.set(lines),
+            None => anyhow::bail!("set_overlay on a renderer without a window"),
+        }
+    }
+
+    /// Moves the camera; the next frame renders from there (nothing else changes).
+    pub fn set_camera(&mut self, camera: crate::scene::Camera) {
+        self.scene.camera = camera;
     }
 
     fn write_uniforms(&self, lights: &[Light]) -> Result<()> {

@@ -64,6 +64,7 @@ fn capture_with(
                 mode,
                 capture: true,
                 global_layout,
+                window: None,
             },
         )
         .unwrap();
@@ -440,6 +441,81 @@ fn a_still_light_skips_the_light_passes() {
         );
         let c = r.output(Vec::new()).unwrap().radiance;
         assert_ne!(a, c);
+    }
+    common::assert_no_validation_messages(&gpu);
+}
+
+/// The viewer's `overlay` pass, headless: outside the text the window image is the display
+/// image (sRGB-encoded for a UNORM swapchain, decoded to linear for an sRGB one); text cells
+/// are darkened with glyph pixels lit; the readback runs only on request, and skipping it keeps
+/// every layout transition valid (validation on).
+#[test]
+fn window_overlay_draws_text_over_the_display() {
+    use translucent::renderer::WindowOutput;
+    let s = scene("[output]\nwidth = 96\nheight = 64\n");
+    let pre = common::preprocess(&s, coarse(1.5));
+    let gpu = common::gpu();
+    let decode = |c: f32| {
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    for linear in [false, true] {
+        let options = Options {
+            window: Some(WindowOutput { linear }),
+            ..Default::default()
+        };
+        let mut r = Renderer::new(&gpu, s.clone(), &pre, options).unwrap();
+        let names = r.pass_names();
+        let overlay = names.iter().position(|n| n == "overlay").unwrap();
+        let readback = names.iter().position(|n| n == "readback").unwrap();
+        assert!(overlay < readback, "{names:?}");
+        r.set_overlay(&["#".into()]).unwrap();
+        let lights = r.orbit_lights(0.0);
+        r.request_readback();
+        let t = r.frame(&lights).unwrap();
+        assert!(t.pass_ms[readback] > 0.0, "readback was requested");
+        let display = r.output(Vec::new()).unwrap().display;
+        let window = r.read_window_image().unwrap();
+        assert_eq!(window.len(), display.len());
+        let (w, h) = (96usize, 64usize);
+        let mut lit = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let i = 4 * (y * w + x);
+                for c in 0..3 {
+                    let d = display[i + c] as f32 / 255.0;
+                    let expect = if linear { decode(d) } else { d };
+                    let got = window[i + c];
+                    if x < 8 && y < 8 {
+                        // The '#' cell: glyph pixels (1, 1, 0.8) or the display darkened.
+                        let glyph = if c == 2 { 0.8 } else { 1.0 };
+                        let glyph = if linear { decode(glyph) } else { glyph };
+                        let dark = if linear { decode(0.3 * d) } else { 0.3 * d };
+                        assert!(
+                            (got - glyph).abs() < 0.01 || (got - dark).abs() < 0.01,
+                            "text cell ({x}, {y}) channel {c}: {got} (display {d})"
+                        );
+                        if c == 0 && (got - glyph).abs() < 0.01 && glyph > dark + 0.05 {
+                            lit += 1;
+                        }
+                    } else {
+                        assert!(
+                            (got - expect).abs() < 0.01,
+                            "({x}, {y}) channel {c}: window {got}, display {expect}"
+                        );
+                    }
+                }
+            }
+        }
+        // '#' in the 8x8 font lights well over a dozen pixels.
+        assert!(lit >= 12, "only {lit} glyph pixels lit");
+        // Without a request the readback is skipped, and the next frame is still valid.
+        let t = r.frame(&lights).unwrap();
+        assert!(t.pass_ms[readback].is_nan());
+        assert!(t.pass_ms[overlay] > 0.0);
     }
     common::assert_no_validation_messages(&gpu);
 }

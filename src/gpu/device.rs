@@ -1,7 +1,11 @@
 //! Instance, device selection, feature checks, validation messages and one-shot submits.
 
 use super::error::{GpuError, GpuResult, VkCall};
-use ash::{ext::debug_utils, vk};
+use ash::{
+    ext::debug_utils,
+    khr::{surface, swapchain},
+    vk,
+};
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::{
     ffi::{c_void, CStr},
@@ -21,6 +25,27 @@ pub struct GpuOptions {
     pub validate: bool,
     /// Device to use: an index from `translucent devices` or part of a device name.
     pub device: Option<String>,
+    /// A window to present to (the viewer); `None` opens the device headless.
+    pub window: Option<WindowTarget>,
+}
+
+/// The platform handles of a window that the device will present to.
+#[derive(Debug, Clone, Copy)]
+pub struct WindowTarget {
+    /// The display connection.
+    pub display: raw_window_handle::RawDisplayHandle,
+    /// The window.
+    pub window: raw_window_handle::RawWindowHandle,
+}
+
+/// A window surface and the swapchain functions of the device that presents to it.
+pub struct Surface {
+    /// `VK_KHR_surface` instance functions.
+    pub loader: surface::Instance,
+    /// `VK_KHR_swapchain` device functions.
+    pub swapchain: swapchain::Device,
+    /// The surface.
+    pub raw: vk::SurfaceKHR,
 }
 
 /// Messages the validation layer sent, counted so that tests can fail on any of them.
@@ -123,6 +148,8 @@ pub struct Gpu {
     /// Debug-utils device functions for labels, when the extension is present.
     pub debug_device: Option<debug_utils::Device>,
     debug_messenger: Option<(debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    /// The window surface, when opened for a window.
+    pub surface: Option<Surface>,
     allocator: ManuallyDrop<Mutex<Allocator>>,
     upload_pool: Mutex<vk::CommandPool>,
 }
@@ -298,7 +325,11 @@ fn load_entry() -> GpuResult<ash::Entry> {
     unsafe { ash::Entry::load() }.map_err(|e| GpuError::Loader(e.to_string()))
 }
 
-fn create_instance(entry: &ash::Entry, validate: bool) -> GpuResult<(ash::Instance, bool)> {
+fn create_instance(
+    entry: &ash::Entry,
+    validate: bool,
+    window: Option<&WindowTarget>,
+) -> GpuResult<(ash::Instance, bool)> {
     let layers = unsafe { entry.enumerate_instance_layer_properties() }
         .vk("vkEnumerateInstanceLayerProperties")?;
     let has_layer = layers
@@ -317,13 +348,35 @@ fn create_instance(entry: &ash::Entry, validate: bool) -> GpuResult<(ash::Instan
         .engine_name(c"translucent")
         .api_version(vk::API_VERSION_1_3);
     let layer_names = [VALIDATION_LAYER.as_ptr()];
-    let ext_names = [debug_utils::NAME.as_ptr()];
-    let mut info = vk::InstanceCreateInfo::default().application_info(&app);
+    let mut ext_names = Vec::new();
+    if has_debug_utils {
+        ext_names.push(debug_utils::NAME.as_ptr());
+    }
+    if let Some(w) = window {
+        let needed = ash_window::enumerate_required_extensions(w.display)
+            .vk("vkEnumerateInstanceExtensionProperties (window system)")?;
+        for &name in needed {
+            let cname = unsafe { CStr::from_ptr(name) };
+            if !extensions
+                .iter()
+                .any(|e| e.extension_name_as_c_str().ok() == Some(cname))
+            {
+                return Err(GpuError::MissingFeature {
+                    device: "the Vulkan instance".into(),
+                    feature: format!(
+                        "{} (needed to show a window; is the driver built with window-system support?)",
+                        cname.to_string_lossy()
+                    ),
+                });
+            }
+            ext_names.push(name);
+        }
+    }
+    let mut info = vk::InstanceCreateInfo::default()
+        .application_info(&app)
+        .enabled_extension_names(&ext_names);
     if validate {
         info = info.enabled_layer_names(&layer_names);
-    }
-    if has_debug_utils {
-        info = info.enabled_extension_names(&ext_names);
     }
     let instance = unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")?;
     Ok((instance, has_debug_utils))
@@ -332,7 +385,7 @@ fn create_instance(entry: &ash::Entry, validate: bool) -> GpuResult<(ash::Instan
 /// Lists every physical device with its description (for `translucent devices`).
 pub fn list_devices() -> GpuResult<Vec<DeviceInfo>> {
     let entry = load_entry()?;
-    let (instance, _) = create_instance(&entry, false)?;
+    let (instance, _) = create_instance(&entry, false, None)?;
     let result = unsafe { instance.enumerate_physical_devices() }
         .vk("vkEnumeratePhysicalDevices")
         .map(|pds| {
@@ -400,12 +453,35 @@ impl Gpu {
     /// Opens the device chosen by `options` (headless: no surface, no window).
     pub fn new(options: &GpuOptions) -> GpuResult<Arc<Gpu>> {
         let entry = load_entry()?;
-        let (instance, has_debug_utils) = create_instance(&entry, options.validate)?;
-        // From here on, failures must destroy the instance.
-        match Self::open(entry.clone(), &instance, has_debug_utils, options) {
+        let (instance, has_debug_utils) =
+            create_instance(&entry, options.validate, options.window.as_ref())?;
+        // From here on, failures must destroy the instance (and the surface).
+        let surface = match &options.window {
+            None => None,
+            Some(w) => {
+                match unsafe {
+                    ash_window::create_surface(&entry, &instance, w.display, w.window, None)
+                } {
+                    Ok(s) => Some(s),
+                    Err(e) => {
+                        unsafe { instance.destroy_instance(None) };
+                        return Err(GpuError::Vk {
+                            call: "vkCreate*SurfaceKHR",
+                            result: e,
+                        });
+                    }
+                }
+            }
+        };
+        match Self::open(entry.clone(), &instance, has_debug_utils, surface, options) {
             Ok(gpu) => Ok(gpu),
             Err(e) => {
-                unsafe { instance.destroy_instance(None) };
+                unsafe {
+                    if let Some(s) = surface {
+                        surface::Instance::new(&entry, &instance).destroy_surface(s, None);
+                    }
+                    instance.destroy_instance(None)
+                };
                 Err(e)
             }
         }
@@ -415,6 +491,7 @@ impl Gpu {
         entry: ash::Entry,
         instance: &ash::Instance,
         has_debug_utils: bool,
+        surface_raw: Option<vk::SurfaceKHR>,
         options: &GpuOptions,
     ) -> GpuResult<Arc<Gpu>> {
         let validation = Arc::new(ValidationLog::default());
@@ -471,13 +548,42 @@ impl Gpu {
         let physical = pds[index];
         let info = infos[index].clone();
         let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
-        let queue_family = families
-            .iter()
-            .position(|f| {
-                f.queue_flags
-                    .contains(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE)
+        let surface_loader = surface::Instance::new(&entry, instance);
+        let presents = |family: usize| match surface_raw {
+            None => true,
+            Some(s) => unsafe {
+                surface_loader.get_physical_device_surface_support(physical, family as u32, s)
+            }
+            .unwrap_or(false),
+        };
+        let queue_family = families.iter().enumerate().position(|(i, f)| {
+            f.queue_flags
+                .contains(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE)
+                && presents(i)
+        });
+        let has_swapchain = unsafe { instance.enumerate_device_extension_properties(physical) }
+            .map(|exts| {
+                exts.iter()
+                    .any(|e| e.extension_name_as_c_str().ok() == Some(swapchain::NAME))
             })
-            .unwrap_or(0) as u32;
+            .unwrap_or(false);
+        let missing = match (queue_family, surface_raw.is_some() && !has_swapchain) {
+            (None, _) if surface_raw.is_some() => {
+                Some("a graphics + compute queue that can present to this window".to_string())
+            }
+            (None, _) => Some("a graphics + compute queue".to_string()),
+            (_, true) => Some("VK_KHR_swapchain".to_string()),
+            _ => None,
+        };
+        if let Some(feature) = missing {
+            destroy_messenger(&debug_messenger);
+            return Err(GpuError::MissingFeature {
+                device: info.name.clone(),
+                feature,
+            });
+        }
+        let queue_family = queue_family.unwrap_or(0) as u32;
+        let device_exts = [swapchain::NAME.as_ptr()];
 
         let priorities = [1.0f32];
         let queue_info = [vk::DeviceQueueCreateInfo::default()
@@ -488,11 +594,14 @@ impl Gpu {
             .dynamic_rendering(true);
         let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
         let mut features = vk::PhysicalDeviceFeatures2::default();
-        let device_info = vk::DeviceCreateInfo::default()
+        let mut device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
             .push_next(&mut features)
             .push_next(&mut f12)
             .push_next(&mut f13);
+        if surface_raw.is_some() {
+            device_info = device_info.enabled_extension_names(&device_exts);
+        }
         let device = match unsafe { instance.create_device(physical, &device_info, None) } {
             Ok(d) => d,
             Err(e) => {
@@ -530,6 +639,11 @@ impl Gpu {
         let upload_pool =
             unsafe { device.create_command_pool(&pool_info, None) }.vk("vkCreateCommandPool")?;
         let debug_device = has_debug_utils.then(|| debug_utils::Device::new(instance, &device));
+        let surface = surface_raw.map(|raw| Surface {
+            loader: surface_loader,
+            swapchain: swapchain::Device::new(instance, &device),
+            raw,
+        });
         tracing::info!(
             device = %info.name,
             driver = %info.driver,
@@ -548,6 +662,7 @@ impl Gpu {
             validation,
             debug_device,
             debug_messenger,
+            surface,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             upload_pool: Mutex::new(upload_pool),
         }))
@@ -629,6 +744,9 @@ impl Drop for Gpu {
             }
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
+            if let Some(s) = self.surface.take() {
+                s.loader.destroy_surface(s.raw, None);
+            }
             if let Some((loader, messenger)) = self.debug_messenger.take() {
                 loader.destroy_debug_utils_messenger(messenger, None);
             }

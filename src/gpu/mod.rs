@@ -5,7 +5,7 @@ pub mod error;
 pub mod pipeline;
 pub mod resources;
 
-pub use device::{list_devices, DeviceInfo, Gpu, GpuOptions, ValidationLog};
+pub use device::{list_devices, DeviceInfo, Gpu, GpuOptions, Surface, ValidationLog, WindowTarget};
 pub use error::{GpuError, GpuResult, VkCall};
 pub use pipeline::{Binding, GraphicsDesc, Pipeline};
 pub use resources::{aspect_of, Buffer, Image, ImageInfo, Sampler, TexelView};

@@ -111,6 +111,14 @@ pub enum GraphError {
         /// The resource kind.
         kind: ResourceKind,
     },
+    /// Leaving out a pass would leave an image in another layout than a later barrier expects.
+    #[error("pass '{pass}' cannot be skipped: it changes the layout of '{resource}', which a later pass of the frame expects")]
+    UnsafeSkip {
+        /// The skipped pass.
+        pass: String,
+        /// The image.
+        resource: String,
+    },
     /// A transient resource is read but nothing writes it.
     #[error("pass '{pass}' reads transient resource '{resource}', which no pass writes")]
     ReadWithoutWriter {
@@ -396,6 +404,57 @@ pub fn compile(resources: &[ResourceDecl], passes: &[PassDecl]) -> Result<Schedu
         barriers,
         final_barriers,
     })
+}
+
+/// Checks that running only the scheduled passes with `ran[i]` true (in schedule order) keeps
+/// every image layout transition valid: each barrier that runs, and each final barrier, must
+/// start from the layout the image is really in (or from `UNDEFINED`, which discards). A
+/// skipped pass's barriers do not run, so a pass that moves an image into a layout a later pass
+/// starts from cannot be skipped.
+pub fn check_skip(
+    resources: &[ResourceDecl],
+    pass_names: &[&str],
+    schedule: &Schedule,
+    ran: &[bool],
+) -> Result<(), GraphError> {
+    let mut layout: Vec<vk::ImageLayout> = resources.iter().map(|r| r.initial_layout).collect();
+    // Who last changed each layout, for the message.
+    let mut changed_by: Vec<Option<usize>> = vec![None; resources.len()];
+    let mut full: Vec<vk::ImageLayout> = layout.clone();
+    let check = |b: &Barrier, layout: &mut Vec<vk::ImageLayout>, changed_by: &[Option<usize>]| {
+        let r = b.resource.0;
+        if resources[r].kind != ResourceKind::Image {
+            return Ok(());
+        }
+        if b.old_layout != vk::ImageLayout::UNDEFINED && b.old_layout != layout[r] {
+            return Err(GraphError::UnsafeSkip {
+                pass: changed_by[r]
+                    .map(|p| pass_names[p].to_string())
+                    .unwrap_or_default(),
+                resource: resources[r].name.clone(),
+            });
+        }
+        layout[r] = b.new_layout;
+        Ok(())
+    };
+    for (i, barriers) in schedule.barriers.iter().enumerate() {
+        for b in barriers {
+            let r = b.resource.0;
+            if resources[r].kind == ResourceKind::Image {
+                if ran[i] {
+                    check(b, &mut layout, &changed_by)?;
+                } else if full[r] != b.new_layout {
+                    // The full schedule would have moved it here; remember who.
+                    changed_by[r] = Some(schedule.order[i]);
+                }
+                full[r] = b.new_layout;
+            }
+        }
+    }
+    for b in &schedule.final_barriers {
+        check(b, &mut layout, &changed_by)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -731,5 +790,37 @@ mod tests {
             .find(|b| b.resource == ResourceId(0))
             .unwrap();
         assert_eq!(b.src_access, A::SHADER_STORAGE_WRITE);
+    }
+
+    #[test]
+    fn skipping_a_pass_that_changes_a_layout_a_later_pass_expects_is_refused() {
+        let res = [image("display")];
+        let passes = [
+            pass("tonemap", &[(0, Access::StorageWrite(Stage::Compute))]),
+            pass("readback", &[(0, Access::TransferRead)]),
+            pass("overlay", &[(0, Access::StorageRead(Stage::Compute))]),
+        ];
+        let names = ["tonemap", "readback", "overlay"];
+        let s = compile(&res, &passes).unwrap();
+        assert_eq!(s.order, vec![0, 1, 2]);
+        check_skip(&res, &names, &s, &[true, true, true]).unwrap();
+        match check_skip(&res, &names, &s, &[true, false, true]) {
+            Err(GraphError::UnsafeSkip { pass, resource }) => {
+                assert_eq!((pass.as_str(), resource.as_str()), ("readback", "display"))
+            }
+            other => panic!("expected UnsafeSkip, got {other:?}"),
+        }
+        // The last reader changes nothing a later pass relies on.
+        check_skip(&res, &names, &s, &[true, true, false]).unwrap();
+        // Readback last: skipping it is safe.
+        let reordered = [passes[0].clone(), passes[2].clone(), passes[1].clone()];
+        let s = compile(&res, &reordered).unwrap();
+        check_skip(
+            &res,
+            &["tonemap", "overlay", "readback"],
+            &s,
+            &[true, true, false],
+        )
+        .unwrap();
     }
 }

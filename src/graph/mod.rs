@@ -22,7 +22,7 @@ pub use compile::{
     Barrier, GraphError, PassDecl, ResourceDecl, ResourceId, ResourceKind, Schedule,
 };
 
-use crate::gpu::{Buffer, Gpu, GpuError, GpuResult, Image, ImageInfo, VkCall};
+use crate::gpu::{Buffer, Gpu, GpuError, Image, ImageInfo, VkCall};
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 use std::{ffi::CString, sync::Arc, time::Instant};
@@ -311,7 +311,35 @@ impl RenderGraph {
                 record: records[pi].take().expect("each pass is scheduled once"),
             })
             .collect();
-        FrameGraph::new(gpu, resources, passes, schedule.final_barriers)
+        let names: Vec<&str> = pass_decls.iter().map(|p| p.name.as_str()).collect();
+        let skip_check = SkipCheck {
+            decls: decls.clone(),
+            names: names.iter().map(|n| n.to_string()).collect(),
+            schedule: schedule.clone(),
+            safe: Vec::new(),
+        };
+        FrameGraph::new(gpu, resources, passes, schedule.final_barriers, skip_check)
+    }
+}
+
+/// What [`FrameGraph::run_frame_skipping`] needs to check a set of skipped passes once.
+struct SkipCheck {
+    decls: Vec<ResourceDecl>,
+    names: Vec<String>,
+    schedule: Schedule,
+    /// Sets already found safe.
+    safe: Vec<Vec<bool>>,
+}
+
+impl SkipCheck {
+    fn check(&mut self, ran: &[bool]) -> Result<(), GraphError> {
+        if self.safe.iter().any(|s| s == ran) {
+            return Ok(());
+        }
+        let names: Vec<&str> = self.names.iter().map(String::as_str).collect();
+        compile::check_skip(&self.decls, &names, &self.schedule, ran)?;
+        self.safe.push(ran.to_vec());
+        Ok(())
     }
 }
 
@@ -332,6 +360,7 @@ pub struct FrameGraph {
     cmd: vk::CommandBuffer,
     fence: vk::Fence,
     queries: vk::QueryPool,
+    skip_check: SkipCheck,
 }
 
 /// Issues `barriers` as one `vkCmdPipelineBarrier2`. With no barriers it still issues an
@@ -388,6 +417,7 @@ impl FrameGraph {
         resources: Resources,
         passes: Vec<ScheduledPass>,
         final_barriers: Vec<Barrier>,
+        skip_check: SkipCheck,
     ) -> anyhow::Result<FrameGraph> {
         let d = &gpu.device;
         let pool_info = vk::CommandPoolCreateInfo::default()
@@ -403,6 +433,7 @@ impl FrameGraph {
             cmd: vk::CommandBuffer::null(),
             fence: vk::Fence::null(),
             queries: vk::QueryPool::null(),
+            skip_check,
         };
         let alloc = vk::CommandBufferAllocateInfo::default()
             .command_pool(pool)
@@ -435,20 +466,23 @@ impl FrameGraph {
     }
 
     /// Records every pass, submits, waits, and returns the frame's timings.
-    pub fn run_frame(&mut self) -> GpuResult<FrameTiming> {
+    pub fn run_frame(&mut self) -> anyhow::Result<FrameTiming> {
         self.run_frame_skipping(&[])
     }
 
     /// Like [`FrameGraph::run_frame`] but leaves out the passes named in `skip`: their outputs
     /// keep the previous frame's contents, which is right only for outputs that persist
     /// (imported resources, or transient buffers that no other pass of the frame overwrites)
-    /// and whose producers' inputs did not change. Skipped passes time as NaN.
-    pub fn run_frame_skipping(&mut self, skip: &[&str]) -> GpuResult<FrameTiming> {
+    /// and whose producers' inputs did not change. Skipped passes time as NaN. A set of skipped
+    /// passes that would break a layout transition of the frame is refused
+    /// ([`GraphError::UnsafeSkip`]) before anything is recorded.
+    pub fn run_frame_skipping(&mut self, skip: &[&str]) -> anyhow::Result<FrameTiming> {
         let ran: Vec<bool> = self
             .passes
             .iter()
             .map(|p| !skip.contains(&p.name.as_str()))
             .collect();
+        self.skip_check.check(&ran)?;
         let gpu = self.gpu.clone();
         let d = &gpu.device;
         let wall_start = Instant::now();
@@ -533,7 +567,8 @@ impl FrameGraph {
             return Err(GpuError::Vk {
                 call: "vkGetQueryPoolResults (a timestamp was never written)",
                 result: vk::Result::NOT_READY,
-            });
+            }
+            .into());
         }
         let period = gpu.info.timestamp_period_ns * 1e-6;
         let to_ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * period;

@@ -7,6 +7,7 @@ pub mod compute;
 pub mod data;
 pub mod frame;
 pub mod illum;
+pub mod overlay;
 pub mod readback;
 pub mod shadow;
 pub mod tonemap;

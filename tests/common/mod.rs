@@ -36,6 +36,7 @@ pub fn gpu() -> Arc<Gpu> {
     Gpu::new(&GpuOptions {
         validate: true,
         device: std::env::var("TRANSLUCENT_DEVICE").ok(),
+        ..Default::default()
     })
     .unwrap_or_else(|e| panic!("cannot open a validated Vulkan device: {e}"))
 }
