@@ -853,6 +853,7 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
         }
     };
     let scene = Scene::load(args.input.scene.as_deref(), &args.input.overrides())?;
+    let event_loop = crate::viewer::connect()?;
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     for r in &choice.reasons {
         println!("# {r}");
@@ -861,19 +862,22 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
     let (pre, _) =
         preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
-    crate::viewer::run(crate::viewer::ViewConfig {
-        scene,
-        pre,
-        overrides: args.pre.overrides(),
-        target_error: args.pre.target_error,
-        cache: args.pre.cache_dir(),
-        mode: args.mode.into(),
-        out: args.out.clone(),
-        script,
-        vsync: !args.no_vsync,
-        validate: cli.validate,
-        device: cli.device.clone(),
-    })
+    crate::viewer::run(
+        event_loop,
+        crate::viewer::ViewConfig {
+            scene,
+            pre,
+            overrides: args.pre.overrides(),
+            target_error: args.pre.target_error,
+            cache: args.pre.cache_dir(),
+            mode: args.mode.into(),
+            out: args.out.clone(),
+            script,
+            vsync: !args.no_vsync,
+            validate: cli.validate,
+            device: cli.device.clone(),
+        },
+    )
 }
 
 fn check_validation(gpu: &Gpu) -> Result<()> {

@@ -911,15 +911,20 @@ impl ApplicationHandler for App {
     }
 }
 
-/// Opens the window and runs until it is closed (or the script quits). Fails if the
-/// validation layer (when on) reported anything.
-pub fn run(config: ViewConfig) -> Result<()> {
-    let event_loop = EventLoop::new().map_err(|e| {
+/// Connects to the window system (first, so that a missing display is reported before any
+/// preprocessing).
+pub fn connect() -> Result<EventLoop<()>> {
+    EventLoop::new().map_err(|e| {
         anyhow::anyhow!(
             "cannot connect to the window system ({e}); `view` needs a display (is DISPLAY set? \
              headless: run it under Xvfb, e.g. `xvfb-run translucent view`)"
         )
-    })?;
+    })
+}
+
+/// Opens the window and runs until it is closed (or the script quits). Fails if the
+/// validation layer (when on) reported anything.
+pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
     let mut app = App {
         overrides: config.overrides.clone(),
         target_error: config.target_error,

@@ -1,0 +1,265 @@
+//! `translucent view` in a real window: an X server (Xvfb) started by the test, lavapipe, the
+//! validation layer on, and a scripted session that moves the light and the camera, zooms,
+//! resizes the window, switches the blending and the material, and takes screenshots.
+//!
+//! Needs `Xvfb` (Debian: xvfb) and the X client libraries winit loads (libxkbcommon-x11-0,
+//! libxcursor1, libxrandr2, libxi6); `.ci/run` installs them. Without Xvfb the test fails
+//! rather than skips.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// An X server on a free display, killed on drop.
+struct Xvfb {
+    child: Child,
+    display: String,
+}
+
+impl Xvfb {
+    fn start() -> Xvfb {
+        let mut child = Command::new("Xvfb")
+            .args(["-displayfd", "1", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot start Xvfb ({e}); on Debian: apt-get install xvfb libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6")
+            });
+        // Xvfb writes the display number it took once it accepts connections.
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let number = line.trim();
+        assert!(
+            !number.is_empty() && number.chars().all(|c| c.is_ascii_digit()),
+            "Xvfb did not report a display: {line:?}"
+        );
+        Xvfb {
+            display: format!(":{number}"),
+            child,
+        }
+    }
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs `cmd`, killing it after `limit` (a hang is a failure, not a stuck CI run).
+fn run_with_limit(mut cmd: Command, limit: Duration) -> (bool, String, String) {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let o = child.wait_with_output().unwrap();
+            panic!(
+                "the viewer did not finish within {limit:?}:\n{}\n{}",
+                String::from_utf8_lossy(&o.stdout),
+                String::from_utf8_lossy(&o.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = child.wait_with_output().unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn rgb(path: &Path) -> image::RgbImage {
+    image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb8()
+}
+
+/// Pixels brighter than the black background, as a fraction.
+fn lit_fraction(img: &image::RgbImage) -> f64 {
+    let lit = img
+        .pixels()
+        .filter(|p| p.0.iter().map(|&c| c as u32).sum::<u32>() > 60)
+        .count();
+    lit as f64 / (img.width() * img.height()) as f64
+}
+
+fn mean(img: &image::RgbImage) -> [f64; 3] {
+    let n = (img.width() * img.height()) as f64;
+    let mut m = [0.0; 3];
+    for p in img.pixels() {
+        for c in 0..3 {
+            m[c] += p.0[c] as f64 / n;
+        }
+    }
+    m
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn scripted_session_in_a_window_shows_the_lit_object() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer");
+    let cache = dir.join("cache");
+
+    // The reference image: the same scene through `render` (no window).
+    let mut render = common::bin();
+    render
+        .args(["--validate", "render", "--frames", "2", "--cache"])
+        .arg(&cache)
+        .arg("--out")
+        .arg(dir.join("render"));
+    let o = render.output().unwrap();
+    assert!(o.status.success(), "{}", common::stderr(&o));
+
+    let script = "frames 3; screenshot start\n\
+                  light 90 0; frames 2; screenshot light\n\
+                  orbit 40 10; zoom 0.7; frames 2; screenshot zoom\n\
+                  resize 400 300; frames 3; screenshot resized\n\
+                  mode local; frames 2; screenshot local\n\
+                  reset; material ketchup; wait; frames 2; screenshot ketchup\n\
+                  quit";
+    let mut view = common::bin();
+    view.env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["--validate", "view", "--script", script, "--cache"])
+        .arg(&cache)
+        .arg("--out")
+        .arg(&dir);
+    let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
+    assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
+    for name in ["start", "light", "zoom", "resized", "local", "ketchup"] {
+        assert!(
+            stdout.contains(&format!("screenshot: wrote {name}.png")),
+            "{name} missing:\n{stdout}"
+        );
+    }
+    assert!(stdout.contains("view: closed after"), "{stdout}");
+
+    // The first screenshot is the default view: the same image as `render`.
+    let (w, h, shot) = translucent::output::read_exr(&dir.join("start.exr")).unwrap();
+    let (rw, rh, reference) =
+        translucent::output::read_exr(&dir.join("render/render.exr")).unwrap();
+    assert_eq!((w, h), (rw, rh));
+    let (err, _) = translucent::reference::metrics::compare(&shot, &reference, None);
+    assert!(err.pixels > 1000, "{} covered pixels", err.pixels);
+    assert!(
+        err.rel_rms < 1e-3,
+        "viewer and render differ: {:.4} % RMS",
+        100.0 * err.rel_rms
+    );
+
+    // What the window showed: the lit object, with the overlay's text in the top-left corner.
+    let window = rgb(&dir.join("start-window.png"));
+    assert_eq!((window.width(), window.height()), (w, h));
+    let lit = lit_fraction(&window);
+    assert!(lit > 0.1, "the window is nearly blank: {lit:.3} lit");
+    let text_pixels = window
+        .enumerate_pixels()
+        .filter(|(x, y, p)| *x < 200 && *y < 16 && p.0 == [255, 255, 204])
+        .count();
+    assert!(
+        text_pixels > 50,
+        "no overlay text: {text_pixels} glyph pixels"
+    );
+
+    // The light moved: the image changed.
+    let a = rgb(&dir.join("start.png"));
+    let b = rgb(&dir.join("light.png"));
+    let diff: f64 = a
+        .pixels()
+        .zip(b.pixels())
+        .map(|(p, q)| (p.0[1] as f64 - q.0[1] as f64).abs())
+        .sum::<f64>()
+        / (w * h) as f64;
+    assert!(diff > 2.0, "moving the light changed little: {diff}");
+
+    // Zooming in covers more of the image.
+    let zoomed = lit_fraction(&rgb(&dir.join("zoom.png")));
+    assert!(
+        zoomed > 1.3 * lit_fraction(&a),
+        "zoom: {zoomed:.3} vs {:.3}",
+        lit_fraction(&a)
+    );
+
+    // The resized window renders at its new size, and the window shows it.
+    let resized = rgb(&dir.join("resized.png"));
+    assert_eq!((resized.width(), resized.height()), (400, 300));
+    let resized_window = rgb(&dir.join("resized-window.png"));
+    assert_eq!(
+        (resized_window.width(), resized_window.height()),
+        (400, 300)
+    );
+    assert!(lit_fraction(&resized_window) > 0.1);
+
+    // Local only is a different image from both responses, and says so in its state.
+    assert_eq!(json(&dir.join("local.json"))["mode"], "local");
+    let local = rgb(&dir.join("local.png"));
+    let change: f64 = local
+        .pixels()
+        .zip(resized.pixels())
+        .map(|(p, q)| (p.0[1] as f64 - q.0[1] as f64).abs())
+        .sum::<f64>()
+        / (400.0 * 300.0);
+    assert!(change > 0.5, "local only looks like both: {change}");
+    assert_eq!(json(&dir.join("resized.json"))["mode"], "optimized");
+
+    // The material switch ran the preprocessing and shows ketchup: red far above blue.
+    let k = json(&dir.join("ketchup.json"));
+    assert_eq!(k["material"], "ketchup");
+    let m = mean(&rgb(&dir.join("ketchup.png")));
+    assert!(m[0] > 4.0 * m[2], "ketchup is not red: {m:?}");
+    let start_state = json(&dir.join("start.json"));
+    assert_ne!(
+        k["settings"], start_state["settings"],
+        "the settings follow the material"
+    );
+
+    // Timings of the frames shown, the overlay pass among them.
+    let t = json(&dir.join("start-timings.json"));
+    let names: Vec<&str> = t["passes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert!(
+        names.contains(&"overlay") && names.contains(&"global"),
+        "{names:?}"
+    );
+}
+
+#[test]
+fn without_a_display_the_viewer_says_what_it_needs() {
+    let mut cmd = common::bin();
+    cmd.env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["view", "--no-cache", "--script", "quit"]);
+    common::fails_with(cmd, "needs a display");
+}
+
+#[test]
+fn a_bad_script_is_refused_before_the_window_opens() {
+    let mut cmd = common::bin();
+    cmd.env_remove("DISPLAY")
+        .args(["view", "--no-cache", "--script", "frames 2; spin 3"]);
+    common::fails_with(cmd, "unknown command 'spin'");
+}
