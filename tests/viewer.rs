@@ -103,8 +103,8 @@ fn mean(img: &image::RgbImage) -> [f64; 3] {
     let n = (img.width() * img.height()) as f64;
     let mut m = [0.0; 3];
     for p in img.pixels() {
-        for c in 0..3 {
-            m[c] += p.0[c] as f64 / n;
+        for (acc, &c) in m.iter_mut().zip(&p.0) {
+            *acc += c as f64 / n;
         }
     }
     m

@@ -366,8 +366,7 @@ impl Running {
     fn start_job(&mut self, name: String, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
         let mut scene = self.scene.clone();
-        let (overrides, target, cache) =
-            (app.overrides.clone(), app.target_error, app.cache.clone());
+        let (overrides, target, cache) = (app.overrides, app.target_error, app.cache.clone());
         let p = progress.clone();
         let material = name.clone();
         let handle = std::thread::spawn(move || -> Result<(Material, Preprocessed)> {
@@ -553,7 +552,7 @@ impl Running {
         while self.frame_instants.len() > TIMING_WINDOW {
             self.frame_instants.pop_front();
         }
-        if self.frames % 30 == 0 {
+        if self.frames.is_multiple_of(30) {
             self.window.set_title(&format!(
                 "translucent: {} ({:.1} fps)",
                 self.material,
@@ -682,7 +681,7 @@ struct AppSettings {
 impl App {
     fn settings(&self) -> AppSettings {
         AppSettings {
-            overrides: self.overrides.clone(),
+            overrides: self.overrides,
             target_error: self.target_error,
             cache: self.cache.clone(),
         }
@@ -926,7 +925,7 @@ pub fn connect() -> Result<EventLoop<()>> {
 /// validation layer (when on) reported anything.
 pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
     let mut app = App {
-        overrides: config.overrides.clone(),
+        overrides: config.overrides,
         target_error: config.target_error,
         cache: config.cache.clone(),
         out: config.out.clone(),
