@@ -198,6 +198,8 @@ impl Renderer {
         let indices = g.import_buffer(data.indices.clone(), None);
         let texels = g.import_buffer(data.texels.clone(), None);
         let kernels = g.import_buffer(data.kernels.clone(), None);
+        let seam_rows = g.import_buffer(data.seam_rows.clone(), None);
+        let seam_entries = g.import_buffer(data.seam_entries.clone(), None);
         let gather_rows = g.import_buffer(data.gather_rows.clone(), None);
         let gather_entries = g.import_buffer(data.gather_entries.clone(), None);
         let global_rows = g.import_buffer(data.global_rows.clone(), None);
@@ -260,6 +262,8 @@ impl Renderer {
                 texel_count: data.texel_count,
                 kernels,
                 kernel_size: data.kernel_size,
+                seam_rows,
+                seam_entries,
                 map,
             },
             local,

@@ -135,6 +135,11 @@ fn illumination_map_matches_the_analytic_irradiance() {
 fn compute_passes_match_the_cpu_operators() {
     let s = scene("[[lights]]\nkind = \"spot\"\nposition = [60.0, 80.0, 90.0]\ncone_deg = 12.0\nintensity = 20000.0\n");
     let pre = common::preprocess(&s, coarse(1.0));
+    assert!(
+        pre.ops.seams.nnz() > 1000,
+        "{} seam taps: too few to test the local pass with them",
+        pre.ops.seams.nnz()
+    );
     for mode in [Blend::Simple, Blend::Optimized] {
         let (cap, _) = capture(&s, &pre, mode);
         let w = pre.atlas.width;
@@ -158,7 +163,13 @@ fn compute_passes_match_the_cpu_operators() {
         } else {
             &pre.ops.direct_optimized
         };
-        let local = apply::local(&pre.atlas, &pre.ops, &irradiance, Some(direct));
+        let local = apply::local(
+            &pre.atlas,
+            &pre.ops,
+            &irradiance,
+            Some(direct),
+            mode.seam_taps(),
+        );
         let scale = local.iter().map(|b| b[0]).fold(0.0, f64::max);
         for (i, t) in pre.atlas.texels.iter().enumerate() {
             let g = cap.local[(t.y * w + t.x) as usize];

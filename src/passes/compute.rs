@@ -73,21 +73,35 @@ pub struct LocalInputs {
     pub kernels: ResourceId,
     /// Kernel edge.
     pub kernel_size: u32,
+    /// Seam tap rows (R32_UINT, one more than texels).
+    pub seam_rows: ResourceId,
+    /// Seam tap entries (RGBA32F: source texel bits, weight).
+    pub seam_entries: ResourceId,
     /// The illumination map.
     pub map: ResourceId,
 }
 
-/// `local`: B^l = K * E + beta E per covered texel, into `out`.
+/// `local`: B^l = K * E (window and seam taps) + beta E per covered texel, into `out`.
 pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
     graph
         .pass("local")
         .access(i.texels, Access::TexelRead(Stage::Compute))
         .access(i.kernels, Access::TexelRead(Stage::Compute))
+        .access(i.seam_rows, Access::TexelRead(Stage::Compute))
+        .access(i.seam_entries, Access::TexelRead(Stage::Compute))
         .access(i.map, Access::StorageRead(Stage::Compute))
         .access(out, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let texel_view = view(gpu, res, i.texels, vk::Format::R32_UINT, 4)?;
             let kernel_view = view(gpu, res, i.kernels, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let seam_row_view = view(gpu, res, i.seam_rows, vk::Format::R32_UINT, 4)?;
+            let seam_view = view(
+                gpu,
+                res,
+                i.seam_entries,
+                vk::Format::R32G32B32A32_SFLOAT,
+                16,
+            )?;
             let pipeline = Pipeline::compute(
                 gpu,
                 "local",
@@ -97,11 +111,13 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
                     Binding::TexelBuffer(kernel_view.raw),
                     Binding::StorageImage(res.image(i.map).view),
                     Binding::StorageImage(res.image(out).view),
+                    Binding::TexelBuffer(seam_row_view.raw),
+                    Binding::TexelBuffer(seam_view.raw),
                 ],
                 8,
             )?;
             Ok(Box::new(move |rec| {
-                let _ = (&texel_view, &kernel_view);
+                let _ = (&texel_view, &kernel_view, &seam_row_view, &seam_view);
                 dispatch(
                     rec,
                     &pipeline,

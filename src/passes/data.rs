@@ -107,6 +107,10 @@ pub struct SubsurfaceData {
     pub kernels: Arc<Buffer>,
     /// Kernel edge.
     pub kernel_size: u32,
+    /// Seam tap rows (one more than covered texels; all empty when the mode has no taps).
+    pub seam_rows: Arc<Buffer>,
+    /// Seam tap entries: source texel (x | y << 16 as float bits), RGB weight.
+    pub seam_entries: Arc<Buffer>,
     /// Gather rows.
     pub gather_rows: Arc<Buffer>,
     /// Gather entries.
@@ -241,6 +245,11 @@ impl Requirements {
             Blend::Local => 0,
             _ => o.global.nnz(),
         } as u64;
+        let seam_taps = if mode.seam_taps() {
+            o.seams.nnz() as u64
+        } else {
+            0
+        };
         let tex = scene
             .texture
             .as_ref()
@@ -252,6 +261,7 @@ impl Requirements {
             ("covered texels".into(), texels * 4),
             ("chart ids".into(), atlas_px * 4),
             ("kernels".into(), texels * (kk + 1) * 16),
+            ("seam taps".into(), (texels + 1) * 4 + seam_taps * 16),
             (
                 "gather".into(),
                 (nodes + 1) * 4 + o.gather.cols.len() as u64 * 8,
@@ -270,10 +280,16 @@ impl Requirements {
         ];
         Requirements {
             total: items.iter().map(|i| i.1).sum(),
-            largest_texel_buffer: [texels * (kk + 1), nnz, o.gather.cols.len() as u64, texels]
-                .into_iter()
-                .max()
-                .unwrap_or(0),
+            largest_texel_buffer: [
+                texels * (kk + 1),
+                nnz,
+                o.gather.cols.len() as u64,
+                texels + 1,
+                seam_taps,
+            ]
+            .into_iter()
+            .max()
+            .unwrap_or(0),
             largest_image_side: [
                 a.width,
                 a.height,
@@ -419,6 +435,24 @@ impl SubsurfaceData {
             ]);
         }
         let kernels = upload(gpu, "kernels", &kernels, texel_usage)?;
+        let mut seam_rows = vec![0u32];
+        let mut seam_entries: Vec<[f32; 4]> = Vec::new();
+        for t in 0..atlas.texels.len() {
+            if mode.seam_taps() {
+                let inv = texel_tex[t].map(|x| 1.0 / x);
+                for (src, w) in ops.seams.row(t) {
+                    seam_entries.push([
+                        f32::from_bits(packed[src as usize]),
+                        w[0] * inv[0] as f32,
+                        w[1] * inv[1] as f32,
+                        w[2] * inv[2] as f32,
+                    ]);
+                }
+            }
+            seam_rows.push(seam_entries.len() as u32);
+        }
+        let seam_rows = upload(gpu, "seam rows", &seam_rows, texel_usage)?;
+        let seam_entries = upload(gpu, "seam entries", &seam_entries, texel_usage)?;
 
         let gather_rows = upload(gpu, "gather rows", &ops.gather.row_start, texel_usage)?;
         let gather_entries: Vec<[f32; 2]> = ops
@@ -484,6 +518,8 @@ impl SubsurfaceData {
             charts,
             kernels,
             kernel_size: ops.kernel_size,
+            seam_rows,
+            seam_entries,
             gather_rows,
             gather_entries,
             global_rows,

@@ -16,12 +16,14 @@ pub struct Applied {
     pub node_global: Vec<[f64; 3]>,
 }
 
-/// Local convolution: B^l(t) = sum over t's kernel of K E (+ beta(t) E(t) when `direct`).
+/// Local convolution: B^l(t) = sum over t's kernel (window and seam taps) of K E
+/// (+ beta(t) E(t) when `direct`).
 pub fn local(
     atlas: &Atlas,
     ops: &Operators,
     irradiance: &[[f32; 3]],
     direct: Option<&[[f32; 3]]>,
+    seams: bool,
 ) -> Vec<[f64; 3]> {
     let k = ops.kernel_size as i64;
     let half = k / 2;
@@ -40,6 +42,11 @@ pub fn local(
                             b[c] += w[c] as f64 * irradiance[s][c] as f64;
                         }
                     }
+                }
+            }
+            for (s, w) in ops.seams.row(t).filter(|_| seams) {
+                for c in 0..3 {
+                    b[c] += w[c] as f64 * irradiance[s as usize][c] as f64;
                 }
             }
             if let Some(beta) = direct {
@@ -93,7 +100,7 @@ pub fn apply(atlas: &Atlas, ops: &Operators, irradiance: &[[f32; 3]], mode: Blen
     let local = if mode == Blend::Global {
         vec![[0.0; 3]; n_texels]
     } else {
-        local(atlas, ops, irradiance, direct)
+        local(atlas, ops, irradiance, direct, mode.seam_taps())
     };
     let node_irradiance = gather(ops, irradiance);
     let node_global = match mode {

@@ -16,7 +16,15 @@
 //!   texels s around t *of the same chart*; texels of other charts and gutter texels get 0.
 //!   The centre texel uses the exact disc mean of R_d (the closed-form cumulative profile),
 //!   nearby texels a sub-sampling, the rest the profile at the texel position.
-//!   Light arriving across a chart seam is therefore left to the global response.
+//! - **Seam taps** complete the kernels across chart seams: for each texel t, the texels s of
+//!   *other* charts whose positions lie within the kernel's inscribed disc
+//!   (|x_s - x_t| <= (k/2 + 1/2) h) get K_t(s) as above, stored as a sparse row of t. Without
+//!   them the light arriving across a seam would be left to the smooth global response, and the
+//!   error would concentrate on the texels next to chart borders (on the bunny three texels in
+//!   four lie within three texels of a border). The kernel of t is the window plus its taps in
+//!   local-only and optimized modes (`P_win(t)` below is then its whole sum), the window alone
+//!   in simple blending (the paper's), where the taps would overlap F's off-diagonal near field
+//!   and only the fit below can account for that.
 //! - **Blending.** The composite adds B = B^l(t) + beta(t) E_t + sum_q phi_q(t) B^g_q.
 //!   * simple: the global uses F^0 (F without its diagonal: a node's own neighbourhood is the
 //!     kernel's business), and the direct term B^d = beta(t) E_t makes up for the difference
@@ -61,6 +69,14 @@ pub enum Blend {
 impl Blend {
     /// All modes.
     pub const ALL: [Blend; 4] = [Blend::Local, Blend::Global, Blend::Simple, Blend::Optimized];
+
+    /// Whether the local response includes the seam taps: local only and optimized. Simple
+    /// blending is the paper's: kernels within their chart, F without its diagonal, and a
+    /// direct term; taps across seams would overlap F's off-diagonal near field there, which
+    /// only the optimized fit accounts for.
+    pub fn seam_taps(self) -> bool {
+        matches!(self, Blend::Local | Blend::Optimized)
+    }
 
     /// Lower-case name.
     pub fn name(self) -> &'static str {
@@ -161,6 +177,8 @@ pub struct Operators {
     pub kernel_size: u32,
     /// Per texel, k*k RGB weights, offsets row-major from (-k/2, -k/2).
     pub kernels: Vec<[f32; 3]>,
+    /// Seam taps: per texel, (source texel of another chart, RGB weight), sorted by source.
+    pub seams: Csr,
     /// Per texel: (node, phi) pairs, summing to 1.
     pub texel_nodes: Csr1,
     /// Per node: (texel, gather weight) pairs, summing to 1.
@@ -365,6 +383,7 @@ impl Operators {
             })
             .collect();
         progress("kernels", n_texels as u64, n_texels as u64);
+        let seams = seam_taps(atlas, kernel_size, &dipoles);
         let kernels_s = clock.elapsed().as_secs_f64();
         let clock = std::time::Instant::now();
 
@@ -459,6 +478,7 @@ impl Operators {
         let mut ops = Operators {
             kernel_size,
             kernels,
+            seams,
             texel_nodes: Csr1::from_rows(phi_rows),
             gather: Csr1::from_rows(gather),
             node_area: node_area.iter().map(|a| *a as f32).collect(),
@@ -484,34 +504,69 @@ impl Operators {
             .collect();
         let optimized_sums: Vec<[f64; 3]> =
             (0..n_nodes).map(|q| ops.optimized.row_sum(q)).collect();
-        ops.direct_simple = ops.direct_term(&simple_sums);
-        ops.direct_optimized = ops.direct_term(&optimized_sums);
+        ops.direct_simple = ops.direct_term(&simple_sums, Blend::Simple.seam_taps());
+        ops.direct_optimized = ops.direct_term(&optimized_sums, Blend::Optimized.seam_taps());
         progress("blending", 1, 1);
         ops
     }
 
-    /// Sum of texel `t`'s kernel per channel (P_win).
-    pub fn kernel_sum(&self, t: usize) -> [f64; 3] {
+    /// Sum of texel `t`'s kernel per channel (P_win): the window, plus the seam taps with
+    /// `seams`.
+    pub fn kernel_sum(&self, t: usize, seams: bool) -> [f64; 3] {
         let kk = (self.kernel_size * self.kernel_size) as usize;
-        self.kernels[t * kk..(t + 1) * kk]
+        let mut s = self.kernels[t * kk..(t + 1) * kk]
             .iter()
             .fold([0.0; 3], |mut s, w| {
                 for c in 0..3 {
                     s[c] += w[c] as f64;
                 }
                 s
-            })
+            });
+        if seams && t < self.seams.rows() {
+            for (_, w) in self.seams.row(t) {
+                for c in 0..3 {
+                    s[c] += w[c] as f64;
+                }
+            }
+        }
+        s
+    }
+
+    /// The weight of source texel `s` in texel `t`'s kernel (window or seam tap; zero outside).
+    pub fn kernel_weight(&self, atlas: &Atlas, t: usize, s: usize) -> [f32; 3] {
+        let (tt, ts) = (&atlas.texels[t], &atlas.texels[s]);
+        let half = (self.kernel_size / 2) as i64;
+        let (dx, dy) = (ts.x as i64 - tt.x as i64, ts.y as i64 - tt.y as i64);
+        if ts.chart == tt.chart {
+            if dx.abs() <= half && dy.abs() <= half {
+                let k = self.kernel_size as i64;
+                let kk = (k * k) as usize;
+                return self.kernels[t * kk + ((dy + half) * k + dx + half) as usize];
+            }
+            return [0.0; 3];
+        }
+        if t >= self.seams.rows() {
+            return [0.0; 3];
+        }
+        let (a, b) = (
+            self.seams.row_start[t] as usize,
+            self.seams.row_start[t + 1] as usize,
+        );
+        match self.seams.cols[a..b].binary_search(&(s as u32)) {
+            Ok(i) => self.seams.vals[a + i],
+            Err(_) => [0.0; 3],
+        }
     }
 
     /// beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t): under locally uniform
     /// light, kernel + beta + W then give exactly what the full F gives.
-    fn direct_term(&self, row_sums: &[[f64; 3]]) -> Vec<[f32; 3]> {
+    fn direct_term(&self, row_sums: &[[f64; 3]], seams: bool) -> Vec<[f32; 3]> {
         let full_sums: Vec<[f64; 3]> = (0..self.global.rows())
             .map(|q| self.global.row_sum(q))
             .collect();
         (0..self.kernels.len() / (self.kernel_size * self.kernel_size) as usize)
             .map(|t| {
-                let win = self.kernel_sum(t);
+                let win = self.kernel_sum(t, seams);
                 let mut g = [0.0; 3];
                 for (q, phi) in self.texel_nodes.row(t) {
                     let full = full_sums[q as usize];
@@ -534,9 +589,6 @@ impl Operators {
         progress: Progress<'_>,
     ) -> Csr {
         let n_nodes = nodes.positions.len();
-        let k = self.kernel_size as i64;
-        let half = k / 2;
-        let kk = (k * k) as usize;
         let footprint = 4.5 * atlas.texel_mm * std::f64::consts::SQRT_2;
         let reach = footprint + nodes.spacing_mm;
         let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
@@ -568,13 +620,8 @@ impl Operators {
                 let mut phi = Vec::with_capacity(4);
                 for &s in &texels {
                     let ts = &atlas.texels[s as usize];
-                    // Kernel weight of s in c's window, if s lies in it.
-                    let (dx, dy) = (ts.x as i64 - tc.x as i64, ts.y as i64 - tc.y as i64);
-                    let kw = if dx.abs() <= half && dy.abs() <= half && ts.chart == tc.chart {
-                        self.kernels[c as usize * kk + ((dy + half) * k + dx + half) as usize]
-                    } else {
-                        [0.0; 3]
-                    };
+                    // Kernel weight of s in c's kernel (window or seam tap), if s lies in it.
+                    let kw = self.kernel_weight(atlas, c as usize, s as usize);
                     let mean = texel_mean(atlas, s as usize, xc, dipoles);
                     let mut target = [0, 1, 2].map(|ch| mean[ch] - kw[ch] as f64 / ts.area as f64);
                     phi.clear();
@@ -644,6 +691,54 @@ impl Operators {
         progress("fit", n_nodes as u64, n_nodes as u64);
         Csr::from_rows(rows)
     }
+}
+
+/// Seam taps (see the module documentation): per texel, the texels of other charts within the
+/// kernel's inscribed disc, with their kernel weights. Found through a uniform grid of cells
+/// one disc radius wide.
+fn seam_taps(atlas: &Atlas, kernel_size: u32, dipoles: &[Dipole; 3]) -> Csr {
+    use std::collections::HashMap;
+    let radius = (kernel_size / 2) as f64 * atlas.texel_mm + 0.5 * atlas.texel_mm;
+    let cell = |p: DVec3| {
+        let c = (p / radius).floor();
+        (c.x as i64, c.y as i64, c.z as i64)
+    };
+    let mut grid: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
+    for (i, t) in atlas.texels.iter().enumerate() {
+        grid.entry(cell(t.position.as_dvec3()))
+            .or_default()
+            .push(i as u32);
+    }
+    let rows: Vec<Vec<(u32, [f32; 3])>> = atlas
+        .texels
+        .par_iter()
+        .map(|t| {
+            let x = t.position.as_dvec3();
+            let (cx, cy, cz) = cell(x);
+            let mut row = Vec::new();
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        let Some(list) = grid.get(&(cx + dx, cy + dy, cz + dz)) else {
+                            continue;
+                        };
+                        for &s in list {
+                            let ts = &atlas.texels[s as usize];
+                            if ts.chart == t.chart || ts.position.as_dvec3().distance(x) > radius {
+                                continue;
+                            }
+                            let mean = texel_mean(atlas, s as usize, x, dipoles);
+                            let w = mean.map(|m| (m * ts.area as f64) as f32);
+                            row.push((s, w));
+                        }
+                    }
+                }
+            }
+            row.sort_by_key(|e| e.0);
+            row
+        })
+        .collect();
+    Csr::from_rows(rows)
 }
 
 /// The texel that represents node `q` as a receiver: where phi_q peaks.

@@ -16,6 +16,7 @@
 //!
 //! Its own error is measured by halving the spacing and theta ([`Reference::refined`]).
 
+pub mod borders;
 pub mod bvh;
 pub mod metrics;
 
@@ -350,6 +351,21 @@ pub fn camera_ray(scene: &Scene, x: u32, y: u32) -> (DVec3, DVec3) {
     let nx = (2.0 * (x as f64 + 0.5) / w - 1.0) * t * w / h;
     let ny = (1.0 - 2.0 * (y as f64 + 0.5) / h) * t;
     (cam.position.as_dvec3(), (f + s * nx + u * ny).normalize())
+}
+
+/// B at arbitrary surface points, from the same dense samples and hierarchical sum as
+/// [`Reference::compute`] (used to check the method texel by texel, independently of the
+/// rasterisation and the composite).
+pub fn b_at(scene: &Scene, settings: ReferenceSettings, points: &[DVec3]) -> Vec<[f64; 3]> {
+    let m = &scene.mesh;
+    let bvh = Bvh::new(&m.positions, &m.indices);
+    let (lit, _) = samples(scene, &bvh, settings.spacing_mm);
+    let tree = Tree::new(lit, 0.5 * settings.spacing_mm * settings.spacing_mm);
+    let dipoles = scene.material.dipoles();
+    points
+        .par_iter()
+        .map(|p| tree.eval(*p, &dipoles, settings.theta))
+        .collect()
 }
 
 impl Reference {
