@@ -45,11 +45,28 @@ pub enum Command {
     /// Speed against accuracy: sweep the method's knobs, time each point, compare each with the
     /// reference; writes chart.csv, chart.svg, chart.png.
     Chart(ChartArgs),
+    /// Error near chart borders: the method's B texel by texel (CPU, no rasterisation) against
+    /// the reference, by distance to the nearest chart border, for every blending mode.
+    Borders(BordersArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
     /// Open a window: orbit, zoom and pan with the mouse, move the light, switch material and
     /// blending live (keys listed in the overlay); `--script` drives it without input.
     View(ViewArgs),
+}
+
+/// Arguments of `borders`.
+#[derive(Debug, Args, Default)]
+pub struct BordersArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder for borders.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
 }
 
 /// Arguments of `view`.
@@ -880,6 +897,50 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     )
 }
 
+fn borders(args: &BordersArgs) -> Result<()> {
+    use crate::reference::{borders, ReferenceSettings};
+    let scene = Scene::load(args.input.scene.as_deref(), &args.input.overrides())?;
+    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
+    let quiet = |_: &str, _: u64, _: u64| {};
+    let (pre, _) = preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &quiet)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let reference =
+        borders::TexelReference::compute(&scene, &pre, ReferenceSettings::for_scene(&scene));
+    let mut json = serde_json::Map::new();
+    println!(
+        "relative RMS per channel (R / G / B), lit texels by distance to the nearest chart border"
+    );
+    println!(
+        "{:<10} {:>9} {:>8}  {:>22}  {:>22}",
+        "mode", "distance", "texels", "RMS %", "bias %"
+    );
+    for mode in Blend::ALL {
+        let bands = borders::compare(&pre, &reference, mode);
+        for b in &bands {
+            let last = b.distance as usize == borders::BANDS - 1;
+            println!(
+                "{:<10} {:>9} {:>8}  {:>6.2} {:>6.2} {:>6.2}    {:>+6.2} {:>+6.2} {:>+6.2}",
+                mode.name(),
+                format!("{}{}", b.distance, if last { "+" } else { "" }),
+                b.texels,
+                100.0 * b.rel_rms[0],
+                100.0 * b.rel_rms[1],
+                100.0 * b.rel_rms[2],
+                100.0 * b.bias[0],
+                100.0 * b.bias[1],
+                100.0 * b.bias[2]
+            );
+        }
+        json.insert(mode.name().into(), serde_json::to_value(bands)?);
+    }
+    output::write_atomic(&args.out.join("borders.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&json)?)?)
+    })?;
+    println!("wrote {}", args.out.join("borders.json").display());
+    Ok(())
+}
+
 fn check_validation(gpu: &Gpu) -> Result<()> {
     let n = gpu.validation.count();
     if n > 0 {
@@ -939,6 +1000,7 @@ pub fn main() -> ExitCode {
         Some(Command::Reference(args)) => reference(args),
         Some(Command::Compare(args)) => compare(args),
         Some(Command::Chart(args)) => chart(&cli, args),
+        Some(Command::Borders(args)) => borders(args),
         Some(Command::Devices) => devices(),
         Some(Command::View(args)) => view(&cli, args),
     };

@@ -368,3 +368,49 @@ fn reference_and_compare_write_their_outputs() {
     fails_with(c, "missing.exr");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn borders_reports_every_mode_by_distance() {
+    let dir = temp_dir("borders");
+    let scene = dir.join("scene.toml");
+    // A box: every edge is a chart border.
+    std::fs::write(&scene, "[mesh]\nbuiltin = \"box\"\nsize = [20.0, 20.0, 20.0]\nsegments = 8\n[camera]\nposition = [50.0, 50.0, 60.0]\ntarget = [0.0, 0.0, 0.0]\n[material]\npreset = \"marble\"\n[output]\nwidth = 64\nheight = 64\n").unwrap();
+    let o = bin()
+        .args(["borders", "--no-cache", "--texel-mm", "1.0", "--out"])
+        .arg(&dir)
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("optimized") && stdout.contains("4+"),
+        "{stdout}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("borders.json")).unwrap()).unwrap();
+    for mode in ["local", "global", "simple", "optimized"] {
+        let bands = json[mode].as_array().unwrap();
+        assert_eq!(bands.len(), 5, "{mode}");
+        assert!(
+            bands[0]["texels"].as_u64().unwrap() > 100,
+            "{mode}: {}",
+            bands[0]
+        );
+        for b in bands {
+            for v in b["rel_rms"].as_array().unwrap() {
+                assert!(v.as_f64().unwrap().is_finite());
+            }
+        }
+    }
+    let worst = |m: &str| {
+        json[m][0]["rel_rms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .fold(0.0, f64::max)
+    };
+    assert!(worst("optimized") < worst("simple"), "{json}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

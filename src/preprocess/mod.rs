@@ -222,6 +222,7 @@ impl Preprocessed {
         (o.kernels.len() * 12) as u64
             + csr(o.global.nnz(), o.global.rows())
             + csr(o.optimized.nnz(), o.optimized.rows())
+            + csr(o.seams.nnz(), o.seams.rows())
             + (o.gather.cols.len() * 8) as u64
             + (o.texel_nodes.cols.len() * 8) as u64
             + (o.direct_simple.len() * 24) as u64
@@ -259,6 +260,13 @@ impl Preprocessed {
                 100.0 * o.prune.mean_dropped
             ),
             format!("kernels: {0} x {0} RGB per texel", o.kernel_size),
+            format!(
+                "seam taps: {} (texels of neighbouring charts within the kernel's disc, on {} texels)",
+                o.seams.nnz(),
+                (0..o.seams.rows())
+                    .filter(|&t| o.seams.row(t).next().is_some())
+                    .count()
+            ),
             format!("device memory for the per-frame data: {:.1} MiB", self.device_bytes() as f64 / (1u64 << 20) as f64),
             format!(
                 "time: atlas {:.2} s, nodes {:.2} s, operators {:.2} s (kernels {:.2} s, global F {:.2} s, near-field fit {:.2} s)",
