@@ -2,9 +2,12 @@
 //! validation layer on, and a scripted session that moves the light and the camera, zooms,
 //! resizes the window, switches the blending and the material, and takes screenshots.
 //!
-//! Needs `Xvfb` (Debian: xvfb) and the X client libraries winit loads (libxkbcommon-x11-0,
-//! libxcursor1, libxrandr2, libxi6); `.ci/run` installs them. Without Xvfb the test fails
-//! rather than skips.
+//! A second session is driven by real X input (keys, mouse drags and the wheel through the XTEST
+//! extension, with xdotool) to check the controls themselves.
+//!
+//! Needs `Xvfb` (Debian: xvfb), `xdotool` and the X client libraries winit loads
+//! (libxkbcommon-x11-0, libxcursor1, libxrandr2, libxi6); `.ci/run` installs them. Without
+//! them the tests fail rather than skip.
 
 mod common;
 
@@ -262,4 +265,149 @@ fn a_bad_script_is_refused_before_the_window_opens() {
     cmd.env_remove("DISPLAY")
         .args(["view", "--no-cache", "--script", "frames 2; spin 3"]);
     common::fails_with(cmd, "unknown command 'spin'");
+}
+
+fn xdotool(display: &str, args: &[&str]) -> String {
+    let o = Command::new("xdotool")
+        .env("DISPLAY", display)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run xdotool ({e}); on Debian: apt-get install xdotool"));
+    assert!(
+        o.status.success(),
+        "xdotool {args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Waits (up to a minute) for `path` to appear and be complete JSON.
+fn wait_for_json(path: &Path, viewer: &mut Child) -> serde_json::Value {
+    let start = Instant::now();
+    loop {
+        if let Ok(text) = std::fs::read_to_string(path) {
+            if let Ok(v) = serde_json::from_str(&text) {
+                return v;
+            }
+        }
+        if let Some(status) = viewer.try_wait().unwrap() {
+            panic!(
+                "the viewer exited ({status}) before writing {}",
+                path.display()
+            );
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "{} never appeared",
+            path.display()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn keys_mouse_and_wheel_drive_the_viewer() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer-input");
+    let mut viewer = common::bin()
+        .env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["--validate", "view", "--cache"])
+        .arg(dir.join("cache"))
+        .arg("--out")
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let d = x.display.as_str();
+    let window = xdotool(d, &["search", "--sync", "--name", "translucent"]);
+    let window = window.lines().next().unwrap().trim().to_string();
+    xdotool(d, &["windowfocus", "--sync", &window]);
+
+    // A screenshot of the starting view.
+    xdotool(d, &["key", "p"]);
+    let start = wait_for_json(&dir.join("shot-000.json"), &mut viewer);
+
+    // Left drag orbits the camera; right drag moves the light; '2': global only.
+    let drag = |button: &str, dx: i32| {
+        let (x0, x1) = (200, 200 + dx);
+        xdotool(
+            d,
+            &[
+                "mousemove",
+                "--window",
+                &window,
+                &x0.to_string(),
+                "250",
+                "mousedown",
+                button,
+                "mousemove",
+                "--window",
+                &window,
+                &((x0 + x1) / 2).to_string(),
+                "255",
+                "sleep",
+                "0.2",
+                "mousemove",
+                "--window",
+                &window,
+                &x1.to_string(),
+                "260",
+                "sleep",
+                "0.2",
+                "mouseup",
+                button,
+            ],
+        );
+    };
+    drag("1", 120);
+    drag("3", -100);
+    xdotool(d, &["key", "2", "p"]);
+    let moved = wait_for_json(&dir.join("shot-001.json"), &mut viewer);
+    assert_ne!(start["camera"]["position"], moved["camera"]["position"]);
+    assert_eq!(start["camera"]["target"], moved["camera"]["target"]);
+    assert_ne!(start["light_yaw_deg"], moved["light_yaw_deg"]);
+    assert_eq!(moved["mode"], "global");
+
+    // The wheel zooms in: the camera comes closer to its target.
+    xdotool(d, &["click", "--repeat", "3", "4", "key", "p"]);
+    let zoomed = wait_for_json(&dir.join("shot-002.json"), &mut viewer);
+    let dist = |v: &serde_json::Value| {
+        let p: Vec<f64> = serde_json::from_value(v["camera"]["position"].clone()).unwrap();
+        let t: Vec<f64> = serde_json::from_value(v["camera"]["target"].clone()).unwrap();
+        p.iter()
+            .zip(&t)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt()
+    };
+    assert!(
+        dist(&zoomed) < 0.9 * dist(&moved),
+        "{} vs {}",
+        dist(&zoomed),
+        dist(&moved)
+    );
+
+    // Escape closes it cleanly (validation on: any message would fail the exit code).
+    xdotool(d, &["key", "Escape"]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let status = loop {
+        if let Some(s) = viewer.try_wait().unwrap() {
+            break s;
+        }
+        if Instant::now() > deadline {
+            let _ = viewer.kill();
+            panic!("the viewer did not close on Escape");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let o = viewer.wait_with_output().unwrap();
+    assert!(
+        status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("view: closed after"));
 }
