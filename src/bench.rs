@@ -6,6 +6,7 @@
 //! the device's bandwidth; the ratio is then reported against the host figure and says so.
 
 use crate::graph::timing::{Stats, TimingReport};
+use crate::preprocess::operators::Blend;
 use crate::preprocess::Preprocessed;
 use crate::scene::Scene;
 use rayon::prelude::*;
@@ -62,14 +63,15 @@ pub struct Traffic {
 /// - shadow: the atlas mesh (vertices and indices) per light; writes the depth maps;
 /// - illum: the mesh and the shadow maps; writes the illumination map;
 /// - dilate: the covered-texel list and the map at those texels; writes nothing it must;
-/// - local: per covered texel its k*k+1 kernel taps and k*k map texels; writes its texel;
+/// - local: per covered texel its k*k+1 kernel taps and k*k map texels, its seam-tap row and,
+///   per seam tap (modes that have them), the tap and one map texel; writes its texel;
 /// - gather / global: row starts, entries, and one source value per entry; writes one value
 ///   per node;
 /// - composite: mesh, node radiosity, one local-response texel per covered pixel; writes the
 ///   radiance and depth of every pixel;
 /// - tonemap: the radiance image; writes the display image;
 /// - readback: both images, written to host memory.
-pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed) -> Traffic {
+pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Traffic {
     let a = &pre.atlas;
     let o = &pre.ops;
     let texels = a.texels.len() as u64;
@@ -85,7 +87,17 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed) -> Traffic {
         "shadow" => (mesh * lights, shadow),
         "illum" => (mesh + shadow, atlas_px * 16),
         "dilate" => (texels * (4 + 16), 0),
-        "local" => (texels * (4 + (kk + 1) * 16 + kk * 16), texels * 16),
+        "local" => {
+            let taps = if mode.seam_taps() {
+                o.seams.nnz() as u64
+            } else {
+                0
+            };
+            (
+                texels * (4 + (kk + 1) * 16 + kk * 16 + 8) + taps * (16 + 16),
+                texels * 16,
+            )
+        }
         "gather" => (
             4 * (nodes + 1) + o.gather.cols.len() as u64 * (8 + 16),
             nodes * 16,
@@ -181,12 +193,13 @@ impl BenchReport {
         bandwidth: Bandwidth,
         nonzeros: usize,
         memory: crate::passes::data::Requirements,
+        mode: Blend,
     ) -> BenchReport {
         let passes: Vec<PassBench> = timings
             .passes
             .iter()
             .map(|p| {
-                let t = traffic(&p.name, scene, pre);
+                let t = traffic(&p.name, scene, pre, mode);
                 let bound_ms = t.read as f64 / (bandwidth.read_gbps * 1e9) * 1e3;
                 PassBench {
                     name: p.name.clone(),
