@@ -848,7 +848,7 @@ mod tests {
                 assert!((k / sums[c] - 1.0).abs() < 1e-6, "{k} vs {}", sums[c]);
                 for &(i, v) in &kept {
                     let orig = row[i as usize].1[c];
-                    let grow = v as f64 / orig;
+                    let grow = v[c] as f64 / orig;
                     assert!(grow >= 1.0 - 1e-6 && grow <= 1.0 / (1.0 - tol) + 1e-6);
                 }
             }
