@@ -6,7 +6,7 @@
 layout(local_size_x = 64) in;
 
 layout(set = 0, binding = 0) uniform usamplerBuffer texels;   // x | y << 16 per covered texel
-layout(set = 0, binding = 1) uniform samplerBuffer kernels;   // (k*k + 1) RGBA per texel
+layout(set = 0, binding = 1) uniform samplerBuffer kernels;   // (k*k + 1) RGBA16F per texel
 layout(set = 0, binding = 2, rgba32f) uniform readonly image2D irradiance;
 layout(set = 0, binding = 3, rgba32f) uniform writeonly image2D local_out;
 layout(set = 0, binding = 4) uniform usamplerBuffer seam_rows;  // texel count + 1 row starts

@@ -63,7 +63,7 @@ pub struct Traffic {
 /// - shadow: the atlas mesh (vertices and indices) per light; writes the depth maps;
 /// - illum: the mesh and the shadow maps; writes the illumination map;
 /// - dilate: the covered-texel list and the map at those texels; writes nothing it must;
-/// - local: per covered texel its k*k+1 kernel taps and k*k map texels, its seam-tap row and,
+/// - local: per covered texel its k*k+1 kernel taps (f16) and k*k map texels, its seam-tap row and,
 ///   per seam tap (modes that have them), the tap and one map texel; writes its texel;
 /// - gather / global: row starts, entries, and one source value per entry; writes one value
 ///   per node;
@@ -94,7 +94,7 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
                 0
             };
             (
-                texels * (4 + (kk + 1) * 16 + kk * 16 + 8) + taps * (16 + 16),
+                texels * (4 + (kk + 1) * 8 + kk * 16 + 8) + taps * (16 + 16),
                 texels * 16,
             )
         }

@@ -108,24 +108,6 @@ fn host_buffer(gpu: &Arc<Gpu>, name: &str, bytes: u64) -> Result<Arc<Buffer>> {
     )?))
 }
 
-/// IEEE half -> f32 (the window image's RGBA16F texels).
-fn half_to_f32(h: u16) -> f32 {
-    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exp = ((h >> 10) & 0x1f) as i32;
-    let mant = (h & 0x3ff) as f32;
-    sign * match exp {
-        0 => mant * 2f32.powi(-24),
-        31 => {
-            if mant == 0.0 {
-                f32::INFINITY
-            } else {
-                f32::NAN
-            }
-        }
-        e => (1.0 + mant / 1024.0) * 2f32.powi(e - 15),
-    }
-}
-
 fn read_back<T: bytemuck::Pod>(buffer: &Buffer, count: usize) -> Result<Vec<T>> {
     let bytes = buffer
         .mapped()
@@ -511,7 +493,7 @@ impl Renderer {
         } else {
             bytemuck::cast_slice::<u8, u16>(&bytes[..(e.width * e.height * 8) as usize])
                 .iter()
-                .map(|&h| half_to_f32(h))
+                .map(|&h| crate::gpu::half::from_f16(h))
                 .collect()
         })
     }

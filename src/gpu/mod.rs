@@ -2,6 +2,7 @@
 
 pub mod device;
 pub mod error;
+pub mod half;
 pub mod pipeline;
 pub mod resources;
 

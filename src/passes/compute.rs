@@ -93,7 +93,7 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
         .access(out, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let texel_view = view(gpu, res, i.texels, vk::Format::R32_UINT, 4)?;
-            let kernel_view = view(gpu, res, i.kernels, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let kernel_view = view(gpu, res, i.kernels, vk::Format::R16G16B16A16_SFLOAT, 8)?;
             let seam_row_view = view(gpu, res, i.seam_rows, vk::Format::R32_UINT, 4)?;
             let seam_view = view(
                 gpu,

@@ -5,7 +5,8 @@
 //! - atlas mesh: one vertex per (mesh vertex, chart) with position, normal, texture coordinate,
 //!   atlas coordinate (texels) and up to three (node, weight) pairs of its prolongation;
 //! - covered texels: `x | y << 16` (R32_UINT), and a chart-id image (R32_UINT, chart + 1);
-//! - kernels: per covered texel k*k RGBA32F taps then the direct term beta (RGBA32F);
+//! - kernels: per covered texel k*k RGBA16F taps then the direct term beta (RGBA16F);
+//! - seam taps: CSR rows (R32_UINT) and entries (texel bits, weight rgb) (R32G32B32A32_SFLOAT);
 //! - gather: CSR rows (R32_UINT) and entries (texel bits, weight) (R32G32_SFLOAT);
 //! - global: CSR rows (R32_UINT) and entries (node bits, W rgb) (R32G32B32A32_SFLOAT).
 //!
@@ -260,7 +261,7 @@ impl Requirements {
             ("atlas indices".into(), a.indices.len() as u64 * 4),
             ("covered texels".into(), texels * 4),
             ("chart ids".into(), atlas_px * 4),
-            ("kernels".into(), texels * (kk + 1) * 16),
+            ("kernels".into(), texels * (kk + 1) * 8),
             ("seam taps".into(), (texels + 1) * 4 + seam_taps * 16),
             (
                 "gather".into(),
@@ -410,7 +411,11 @@ impl SubsurfaceData {
             Blend::Simple => (true, Some(&ops.direct_simple)),
             Blend::Optimized => (true, Some(&ops.direct_optimized)),
         };
-        let mut kernels = Vec::with_capacity(atlas.texels.len() * (kk + 1));
+        // Half precision: 8 bytes a tap instead of 16 for the pass that streams the most data
+        // per texel; kernel weights span a few decades, well inside f16's normal range, and the
+        // rounding (2^-11 relative) is far below the method's error (see the accuracy tests).
+        let h = crate::gpu::half::to_f16;
+        let mut kernels: Vec<[u16; 4]> = Vec::with_capacity(atlas.texels.len() * (kk + 1));
         for t in 0..atlas.texels.len() {
             let inv = texel_tex[t].map(|x| 1.0 / x);
             for j in 0..kk {
@@ -420,18 +425,18 @@ impl SubsurfaceData {
                     [0.0; 3]
                 };
                 kernels.push([
-                    w[0] * inv[0] as f32,
-                    w[1] * inv[1] as f32,
-                    w[2] * inv[2] as f32,
-                    0.0,
+                    h(w[0] * inv[0] as f32),
+                    h(w[1] * inv[1] as f32),
+                    h(w[2] * inv[2] as f32),
+                    0,
                 ]);
             }
             let b = direct.map(|d| d[t]).unwrap_or([0.0; 3]);
             kernels.push([
-                b[0] * inv[0] as f32,
-                b[1] * inv[1] as f32,
-                b[2] * inv[2] as f32,
-                0.0,
+                h(b[0] * inv[0] as f32),
+                h(b[1] * inv[1] as f32),
+                h(b[2] * inv[2] as f32),
+                0,
             ]);
         }
         let kernels = upload(gpu, "kernels", &kernels, texel_usage)?;
