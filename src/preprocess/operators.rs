@@ -201,7 +201,11 @@ pub struct Operators {
 
 /// Mean of R_d over texel `s` as seen from `x`, per channel: the exact disc mean when `x`
 /// lies within the texel, a 6x6 (within 1.5 texels) or 3x3 (within 2.5 texels) sub-sampling
-/// where R_d is too curved for one sample, the profile at the texel's position beyond.
+/// where R_d is too curved for one sample, the profile at the texel's position beyond. Each
+/// sample stands for a square cell of edge c and carries the second-order term of the cell's
+/// mean, R_d + (c^2 / 24) Laplacian(R_d): R_d is convex away from its peak, so the bare
+/// midpoint rule underestimates every tap (by about 1 % of R_total in all, which showed as a
+/// uniform darkening of the slab and the bunny).
 fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64; 3] {
     let ts = &atlas.texels[s];
     let area = ts.area as f64;
@@ -227,13 +231,17 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64;
                 );
                 let ry = x.distance(xs + u * a + v * b);
                 for c in 0..3 {
-                    acc[c] += dipoles[c].rd(ry) * weight;
+                    let (f, lap) = dipoles[c].rd_and_laplacian(ry);
+                    acc[c] += (f + step * step / 24.0 * lap).max(0.0) * weight;
                 }
             }
         }
         acc
     } else {
-        rgb(dipoles, |d| d.rd(r))
+        rgb(dipoles, |d| {
+            let (f, lap) = d.rd_and_laplacian(r);
+            (f + h * h / 24.0 * lap).max(0.0)
+        })
     }
 }
 
