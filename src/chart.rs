@@ -35,13 +35,16 @@ pub struct Point {
     pub nonzeros: usize,
     /// Median GPU frame time, ms.
     pub gpu_ms: f64,
+    /// Spread of the frame times: half the interquartile range over the median.
+    pub gpu_spread: f64,
     /// Relative RMS error, worst channel.
     pub rel_rms: f64,
     /// 99th percentile of the per-pixel relative error, worst channel.
     pub p99: f64,
     /// Whether this is the automatic setting.
     pub auto: bool,
-    /// Whether no other point is both faster and more accurate.
+    /// Whether no other point is both faster and more accurate beyond the measurement noise
+    /// (see [`mark_pareto`]).
     pub pareto: bool,
 }
 
@@ -100,12 +103,28 @@ pub fn sweep(
     out
 }
 
-/// Marks the points no other point dominates (faster and at least as accurate, or vice versa).
+/// Relative error differences below this are ties (the errors are deterministic, but points a
+/// knob apart that do not change the method differ in the last digits).
+pub const ERROR_TIE: f64 = 0.005;
+
+/// Marks the Pareto front: a point is on it unless another one is at least as good in both
+/// time and error and better in one, beyond the noise: times within the larger of the two
+/// points' spreads (at least 2 %) and errors within [`ERROR_TIE`] count as equal. On a shared
+/// machine, settings of identical cost time up to 30 % apart; without the tolerance the front
+/// would be decided by that noise.
 pub fn mark_pareto(points: &mut [Point]) {
-    let copy: Vec<(f64, f64)> = points.iter().map(|p| (p.gpu_ms, p.rel_rms)).collect();
+    let copy: Vec<(f64, f64, f64)> = points
+        .iter()
+        .map(|p| (p.gpu_ms, p.rel_rms, p.gpu_spread))
+        .collect();
     for (i, p) in points.iter_mut().enumerate() {
         p.pareto = !copy.iter().enumerate().any(|(j, q)| {
-            j != i && q.0 <= p.gpu_ms && q.1 <= p.rel_rms && (q.0 < p.gpu_ms || q.1 < p.rel_rms)
+            let noise = q.2.max(p.gpu_spread).max(0.02);
+            let (t, e) = (p.gpu_ms, p.rel_rms);
+            j != i
+                && q.0 <= t * (1.0 + noise)
+                && q.1 <= e * (1.0 + ERROR_TIE)
+                && (q.0 < t * (1.0 - noise) || q.1 < e * (1.0 - ERROR_TIE))
         });
     }
 }
@@ -138,6 +157,7 @@ pub fn point(
             _ => pre.ops.global.nnz(),
         },
         gpu_ms,
+        gpu_spread: 0.0,
         rel_rms: err.rel_rms,
         p99: err.channels.iter().map(|c| c.p99).fold(0.0, f64::max),
         auto,
@@ -147,10 +167,10 @@ pub fn point(
 
 /// `chart.csv`.
 pub fn csv(points: &[Point]) -> String {
-    let mut s = String::from("setting,mode,texel_mm,kernel,node_spacing_mm,prune,nodes,texels,nonzeros,gpu_ms,rel_rms,p99,auto,pareto\n");
+    let mut s = String::from("setting,mode,texel_mm,kernel,node_spacing_mm,prune,nodes,texels,nonzeros,gpu_ms,gpu_spread,rel_rms,p99,auto,pareto\n");
     for p in points {
         s.push_str(&format!(
-            "{},{},{:.4},{},{:.3},{},{},{},{},{:.3},{:.5},{:.5},{},{}\n",
+            "{},{},{:.4},{},{:.3},{},{},{},{},{:.3},{:.3},{:.5},{:.5},{},{}\n",
             p.setting,
             p.mode,
             p.texel_mm,
@@ -161,6 +181,7 @@ pub fn csv(points: &[Point]) -> String {
             p.texels,
             p.nonzeros,
             p.gpu_ms,
+            p.gpu_spread,
             p.rel_rms,
             p.p99,
             p.auto,
@@ -320,6 +341,7 @@ mod tests {
             texels: 1,
             nonzeros: 1,
             gpu_ms: t,
+            gpu_spread: 0.05,
             rel_rms: e,
             p99: e,
             auto: mode == "optimized",
@@ -338,6 +360,15 @@ mod tests {
         mark_pareto(&mut pts);
         let front: Vec<bool> = pts.iter().map(|p| p.pareto).collect();
         assert_eq!(front, vec![true, true, false, true]);
+        // Within the noise (5 % spreads): 3 % faster at the same error is a tie...
+        let mut ties = vec![p("a", 10.0, 0.02), p("b", 9.7, 0.02), p("c", 8.0, 0.03)];
+        mark_pareto(&mut ties);
+        assert!(ties.iter().all(|p| p.pareto));
+        // ... 7 % faster than b and 10 % faster than a at an error within the tie is not.
+        ties.push(p("d", 9.0, 0.02 * (1.0 + 0.5 * ERROR_TIE)));
+        mark_pareto(&mut ties);
+        let front: Vec<bool> = ties.iter().map(|p| p.pareto).collect();
+        assert_eq!(front, vec![false, false, true, true]);
         let dir = std::env::temp_dir().join(format!("translucent-chart-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         plot(&dir, "test", &pts).unwrap();

@@ -122,8 +122,9 @@ pub struct ChartArgs {
     /// Output folder.
     #[arg(long, default_value = "out/chart")]
     pub out: PathBuf,
-    /// Timed frames per point (after 2 warm-up frames).
-    #[arg(long, default_value_t = 5)]
+    /// Timed frames per point, spread over three interleaved rounds from 6 frames on (each
+    /// round after one warm-up frame).
+    #[arg(long, default_value_t = 6)]
     pub frames: usize,
     /// A few settings only (for CI).
     #[arg(long)]
@@ -747,48 +748,73 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             r.frame(&scene.lights)?;
         }
     }
+    // Timing rounds: every point is timed in each round, a few frames at a time, and its time is
+    // the median over all its frames. Interleaving spreads slow drifts of a shared machine over
+    // all points instead of charging them to whichever points ran during them (identical
+    // settings timed 30 % apart when each point ran its frames in one block).
+    let sweep = crate::chart::sweep(&auto.settings, args.quick);
+    let rounds = if args.frames >= 6 { 3 } else { 1 };
+    let per_round = args.frames.div_ceil(rounds);
     let mut points = Vec::new();
-    for (label, o) in crate::chart::sweep(&auto.settings, args.quick) {
-        let choice = preprocess::choose(&scene, &o, args.target_error)?;
-        let (pre, _) = preprocess::prepare(&scene, &choice, Some(&cache_dir), &quiet)?;
-        for mode in Blend::ALL {
-            let mut r = Renderer::new(
-                &gpu,
-                scene.clone(),
-                &pre,
-                Options {
-                    mode,
-                    ..Default::default()
-                },
-            )?;
-            let mut times = Vec::new();
-            for f in 0..args.frames + 2 {
-                let t = r.frame(&scene.lights)?;
-                if f >= 2 {
-                    times.push(t.gpu_ms);
+    let mut times: Vec<Vec<f64>> = Vec::new();
+    for round in 0..rounds {
+        let mut i = 0;
+        for (label, o) in &sweep {
+            let choice = preprocess::choose(&scene, o, args.target_error)?;
+            let (pre, _) = preprocess::prepare(&scene, &choice, Some(&cache_dir), &quiet)?;
+            for mode in Blend::ALL {
+                let mut r = Renderer::new(
+                    &gpu,
+                    scene.clone(),
+                    &pre,
+                    Options {
+                        mode,
+                        ..Default::default()
+                    },
+                )?;
+                if round == 0 {
+                    times.push(Vec::new());
                 }
+                for f in 0..per_round + 1 {
+                    let t = r.frame(&scene.lights)?;
+                    if f >= 1 {
+                        times[i].push(t.gpu_ms);
+                    }
+                }
+                if round == 0 {
+                    let out = r.output(Vec::new())?;
+                    points.push(crate::chart::point(
+                        label,
+                        mode,
+                        &pre,
+                        choice.settings.node_spacing_mm,
+                        f64::NAN,
+                        &out.radiance,
+                        &reference.radiance,
+                        label == "auto",
+                    ));
+                }
+                i += 1;
             }
-            let out = r.output(Vec::new())?;
-            let gpu_ms = crate::graph::timing::Stats::of(&times).median_ms;
-            let p = crate::chart::point(
-                &label,
-                mode,
-                &pre,
-                choice.settings.node_spacing_mm,
-                gpu_ms,
-                &out.radiance,
-                &reference.radiance,
-                label == "auto",
-            );
-            println!(
-                "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS",
-                label,
-                mode.name(),
-                gpu_ms,
-                100.0 * p.rel_rms
-            );
-            points.push(p);
         }
+    }
+    for (p, t) in points.iter_mut().zip(&times) {
+        p.gpu_ms = crate::graph::timing::Stats::of(t).median_ms;
+        let mut sorted = t.clone();
+        sorted.sort_by(f64::total_cmp);
+        let q = |f: f64| sorted[((sorted.len() - 1) as f64 * f).round() as usize];
+        p.gpu_spread = if sorted.is_empty() || p.gpu_ms <= 0.0 {
+            0.0
+        } else {
+            0.5 * (q(0.75) - q(0.25)) / p.gpu_ms
+        };
+        println!(
+            "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS",
+            p.setting,
+            p.mode,
+            p.gpu_ms,
+            100.0 * p.rel_rms
+        );
     }
     check_validation(&gpu)?;
     crate::chart::mark_pareto(&mut points);

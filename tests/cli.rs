@@ -309,7 +309,7 @@ fn chart_runs_on_a_small_scene() {
     );
     assert!(rows.iter().any(|r| r.ends_with(",true")), "no Pareto point");
     for r in &rows {
-        let err: f64 = r.split(',').nth(10).unwrap().parse().unwrap();
+        let err: f64 = r.split(',').nth(11).unwrap().parse().unwrap();
         assert!(err.is_finite() && err >= 0.0, "{r}");
     }
     assert!(std::fs::read_to_string(dir.join("chart.svg"))

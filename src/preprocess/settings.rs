@@ -15,8 +15,12 @@
 //!   the kernel radius (the tail the global response carries) is small, since its error is
 //!   proportional to that tail. The render mesh is simplified to this spacing when it is finer;
 //!   a coarser render mesh is used as it is and the shortfall is reported.
-//! - **Pruning tolerance** of F: 0.5 % of each row's mass, or a quarter of the target error if
-//!   that is smaller.
+//! - **Pruning tolerance** of F: half the target error (1 % of each row's mass by default), at
+//!   most 1 %. Pruning keeps each row's sum (the dropped mass moves to the kept entries), so
+//!   what it adds is at most the tolerance times the contrast of the light between far and
+//!   near sources. Measured on the bunny at 512x512: 0.5 % -> 1 % leaves the error unchanged
+//!   (1.00 / 1.32 / 1.60 vs 1.01 / 1.28 / 1.60 % RMS) with a fifth fewer entries; 2 % raises
+//!   red to 1.40 %.
 
 use crate::physics::Material;
 use serde::{Deserialize, Serialize};
@@ -197,9 +201,9 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             t
         }
         None => {
-            let t = (scale.target_error / 4.0).min(0.005);
+            let t = (scale.target_error / 2.0).min(0.01);
             reasons.push(format!(
-                "pruning tolerance {:.2} % of each row of F",
+                "pruning tolerance {:.2} % of each row of F (half the target error; rows keep their sums)",
                 100.0 * t
             ));
             t
@@ -271,7 +275,7 @@ mod tests {
         );
         for s in [milk, ketchup, cream] {
             assert!(s.kernel_size % 2 == 1 && (3..=11).contains(&s.kernel_size));
-            assert!(s.prune_tolerance <= 0.005);
+            assert!(s.prune_tolerance <= 0.01);
         }
     }
 
