@@ -806,7 +806,7 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         p.gpu_spread = if sorted.is_empty() || p.gpu_ms <= 0.0 {
             0.0
         } else {
-            0.5 * (q(0.75) - q(0.25)) / p.gpu_ms
+            (q(0.75) - q(0.25)) / p.gpu_ms
         };
         println!(
             "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS",
