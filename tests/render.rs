@@ -304,3 +304,30 @@ fn timings_cover_every_pass_and_add_up_to_the_frame() {
     assert!(json["frame"]["gpu_median_ms"].as_f64().unwrap() > 0.0);
     assert!(json["frame"]["wall_median_ms"].as_f64().unwrap() > 0.0);
 }
+
+/// The `tonemap` pass against the CPU's `output::tonemap` of the same radiance: within one 8-bit
+/// step everywhere (the pass uses a square-root approximation of the sRGB curve).
+#[test]
+fn tonemap_pass_matches_the_srgb_curve() {
+    let scene = bunny_scene(128, 128);
+    let exposure = scene.exposure;
+    let out = render(scene, 1);
+    let cpu = translucent::output::tonemap(&out.radiance, exposure);
+    assert_eq!(cpu.len(), out.display.len());
+    let mut worst = 0i32;
+    let mut mid = 0;
+    for (g, c) in out.display.iter().zip(&cpu) {
+        worst = worst.max((*g as i32 - *c as i32).abs());
+        if (30..220).contains(c) {
+            mid += 1;
+        }
+    }
+    assert!(
+        mid > 1000,
+        "too few mid-tone values ({mid}) to test the curve"
+    );
+    assert!(
+        worst <= 1,
+        "display differs from the sRGB curve by {worst} steps"
+    );
+}
