@@ -450,24 +450,7 @@ impl Renderer {
             e.width as u64 * e.height as u64 * texel,
         )?;
         self.gpu.one_shot(|cmd| {
-            let layers = vk::ImageSubresourceLayers {
-                aspect_mask: vk::ImageAspectFlags::COLOR,
-                mip_level: 0,
-                base_array_layer: 0,
-                layer_count: 1,
-            };
-            let copy = [vk::BufferImageCopy {
-                buffer_offset: 0,
-                buffer_row_length: 0,
-                buffer_image_height: 0,
-                image_subresource: layers,
-                image_offset: vk::Offset3D::default(),
-                image_extent: vk::Extent3D {
-                    width: e.width,
-                    height: e.height,
-                    depth: 1,
-                },
-            }];
+            let copy = [crate::gpu::resources::whole_image_copy(e)];
             unsafe {
                 self.gpu.device.cmd_copy_image_to_buffer(
                     cmd,

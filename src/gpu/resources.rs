@@ -194,6 +194,23 @@ pub struct ImageInfo {
     pub usage: vk::ImageUsageFlags,
 }
 
+/// The copy region of a whole single-layer colour image of `extent` from or to a tightly packed
+/// buffer at offset 0.
+pub fn whole_image_copy(extent: vk::Extent2D) -> vk::BufferImageCopy {
+    vk::BufferImageCopy::default()
+        .image_subresource(vk::ImageSubresourceLayers {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            mip_level: 0,
+            base_array_layer: 0,
+            layer_count: 1,
+        })
+        .image_extent(vk::Extent3D {
+            width: extent.width,
+            height: extent.height,
+            depth: 1,
+        })
+}
+
 /// Aspect of a format: depth for depth formats, colour otherwise.
 pub fn aspect_of(format: vk::Format) -> vk::ImageAspectFlags {
     match format {
@@ -403,18 +420,7 @@ impl Image {
                     vk::ImageLayout::TRANSFER_DST_OPTIMAL,
                 ),
             );
-            let region = [vk::BufferImageCopy::default()
-                .image_subresource(vk::ImageSubresourceLayers {
-                    aspect_mask: vk::ImageAspectFlags::COLOR,
-                    mip_level: 0,
-                    base_array_layer: 0,
-                    layer_count: 1,
-                })
-                .image_extent(vk::Extent3D {
-                    width,
-                    height,
-                    depth: 1,
-                })];
+            let region = [whole_image_copy(vk::Extent2D { width, height })];
             gpu.device.cmd_copy_buffer_to_image(
                 cmd,
                 staging.raw,

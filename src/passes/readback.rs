@@ -22,18 +22,7 @@ pub fn add(graph: &mut RenderGraph, name: &str, pairs: Vec<(ResourceId, Resource
             for (source, buffer) in &copies {
                 match source {
                     Physical::Image(image) => {
-                        let region = [vk::BufferImageCopy::default()
-                            .image_subresource(vk::ImageSubresourceLayers {
-                                aspect_mask: vk::ImageAspectFlags::COLOR,
-                                mip_level: 0,
-                                base_array_layer: 0,
-                                layer_count: 1,
-                            })
-                            .image_extent(vk::Extent3D {
-                                width: image.info.extent.width,
-                                height: image.info.extent.height,
-                                depth: 1,
-                            })];
+                        let region = [crate::gpu::resources::whole_image_copy(image.info.extent)];
                         unsafe {
                             rec.gpu.device.cmd_copy_image_to_buffer(
                                 rec.cmd,

@@ -365,18 +365,7 @@ impl Swapchain {
                     self.cmd,
                     &vk::DependencyInfo::default().image_memory_barriers(&to_src),
                 );
-                let copy = [vk::BufferImageCopy {
-                    buffer_offset: 0,
-                    buffer_row_length: 0,
-                    buffer_image_height: 0,
-                    image_subresource: layers,
-                    image_offset: vk::Offset3D::default(),
-                    image_extent: vk::Extent3D {
-                        width: self.extent.width,
-                        height: self.extent.height,
-                        depth: 1,
-                    },
-                }];
+                let copy = [crate::gpu::resources::whole_image_copy(self.extent)];
                 d.cmd_copy_image_to_buffer(
                     self.cmd,
                     target,
