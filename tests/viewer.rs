@@ -281,27 +281,57 @@ fn xdotool(display: &str, args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-/// Waits (up to a minute) for `path` to appear and be complete JSON.
-fn wait_for_json(path: &Path, viewer: &mut Child) -> serde_json::Value {
+/// The screenshots' state files written so far, sorted by name (shot-000.json, ...).
+fn shots(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .map(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    let name = p.file_name().unwrap_or_default().to_string_lossy();
+                    name.starts_with("shot-")
+                        && name.ends_with(".json")
+                        && !name.contains("timings")
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+/// Presses `keys` (ending with the screenshot key) and waits for a new screenshot; presses
+/// again every 10 s if none appears (a key can be lost while the X server hands the focus
+/// over on a loaded machine), up to two minutes. Returns the newest screenshot's state.
+fn screenshot(d: &str, keys: &[&str], dir: &Path, viewer: &mut Child) -> serde_json::Value {
+    let before = shots(dir).len();
     let start = Instant::now();
+    let mut pressed = Instant::now() - Duration::from_secs(60);
     loop {
-        if let Ok(text) = std::fs::read_to_string(path) {
-            if let Ok(v) = serde_json::from_str(&text) {
+        if pressed.elapsed() > Duration::from_secs(10) {
+            let mut args = vec!["key", "--delay", "50"];
+            args.extend_from_slice(keys);
+            xdotool(d, &args);
+            pressed = Instant::now();
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        let now = shots(dir);
+        if now.len() > before {
+            // Complete JSON (the file is written atomically, but be safe).
+            if let Some(v) = now
+                .last()
+                .and_then(|p| std::fs::read_to_string(p).ok())
+                .and_then(|t| serde_json::from_str(&t).ok())
+            {
                 return v;
             }
         }
         if let Some(status) = viewer.try_wait().unwrap() {
-            panic!(
-                "the viewer exited ({status}) before writing {}",
-                path.display()
-            );
+            panic!("the viewer exited ({status}) before the screenshot");
         }
         assert!(
-            start.elapsed() < Duration::from_secs(60),
-            "{} never appeared",
-            path.display()
+            start.elapsed() < Duration::from_secs(120),
+            "no screenshot after pressing {keys:?} for two minutes"
         );
-        std::thread::sleep(Duration::from_millis(100));
     }
 }
 
@@ -320,14 +350,31 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    // Wait until the viewer is up (it prints its device and size once the first renderer is
+    // built), then give its window the keyboard focus and put the pointer over it.
+    let stdout = viewer.stdout.take().unwrap();
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut lines = Vec::new();
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if line.starts_with("view: ") {
+                let _ = ready_tx.send(());
+            }
+            lines.push(line);
+        }
+        lines
+    });
+    ready_rx
+        .recv_timeout(Duration::from_secs(180))
+        .expect("the viewer never came up");
     let d = x.display.as_str();
     let window = xdotool(d, &["search", "--sync", "--name", "translucent"]);
     let window = window.lines().next().unwrap().trim().to_string();
     xdotool(d, &["windowfocus", "--sync", &window]);
+    xdotool(d, &["mousemove", "--window", &window, "20", "20"]);
 
     // A screenshot of the starting view.
-    xdotool(d, &["key", "p"]);
-    let start = wait_for_json(&dir.join("shot-000.json"), &mut viewer);
+    let start = screenshot(d, &["p"], &dir, &mut viewer);
 
     // Left drag orbits the camera; right drag moves the light; '2': global only.
     let drag = |button: &str, dx: i32| {
@@ -363,16 +410,15 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
     };
     drag("1", 120);
     drag("3", -100);
-    xdotool(d, &["key", "2", "p"]);
-    let moved = wait_for_json(&dir.join("shot-001.json"), &mut viewer);
+    let moved = screenshot(d, &["2", "p"], &dir, &mut viewer);
     assert_ne!(start["camera"]["position"], moved["camera"]["position"]);
     assert_eq!(start["camera"]["target"], moved["camera"]["target"]);
     assert_ne!(start["light_yaw_deg"], moved["light_yaw_deg"]);
     assert_eq!(moved["mode"], "global");
 
     // The wheel zooms in: the camera comes closer to its target.
-    xdotool(d, &["click", "--repeat", "3", "4", "key", "p"]);
-    let zoomed = wait_for_json(&dir.join("shot-002.json"), &mut viewer);
+    xdotool(d, &["click", "--repeat", "3", "--delay", "50", "4"]);
+    let zoomed = screenshot(d, &["p"], &dir, &mut viewer);
     let dist = |v: &serde_json::Value| {
         let p: Vec<f64> = serde_json::from_value(v["camera"]["position"].clone()).unwrap();
         let t: Vec<f64> = serde_json::from_value(v["camera"]["target"].clone()).unwrap();
@@ -390,8 +436,8 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
     );
 
     // Escape closes it cleanly (validation on: any message would fail the exit code).
-    xdotool(d, &["key", "Escape"]);
-    let deadline = Instant::now() + Duration::from_secs(60);
+    let deadline = Instant::now() + Duration::from_secs(90);
+    let mut pressed = Instant::now() - Duration::from_secs(60);
     let status = loop {
         if let Some(s) = viewer.try_wait().unwrap() {
             break s;
@@ -400,14 +446,22 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
             let _ = viewer.kill();
             panic!("the viewer did not close on Escape");
         }
+        if pressed.elapsed() > Duration::from_secs(10) {
+            // The window may already be gone: a failure here is not an error.
+            let _ = Command::new("xdotool")
+                .env("DISPLAY", d)
+                .args(["key", "Escape"])
+                .output();
+            pressed = Instant::now();
+        }
         std::thread::sleep(Duration::from_millis(50));
     };
     let o = viewer.wait_with_output().unwrap();
+    let lines = reader.join().unwrap().join("\n");
     assert!(
         status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
+        "{lines}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    assert!(String::from_utf8_lossy(&o.stdout).contains("view: closed after"));
+    assert!(lines.contains("view: closed after"), "{lines}");
 }
