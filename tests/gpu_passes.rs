@@ -10,21 +10,13 @@
 mod common;
 
 use glam::Vec3;
-use std::path::Path;
 use translucent::passes::compute::GlobalLayout;
 use translucent::physics::fresnel_transmittance;
 use translucent::preprocess::{apply, operators::Blend, settings::SettingsOverrides, Preprocessed};
 use translucent::renderer::{Options, Renderer};
 use translucent::scene::{desc::SceneDesc, Overrides, Scene};
 
-fn scene(text: &str) -> Scene {
-    Scene::from_desc(
-        SceneDesc::parse(text).unwrap(),
-        Path::new(""),
-        &Overrides::default(),
-    )
-    .unwrap()
-}
+use common::scene;
 
 fn coarse(texel_mm: f64) -> SettingsOverrides {
     SettingsOverrides {

@@ -9,20 +9,12 @@
 mod common;
 
 use glam::{Mat4, Vec3};
-use std::path::Path;
 use translucent::preprocess::{operators::Blend, settings::SettingsOverrides};
 use translucent::reference::{metrics, Reference, ReferenceSettings};
 use translucent::renderer::Options;
-use translucent::scene::{desc::SceneDesc, mesh::Mesh, Overrides, Scene};
+use translucent::scene::{mesh::Mesh, Scene};
 
-fn scene(text: &str) -> Scene {
-    Scene::from_desc(
-        SceneDesc::parse(text).unwrap(),
-        Path::new(""),
-        &Overrides::default(),
-    )
-    .unwrap()
-}
+use common::scene;
 
 /// Appends `part` (moved by `t`) to the scene's mesh.
 fn add(scene: &mut Scene, mut part: Mesh, t: Mat4) {

@@ -13,6 +13,16 @@ use translucent::scene::Scene;
 
 fn quiet(_: &str, _: u64, _: u64) {}
 
+/// A scene from TOML text (relative paths from the current folder).
+pub fn scene(text: &str) -> Scene {
+    Scene::from_desc(
+        translucent::scene::desc::SceneDesc::parse(text).unwrap(),
+        std::path::Path::new(""),
+        &translucent::scene::Overrides::default(),
+    )
+    .unwrap()
+}
+
 /// Preprocesses `scene` (no cache) with the given overrides of the derived settings.
 pub fn preprocess(scene: &Scene, overrides: SettingsOverrides) -> Preprocessed {
     let choice = preprocess::choose(scene, &overrides, 0.02).unwrap();
