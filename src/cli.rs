@@ -207,6 +207,11 @@ pub struct SceneArgs {
 }
 
 impl SceneArgs {
+    /// The scene file (or the default scene) with the command-line replacements applied.
+    fn load(&self) -> Result<Scene> {
+        Scene::load(self.scene.as_deref(), &self.overrides())
+    }
+
     fn overrides(&self) -> Overrides {
         Overrides {
             mesh: self.mesh.clone(),
@@ -324,14 +329,12 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let overrides = args.input.overrides();
-    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
+    let scene = args.input.load()?;
     println!(
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
         scene.resolved.to_toml()
     );
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
     let resolved = scene.resolved.to_toml();
     let mode: Blend = args.mode.into();
@@ -452,8 +455,7 @@ impl Bars {
 }
 
 fn precompute(args: &PrecomputeArgs) -> Result<()> {
-    let overrides = args.input.overrides();
-    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
+    let scene = args.input.load()?;
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     println!(
         "mesh: {} vertices, {} triangles, {:.0} mm^2",
@@ -492,10 +494,8 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let overrides = args.input.overrides();
-    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let scene = args.input.load()?;
+    output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
     let mode: Blend = args.mode.into();
     let nonzeros = match mode {
@@ -593,8 +593,7 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
 
 fn reference(args: &ReferenceArgs) -> Result<()> {
     use crate::reference::{metrics, Reference, ReferenceSettings};
-    let overrides = args.input.overrides();
-    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
+    let scene = args.input.load()?;
     let mut settings = ReferenceSettings::for_scene(&scene);
     if let Some(s) = args.spacing_mm {
         if !(s.is_finite() && s > 0.0) {
@@ -608,8 +607,7 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
         }
         settings.theta = t;
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    output::create_dir(&args.out)?;
     let start = std::time::Instant::now();
     let r = Reference::compute(&scene, settings);
     let seconds = start.elapsed().as_secs_f64();
@@ -670,8 +668,7 @@ fn compare(args: &CompareArgs) -> Result<()> {
     if report.pixels == 0 {
         bail!("no pixel is covered in both images");
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    output::create_dir(&args.out)?;
     let grey: Vec<f32> = per_pixel
         .iter()
         .flat_map(|&e| {
@@ -709,10 +706,8 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let overrides = args.input.overrides();
-    let scene = Scene::load(args.input.scene.as_deref(), &overrides)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    let scene = args.input.load()?;
+    output::create_dir(&args.out)?;
     let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
     println!("automatic setting:");
     for r in &auto.reasons {
@@ -906,7 +901,7 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
             crate::viewer::script::parse(&text)?
         }
     };
-    let scene = Scene::load(args.input.scene.as_deref(), &args.input.overrides())?;
+    let scene = args.input.load()?;
     let event_loop = crate::viewer::connect()?;
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     for r in &choice.reasons {
@@ -936,12 +931,11 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
 
 fn borders(args: &BordersArgs) -> Result<()> {
     use crate::reference::{borders, ReferenceSettings};
-    let scene = Scene::load(args.input.scene.as_deref(), &args.input.overrides())?;
+    let scene = args.input.load()?;
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     let quiet = |_: &str, _: u64, _: u64| {};
     let (pre, _) = preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &quiet)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder '{}'", args.out.display()))?;
+    output::create_dir(&args.out)?;
     let reference =
         borders::TexelReference::compute(&scene, &pre, ReferenceSettings::for_scene(&scene));
     let mut json = serde_json::Map::new();

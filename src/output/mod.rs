@@ -79,6 +79,12 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     ))
 }
 
+/// Creates the output folder `dir` (and its parents), naming it in the error.
+pub fn create_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create output folder '{}'", dir.display()))
+}
+
 /// Linear radiance to sRGB RGBA8 with `exposure`, as `glsl/tonemap.comp` does (alpha kept).
 pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
     let encode = |c: f32| {

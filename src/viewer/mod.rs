@@ -571,8 +571,7 @@ impl Running {
         name: &str,
         window: Option<swapchain::WindowPixels>,
     ) -> Result<()> {
-        std::fs::create_dir_all(out)
-            .with_context(|| format!("cannot create output folder '{}'", out.display()))?;
+        output::create_dir(out)?;
         let renderer = self.renderer.as_ref().context("no renderer")?;
         let o = renderer.output(Vec::new())?;
         output::write_png(
