@@ -200,7 +200,6 @@ struct Running {
     view: View,
     mode: Blend,
     both_blend: Blend,
-    material: String,
     job: Option<Job>,
     queued_material: Option<String>,
     status: String,
@@ -218,9 +217,7 @@ struct Running {
 
 struct App {
     config: Option<ViewConfig>,
-    overrides: SettingsOverrides,
-    target_error: f64,
-    cache: Option<PathBuf>,
+    settings: AppSettings,
     out: PathBuf,
     script: VecDeque<Step>,
     frames_left: u32,
@@ -228,15 +225,6 @@ struct App {
     running: Option<Running>,
     error: Option<anyhow::Error>,
     validation: Option<Arc<crate::gpu::ValidationLog>>,
-}
-
-fn preset_name(scene: &Scene) -> String {
-    scene
-        .resolved
-        .material
-        .preset
-        .clone()
-        .unwrap_or_else(|| "custom".into())
 }
 
 fn renderer_options(mode: Blend, linear: bool) -> Options {
@@ -248,6 +236,16 @@ fn renderer_options(mode: Blend, linear: bool) -> Options {
 }
 
 impl Running {
+    /// The material preset being shown.
+    fn material(&self) -> &str {
+        self.scene
+            .resolved
+            .material
+            .preset
+            .as_deref()
+            .unwrap_or("custom")
+    }
+
     fn linear(&self) -> bool {
         swapchain::is_srgb(self.swapchain.format)
     }
@@ -300,12 +298,11 @@ impl Running {
             Action::Material(name) => self.request_material(name, app)?,
             Action::NextMaterial(step) => {
                 let n = PRESETS.len() as i32;
-                let current = self.queued_material.as_ref().unwrap_or(
-                    self.job
-                        .as_ref()
-                        .map(|j| &j.material)
-                        .unwrap_or(&self.material),
-                );
+                let current = self
+                    .queued_material
+                    .as_deref()
+                    .or(self.job.as_ref().map(|j| j.material.as_str()))
+                    .unwrap_or(self.material());
                 let i = PRESETS
                     .iter()
                     .position(|p| p.0 == current)
@@ -357,7 +354,7 @@ impl Running {
         Material::preset(&name).with_context(|| format!("material '{name}'"))?;
         if self.job.is_some() {
             self.queued_material = Some(name);
-        } else if name != self.material {
+        } else if name != self.material() {
             self.start_job(name, app);
         }
         Ok(())
@@ -401,7 +398,6 @@ impl Running {
                 self.scene.material = material;
                 self.scene.resolved.material.preset = Some(job.material.clone());
                 self.pre = pre;
-                self.material = job.material.clone();
                 self.reupload()?;
                 self.status = format!("{} ready in {seconds:.1} s", job.material);
             }
@@ -412,7 +408,7 @@ impl Running {
             Err(_) => bail!("the preprocessing thread for {} panicked", job.material),
         }
         if let Some(next) = self.queued_material.take() {
-            if next != self.material {
+            if next != self.material() {
                 self.start_job(next, app);
             }
         }
@@ -465,7 +461,7 @@ impl Running {
             ),
             format!(
                 "{} | {} | {}x{} | light {:.0}/{:.0} deg",
-                self.material,
+                self.material(),
                 mode,
                 self.scene.width,
                 self.scene.height,
@@ -555,7 +551,7 @@ impl Running {
         if self.frames.is_multiple_of(30) {
             self.window.set_title(&format!(
                 "translucent: {} ({:.1} fps)",
-                self.material,
+                self.material(),
                 self.fps()
             ));
         }
@@ -601,7 +597,7 @@ impl Running {
             wrote.push(format!("{name}-timings.json"));
         }
         let state = serde_json::json!({
-            "material": self.material,
+            "material": self.material(),
             "mode": self.mode.name(),
             "width": o.width,
             "height": o.height,
@@ -678,14 +674,6 @@ struct AppSettings {
 }
 
 impl App {
-    fn settings(&self) -> AppSettings {
-        AppSettings {
-            overrides: self.overrides,
-            target_error: self.target_error,
-            cache: self.cache.clone(),
-        }
-    }
-
     fn fail(&mut self, el: &ActiveEventLoop, e: anyhow::Error) {
         if self.error.is_none() {
             self.error = Some(e);
@@ -696,7 +684,16 @@ impl App {
     fn start(&mut self, el: &ActiveEventLoop) -> Result<()> {
         let config = self.config.take().context("the viewer started twice")?;
         let attrs = Window::default_attributes()
-            .with_title(format!("translucent: {}", preset_name(&config.scene)))
+            .with_title(format!(
+                "translucent: {}",
+                config
+                    .scene
+                    .resolved
+                    .material
+                    .preset
+                    .as_deref()
+                    .unwrap_or("custom")
+            ))
             .with_inner_size(PhysicalSize::new(config.scene.width, config.scene.height));
         let window = el
             .create_window(attrs)
@@ -730,7 +727,6 @@ impl App {
             swapchain,
             data,
             rig: Rig::new(&config.scene),
-            material: preset_name(&config.scene),
             pre: config.pre,
             scene: config.scene,
             gpu,
@@ -755,7 +751,7 @@ impl App {
         running.rebuild()?;
         println!(
             "view: {} on {} ({}), {}x{}, swapchain {:?}",
-            running.material,
+            running.material(),
             running.gpu.info.name,
             running.gpu.info.driver,
             running.scene.width,
@@ -768,7 +764,7 @@ impl App {
 
     /// Runs the script up to its next frame count or wait; false once it says quit.
     fn step_script(&mut self) -> Result<bool> {
-        let settings = self.settings();
+        let settings = &self.settings;
         let Some(running) = self.running.as_mut() else {
             return Ok(true);
         };
@@ -797,7 +793,7 @@ impl App {
                 Step::Act(a) => {
                     tracing::info!(?a, "script");
                     let shot = matches!(a, Action::Screenshot(_));
-                    if !running.apply(a, &settings)? {
+                    if !running.apply(a, settings)? {
                         return Ok(false);
                     }
                     if shot {
@@ -811,9 +807,8 @@ impl App {
     }
 
     fn redraw(&mut self, el: &ActiveEventLoop) -> Result<()> {
-        let settings = self.settings();
         if let Some(r) = self.running.as_mut() {
-            r.poll_job(&settings)?;
+            r.poll_job(&self.settings)?;
         }
         if !self.step_script()? {
             el.exit();
@@ -837,7 +832,6 @@ impl ApplicationHandler for App {
     }
 
     fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
-        let settings = self.settings();
         let Some(running) = self.running.as_mut() else {
             return;
         };
@@ -879,7 +873,7 @@ impl ApplicationHandler for App {
             let Some(running) = self.running.as_mut() else {
                 return;
             };
-            match running.apply(a, &settings) {
+            match running.apply(a, &self.settings) {
                 Ok(true) => {}
                 Ok(false) => el.exit(),
                 Err(e) => {
@@ -924,9 +918,11 @@ pub fn connect() -> Result<EventLoop<()>> {
 /// validation layer (when on) reported anything.
 pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
     let mut app = App {
-        overrides: config.overrides,
-        target_error: config.target_error,
-        cache: config.cache.clone(),
+        settings: AppSettings {
+            overrides: config.overrides,
+            target_error: config.target_error,
+            cache: config.cache.clone(),
+        },
         out: config.out.clone(),
         script: config.script.iter().cloned().collect(),
         frames_left: 0,

@@ -471,11 +471,6 @@ impl Swapchain {
         };
         Ok((presented, pixels))
     }
-
-    /// Whether presented images can be read back (the surface allows `TRANSFER_SRC`).
-    pub fn can_read(&self) -> bool {
-        self.can_read
-    }
 }
 
 impl Drop for Swapchain {
