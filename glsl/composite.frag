@@ -1,7 +1,8 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // B = (B^l + B^g) T, L = F_t(eta, w_o) B / pi. B^l is filtered bilinearly over the covered
-// texels of the atlas only (alpha 1), so chart borders do not pull in gutter texels.
+// texels of the atlas only (alpha 1), so chart borders do not pull in gutter texels. Writes L
+// (linear) and its tone-mapped display value (exposure, sRGB curve); alpha marks coverage.
 #include "frame.glsl"
 
 layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
@@ -14,6 +15,24 @@ layout(location = 3) in vec2 in_atlas;
 layout(location = 4) in vec3 in_global;
 
 layout(location = 0) out vec4 out_radiance;
+layout(location = 1) out vec4 out_display;
+
+layout(push_constant) uniform Push {
+    float exposure;
+} push;
+
+// The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
+// (three square roots instead of a pow, which was a third of the former tone-mapping pass on
+// lavapipe), within 0.4 of an 8-bit step of the exact curve over [0, 1]; tests/render.rs checks
+// the display against output::tonemap to one step.
+vec3 srgb_encode(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    vec3 s1 = sqrt(c);
+    vec3 s2 = sqrt(s1);
+    vec3 s3 = sqrt(s2);
+    vec3 curve = 0.585122381 * s1 + 0.783140355 * s2 - 0.368262736 * s3;
+    return mix(c * 12.92, curve, greaterThan(c, vec3(0.0031308)));
+}
 
 vec3 local_response(vec2 atlas) {
     vec2 t = atlas - 0.5;
@@ -40,5 +59,7 @@ void main() {
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
     float cos_o = abs(dot(n, v));
     vec3 b = (local_response(in_atlas) + in_global) * texture(albedo_texture, in_uv).rgb;
-    out_radiance = vec4(fresnel_transmittance(frame.material.x, cos_o) * b / PI, 1.0);
+    vec3 l = fresnel_transmittance(frame.material.x, cos_o) * b / PI;
+    out_radiance = vec4(l, 1.0);
+    out_display = vec4(srgb_encode(l * push.exposure), 1.0);
 }

@@ -63,13 +63,13 @@ pub struct Traffic {
 /// - shadow: the atlas mesh (vertices and indices) per light; writes the depth maps;
 /// - illum: the mesh and the shadow maps; writes the illumination map;
 /// - dilate: the covered-texel list and the map at those texels; writes nothing it must;
-/// - local: per covered texel its k*k+1 kernel taps (f16) and k*k map texels, its seam-tap row and,
+/// - local: per covered texel its k*k kernel taps (f16 rgb, two per 16 bytes) and k*k map
+///   texels, its seam-tap row and,
 ///   per seam tap (modes that have them), the tap and one map texel; writes its texel;
 /// - gather / global: row starts, entries, and one source value per entry; writes one value
 ///   per node;
 /// - composite: mesh, node radiosity, one local-response texel per covered pixel; writes the
-///   radiance and depth of every pixel;
-/// - tonemap: the radiance image; writes the display image;
+///   radiance, display and depth of every pixel;
 /// - readback: both images, written to host memory.
 pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Traffic {
     let a = &pre.atlas;
@@ -94,7 +94,7 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
                 0
             };
             (
-                texels * (4 + (kk + 1) * 8 + kk * 16 + 8) + taps * (16 + 16),
+                texels * (4 + kk.div_ceil(2) * 16 + kk * 16 + 8) + taps * (16 + 16),
                 texels * 16,
             )
         }
@@ -103,8 +103,7 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
             nodes * 16,
         ),
         "global" => (4 * (nodes + 1) + global_nnz * (16 + 16), nodes * 16),
-        "composite" => (mesh + nodes * 16 + pixels * 16, pixels * 20),
-        "tonemap" => (pixels * 16, pixels * 4),
+        "composite" => (mesh + nodes * 16 + pixels * 16, pixels * 24),
         "readback" | "capture" => (pixels * 20, pixels * 20),
         _ => (0, 0),
     };

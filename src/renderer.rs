@@ -1,7 +1,7 @@
 //! Assembles the render graph of the method for a scene and runs it:
 //!
 //! ```text
-//! shadow -> illum -> dilate -> local ----------------------------> composite -> tonemap -> readback
+//! shadow -> illum -> dilate -> local ----------------------------> composite -> readback
 //!                           \-> gather -> global (node radiosity) -/
 //! ```
 //!
@@ -212,7 +212,10 @@ impl Renderer {
             "camera depth",
             ImageDesc::new(passes::composite::DEPTH_FORMAT, w, h),
         );
-        let display = g.image("display", ImageDesc::new(vk::Format::R8G8B8A8_UNORM, w, h));
+        let display = g.image(
+            "display",
+            ImageDesc::new(passes::composite::DISPLAY_FORMAT, w, h),
+        );
 
         passes::shadow::add(
             &mut g,
@@ -279,10 +282,13 @@ impl Renderer {
                 local,
                 texture,
             },
-            hdr,
-            depth,
+            passes::composite::CompositeTargets {
+                hdr,
+                display,
+                depth,
+            },
+            scene.exposure,
         );
-        passes::tonemap::add(&mut g, hdr, display, scene.exposure);
         // The overlay reads the display before the readback does: the readback, skipped in
         // most window frames, is then the display's last user and changes no layout that a
         // pass after it relies on (see `graph::compile::check_skip`).

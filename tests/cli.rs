@@ -259,7 +259,7 @@ fn bench_writes_per_pass_bounds() {
     assert!(b["frame"]["gpu_median_ms"].as_f64().unwrap() > 0.0);
     assert!(b["bandwidth"]["read_gbps"].as_f64().unwrap() > 0.1);
     let passes = b["passes"].as_array().unwrap();
-    assert_eq!(passes.len(), 9);
+    assert_eq!(passes.len(), 8);
     for p in passes {
         for key in [
             "name",

@@ -217,6 +217,11 @@ pub const REQUIRED_BUFFER_FORMATS: &[(vk::Format, vk::FormatFeatureFlags, &str)]
         "R32_UINT uniform texel buffer",
     ),
     (
+        vk::Format::R32G32B32A32_UINT,
+        vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER,
+        "R32G32B32A32_UINT uniform texel buffer",
+    ),
+    (
         vk::Format::R32G32_SFLOAT,
         vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER,
         "R32G32_SFLOAT uniform texel buffer",

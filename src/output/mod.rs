@@ -85,7 +85,7 @@ pub fn create_dir(dir: &Path) -> Result<()> {
         .with_context(|| format!("cannot create output folder '{}'", dir.display()))
 }
 
-/// Linear radiance to sRGB RGBA8 with `exposure`, as `glsl/tonemap.comp` does (alpha kept).
+/// Linear radiance to sRGB RGBA8 with `exposure`, as `glsl/composite.frag` does (alpha kept).
 pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
     let encode = |c: f32| {
         let c = (c * exposure).clamp(0.0, 1.0);

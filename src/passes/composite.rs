@@ -1,5 +1,7 @@
 //! `composite`: the camera view. B = (B^l + B^g) T and L = F_t(eta, w_o) B / pi into a linear
-//! HDR image whose alpha marks covered pixels.
+//! HDR image whose alpha marks covered pixels, and the same radiance tone-mapped (exposure,
+//! sRGB curve) into the RGBA8 display image as a second attachment. (The tone mapping was a
+//! compute pass of its own over every pixel; here it costs the covered fragments only.)
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::{draw_mesh, DrawTarget, MeshDraw};
@@ -9,6 +11,8 @@ use ash::vk;
 
 /// Format of the HDR radiance image.
 pub const HDR_FORMAT: vk::Format = vk::Format::R32G32B32A32_SFLOAT;
+/// Format of the display image (sRGB-encoded values in a UNORM image).
+pub const DISPLAY_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
 /// Format of the camera depth buffer.
 pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 
@@ -30,8 +34,18 @@ pub struct CompositeInputs {
     pub texture: ResourceId,
 }
 
-/// Declares `composite`, writing `hdr` and `depth`.
-pub fn add(graph: &mut RenderGraph, i: CompositeInputs, hdr: ResourceId, depth: ResourceId) {
+/// The images `composite` writes.
+pub struct CompositeTargets {
+    /// Linear radiance ([`HDR_FORMAT`]).
+    pub hdr: ResourceId,
+    /// Tone-mapped radiance ([`DISPLAY_FORMAT`]).
+    pub display: ResourceId,
+    /// Camera depth ([`DEPTH_FORMAT`]), discarded after the pass.
+    pub depth: ResourceId,
+}
+
+/// Declares `composite`, writing `hdr`, `display = srgb(exposure * hdr)` and `depth`.
+pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exposure: f32) {
     graph
         .pass("composite")
         .access(i.frame, Access::Uniform(Stage::Vertex))
@@ -40,8 +54,9 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, hdr: ResourceId, depth: 
         .access(i.node_radiosity, Access::TexelRead(Stage::Vertex))
         .access(i.local, Access::StorageRead(Stage::Fragment))
         .access(i.texture, Access::Sampled(Stage::Fragment))
-        .access(hdr, Access::ColorAttachment)
-        .access(depth, Access::DepthAttachment)
+        .access(t.hdr, Access::ColorAttachment)
+        .access(t.display, Access::ColorAttachment)
+        .access(t.depth, Access::DepthAttachment)
         .setup(move |gpu, res| {
             let sampler = Sampler::linear(gpu, true)?;
             let nodes = TexelView::new(
@@ -58,7 +73,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, hdr: ResourceId, depth: 
                     fragment: Some(shaders::COMPOSITE_FRAG),
                     vertex_bindings: &ATLAS_VERTEX_BINDINGS,
                     vertex_attributes: &ATLAS_VERTEX_ATTRIBUTES,
-                    color_formats: &[HDR_FORMAT],
+                    color_formats: &[HDR_FORMAT, DISPLAY_FORMAT],
                     depth_format: DEPTH_FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     depth_bias: None,
@@ -69,10 +84,11 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, hdr: ResourceId, depth: 
                     Binding::StorageImage(res.image(i.local).view),
                     Binding::Sampled(res.image(i.texture).view, sampler.raw),
                 ],
-                0,
+                4,
             )?;
-            let hdr = res.image(hdr).clone();
-            let depth = res.image(depth).clone();
+            let hdr = res.image(t.hdr).clone();
+            let display = res.image(t.display).clone();
+            let depth = res.image(t.depth).clone();
             let mesh = MeshDraw {
                 vertices: res.buffer(i.vertices).raw,
                 indices: res.buffer(i.indices).raw,
@@ -81,11 +97,13 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, hdr: ResourceId, depth: 
             Ok(Box::new(move |rec| {
                 let _ = (&sampler, &nodes);
                 let target = DrawTarget {
-                    color: Some(hdr.view),
+                    color: &[hdr.view, display.view],
                     depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),
                     extent: hdr.info.extent,
                 };
-                draw_mesh(rec, &target, &pipeline, mesh, || {});
+                draw_mesh(rec, &target, &pipeline, mesh, || {
+                    pipeline.push(rec.cmd, &exposure)
+                });
             }))
         });
 }

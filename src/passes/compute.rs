@@ -81,7 +81,8 @@ pub struct LocalInputs {
     pub map: ResourceId,
 }
 
-/// `local`: B^l = K * E (window and seam taps) + beta E per covered texel, into `out`.
+/// `local`: B^l = K * E (window and seam taps) + beta E per covered texel, into `out`; beta is
+/// stored in the window's centre tap.
 pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
     graph
         .pass("local")
@@ -93,7 +94,7 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
         .access(out, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let texel_view = view(gpu, res, i.texels, vk::Format::R32_UINT, 4)?;
-            let kernel_view = view(gpu, res, i.kernels, vk::Format::R16G16B16A16_SFLOAT, 8)?;
+            let kernel_view = view(gpu, res, i.kernels, vk::Format::R32G32B32A32_UINT, 16)?;
             let seam_row_view = view(gpu, res, i.seam_rows, vk::Format::R32_UINT, 4)?;
             let seam_view = view(
                 gpu,

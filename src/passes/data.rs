@@ -5,7 +5,8 @@
 //! - atlas mesh: one vertex per (mesh vertex, chart) with position, normal, texture coordinate,
 //!   atlas coordinate (texels) and up to three (node, weight) pairs of its prolongation;
 //! - covered texels: `x | y << 16` (R32_UINT), and a chart-id image (R32_UINT, chart + 1);
-//! - kernels: per covered texel k*k RGBA16F taps then the direct term beta (RGBA16F);
+//! - kernels: per covered texel ceil(k*k/2) RGBA32UI entries, each two taps of rgb f16 (halves
+//!   0-2 and 3-5), the direct term beta added to the centre tap;
 //! - seam taps: CSR rows (R32_UINT) and entries (texel bits, weight rgb) (R32G32B32A32_SFLOAT);
 //! - gather: CSR rows (R32_UINT) and entries (texel bits, weight) (R32G32_SFLOAT);
 //! - global: CSR rows (R32_UINT) and entries (node bits, W rgb) (R32G32B32A32_SFLOAT).
@@ -16,6 +17,11 @@
 //! So B^T = B / T_p at texel and node scale, and T restores the detail per fragment.
 
 use crate::gpu::{Buffer, Gpu, GpuResult, Image};
+
+/// RGBA32UI kernel entries per covered texel: two f16 rgb taps each, k*k taps.
+pub fn kernel_pairs(kernel_size: u32) -> u32 {
+    (kernel_size * kernel_size).div_ceil(2)
+}
 use crate::preprocess::{operators::Blend, Preprocessed};
 use crate::scene::Scene;
 use ash::vk;
@@ -261,7 +267,10 @@ impl Requirements {
             ("atlas indices".into(), a.indices.len() as u64 * 4),
             ("covered texels".into(), texels * 4),
             ("chart ids".into(), atlas_px * 4),
-            ("kernels".into(), texels * (kk + 1) * 8),
+            (
+                "kernels".into(),
+                texels * kernel_pairs(o.kernel_size) as u64 * 16,
+            ),
             ("seam taps".into(), (texels + 1) * 4 + seam_taps * 16),
             (
                 "gather".into(),
@@ -411,33 +420,33 @@ impl SubsurfaceData {
             Blend::Simple => (true, Some(&ops.direct_simple)),
             Blend::Optimized => (true, Some(&ops.direct_optimized)),
         };
-        // Half precision: 8 bytes a tap instead of 16 for the pass that streams the most data
+        // Half precision: 6 bytes a tap instead of 12 for the pass that streams the most data
         // per texel; kernel weights span a few decades, well inside f16's normal range, and the
         // rounding (2^-11 relative) is far below the method's error (see the accuracy tests).
+        // Two taps per 16-byte fetch, and beta (which weighs the same texel as the window's
+        // centre tap) added to the centre tap: the pass's cost on lavapipe follows its fetch
+        // count, and this halves the kernel fetches (k*k + 1 -> ceil(k*k / 2)).
         let h = crate::gpu::half::to_f16;
-        let mut kernels: Vec<[u16; 4]> = Vec::with_capacity(atlas.texels.len() * (kk + 1));
-        for t in 0..atlas.texels.len() {
+        let pairs = kernel_pairs(ops.kernel_size) as usize;
+        let centre = kk / 2;
+        let mut kernels: Vec<[u16; 8]> = vec![[0; 8]; atlas.texels.len() * pairs];
+        for (t, entries) in kernels.chunks_exact_mut(pairs).enumerate() {
             let inv = texel_tex[t].map(|x| 1.0 / x);
+            let beta = direct.map(|d| d[t]).unwrap_or([0.0; 3]);
             for j in 0..kk {
-                let w = if use_local {
+                let mut w = if use_local {
                     ops.kernels[t * kk + j]
                 } else {
                     [0.0; 3]
                 };
-                kernels.push([
-                    h(w[0] * inv[0] as f32),
-                    h(w[1] * inv[1] as f32),
-                    h(w[2] * inv[2] as f32),
-                    0,
-                ]);
+                if j == centre {
+                    w = [w[0] + beta[0], w[1] + beta[1], w[2] + beta[2]];
+                }
+                let slot = &mut entries[j / 2][3 * (j % 2)..3 * (j % 2) + 3];
+                for c in 0..3 {
+                    slot[c] = h(w[c] * inv[c] as f32);
+                }
             }
-            let b = direct.map(|d| d[t]).unwrap_or([0.0; 3]);
-            kernels.push([
-                h(b[0] * inv[0] as f32),
-                h(b[1] * inv[1] as f32),
-                h(b[2] * inv[2] as f32),
-                0,
-            ]);
         }
         let kernels = upload(gpu, "kernels", &kernels, texel_usage)?;
         let mut seam_rows = vec![0u32];

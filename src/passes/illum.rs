@@ -69,7 +69,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
             Ok(Box::new(move |rec| {
                 let _ = &sampler;
                 let target = DrawTarget {
-                    color: Some(map.view),
+                    color: &[map.view],
                     depth: None,
                     extent: map.info.extent,
                 };

@@ -10,7 +10,6 @@ pub mod illum;
 pub mod overlay;
 pub mod readback;
 pub mod shadow;
-pub mod tonemap;
 
 use crate::gpu::{Gpu, Pipeline};
 use crate::graph::RecordContext;
@@ -36,11 +35,14 @@ pub fn set_viewport(gpu: &Gpu, cmd: vk::CommandBuffer, extent: vk::Extent2D) {
     }
 }
 
-/// Where a mesh pass draws: an optional colour attachment (cleared to zero) and an optional
-/// depth attachment (cleared to 1, stored or discarded), both of `extent`.
-pub struct DrawTarget {
-    /// Colour attachment view.
-    pub color: Option<vk::ImageView>,
+/// Most colour attachments a mesh pass writes.
+pub const MAX_COLOR_ATTACHMENTS: usize = 2;
+
+/// Where a mesh pass draws: up to [`MAX_COLOR_ATTACHMENTS`] colour attachments (cleared to zero)
+/// and an optional depth attachment (cleared to 1, stored or discarded), all of `extent`.
+pub struct DrawTarget<'a> {
+    /// Colour attachment views, in the order of the fragment shader's outputs.
+    pub color: &'a [vk::ImageView],
     /// Depth attachment view and what to do with the depth afterwards.
     pub depth: Option<(vk::ImageView, vk::AttachmentStoreOp)>,
     /// Size of the attachments.
@@ -68,20 +70,22 @@ pub fn draw_mesh(
     push: impl FnOnce(),
 ) {
     let d = &rec.gpu.device;
-    let color: Vec<vk::RenderingAttachmentInfo> = target
-        .color
-        .iter()
-        .map(|&view| {
-            vk::RenderingAttachmentInfo::default()
-                .image_view(view)
-                .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .clear_value(vk::ClearValue {
-                    color: vk::ClearColorValue { float32: [0.0; 4] },
-                })
-        })
-        .collect();
+    assert!(
+        target.color.len() <= MAX_COLOR_ATTACHMENTS,
+        "a mesh pass writes at most {MAX_COLOR_ATTACHMENTS} colour attachments"
+    );
+    let mut color = [vk::RenderingAttachmentInfo::default(); MAX_COLOR_ATTACHMENTS];
+    for (a, &view) in color.iter_mut().zip(target.color) {
+        *a = vk::RenderingAttachmentInfo::default()
+            .image_view(view)
+            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .clear_value(vk::ClearValue {
+                color: vk::ClearColorValue { float32: [0.0; 4] },
+            });
+    }
+    let color = &color[..target.color.len()];
     let depth = target.depth.map(|(view, store)| {
         vk::RenderingAttachmentInfo::default()
             .image_view(view)
@@ -101,7 +105,7 @@ pub fn draw_mesh(
             extent: target.extent,
         })
         .layer_count(1)
-        .color_attachments(&color);
+        .color_attachments(color);
     if let Some(depth) = depth.as_ref() {
         info = info.depth_attachment(depth);
     }

@@ -58,7 +58,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
             Ok(Box::new(move |rec| {
                 for layer in 0..inputs.layers {
                     let target = DrawTarget {
-                        color: None,
+                        color: &[],
                         depth: Some((
                             maps.layer_views[layer as usize],
                             vk::AttachmentStoreOp::STORE,
