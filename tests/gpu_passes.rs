@@ -155,13 +155,18 @@ fn compute_passes_match_the_cpu_operators() {
         } else {
             &pre.ops.direct_optimized
         };
-        // The GPU holds the kernels (and the direct term) in half precision: the CPU side
-        // applies the same rounded weights, so that the pass's arithmetic is checked to 1e-4.
+        // The GPU holds the kernels in half precision, the direct term added to the centre tap
+        // (both weigh the texel itself): the CPU side applies the same rounded weights, so
+        // that the pass's arithmetic is checked to 1e-4.
         let mut ops = pre.ops.clone();
+        let kk = (ops.kernel_size * ops.kernel_size) as usize;
+        for (t, d) in direct.iter().enumerate() {
+            let w = &mut ops.kernels[t * kk + kk / 2];
+            *w = [w[0] + d[0], w[1] + d[1], w[2] + d[2]];
+        }
         let q = |w: &mut [f32; 3]| *w = w.map(translucent::gpu::half::quantize);
         ops.kernels.iter_mut().for_each(q);
-        let mut direct = direct.clone();
-        direct.iter_mut().for_each(q);
+        let direct = vec![[0.0f32; 3]; direct.len()];
         let local = apply::local(
             &pre.atlas,
             &ops,
