@@ -89,6 +89,8 @@ pub struct Renderer {
     hdr_readback: Arc<Buffer>,
     display_readback: Arc<Buffer>,
     capture: Option<[Arc<Buffer>; 4]>,
+    /// Edge of the shadow maps, texels.
+    shadow_map_size: u32,
     last_lights: Option<Vec<Light>>,
     window: Option<(Arc<Image>, passes::overlay::Text)>,
     readback_requested: bool,
@@ -193,7 +195,7 @@ impl Renderer {
         let display_rb = g.import_buffer(display_readback.clone(), Some(Access::HostRead));
 
         let layers: u32 = scene.lights.iter().map(passes::frame::layers_of).sum();
-        let s = scene.shadow_map_size;
+        let (s, _) = passes::frame::shadow_map_size(&scene, data.texel_mm);
         let shadow_maps = g.image(
             "shadow maps",
             ImageDesc::layered(passes::shadow::FORMAT, s, s, layers),
@@ -373,6 +375,7 @@ impl Renderer {
             hdr_readback,
             display_readback,
             capture,
+            shadow_map_size: s,
             last_lights: None,
             window,
             readback_requested: false,
@@ -501,7 +504,7 @@ impl Renderer {
     }
 
     fn write_uniforms(&self, lights: &[Light]) -> Result<()> {
-        let uniforms = FrameUniforms::new(&self.scene, lights)?;
+        let uniforms = FrameUniforms::new(&self.scene, lights, self.shadow_map_size)?;
         if !self.uniforms.write_mapped(bytemuck::bytes_of(&uniforms)) {
             anyhow::bail!("the uniform buffer is not host-visible");
         }

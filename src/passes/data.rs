@@ -104,6 +104,8 @@ pub struct SubsurfaceData {
     pub index_count: u32,
     /// Atlas size in texels.
     pub atlas_size: (u32, u32),
+    /// Atlas texel edge, mm (sets the default shadow-map size).
+    pub texel_mm: f64,
     /// Covered texels, packed coordinates.
     pub texels: Arc<Buffer>,
     /// Number of covered texels.
@@ -239,9 +241,9 @@ impl Requirements {
         let o = &pre.ops;
         let texels = a.texels.len() as u64;
         let nodes = pre.nodes.positions.len().max(1) as u64;
-        let kk = (o.kernel_size * o.kernel_size) as u64;
         let atlas_px = a.width as u64 * a.height as u64;
         let pixels = scene.width as u64 * scene.height as u64;
+        let shadow_map = crate::passes::frame::shadow_map_size(scene, a.texel_mm).0;
         let layers: u64 = scene
             .lights
             .iter()
@@ -283,7 +285,7 @@ impl Requirements {
             ("node irradiance + radiosity".into(), 2 * nodes * 16),
             (
                 "shadow maps".into(),
-                (scene.shadow_map_size as u64).pow(2) * 4 * layers,
+                (shadow_map as u64).pow(2) * 4 * layers,
             ),
             ("radiance + depth + display".into(), pixels * 24),
             ("readbacks".into(), pixels * 20),
@@ -291,7 +293,7 @@ impl Requirements {
         Requirements {
             total: items.iter().map(|i| i.1).sum(),
             largest_texel_buffer: [
-                texels * (kk + 1),
+                texels * kernel_pairs(o.kernel_size) as u64,
                 nnz,
                 o.gather.cols.len() as u64,
                 texels + 1,
@@ -300,16 +302,10 @@ impl Requirements {
             .into_iter()
             .max()
             .unwrap_or(0),
-            largest_image_side: [
-                a.width,
-                a.height,
-                scene.width,
-                scene.height,
-                scene.shadow_map_size,
-            ]
-            .into_iter()
-            .max()
-            .unwrap_or(0),
+            largest_image_side: [a.width, a.height, scene.width, scene.height, shadow_map]
+                .into_iter()
+                .max()
+                .unwrap_or(0),
             items,
         }
     }
@@ -527,6 +523,7 @@ impl SubsurfaceData {
             indices,
             index_count: atlas.indices.len() as u32,
             atlas_size: (atlas.width, atlas.height),
+            texel_mm: atlas.texel_mm,
             texels,
             texel_count: atlas.texels.len() as u32,
             charts,

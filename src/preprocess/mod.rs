@@ -80,11 +80,15 @@ pub fn choose(
     target_error: f64,
 ) -> anyhow::Result<Choice> {
     settings::validate(overrides)?;
-    Ok(settings::derive(
+    let mut choice = settings::derive(
         &scene.material,
         &object_scale(scene, target_error, DEFAULT_MAX_TEXELS),
         overrides,
-    ))
+    );
+    // Not a preprocessing setting, but chosen from the texel like them: said here with them.
+    let (_, why) = crate::passes::frame::shadow_map_size(scene, choice.settings.texel_mm);
+    choice.reasons.push(why);
+    Ok(choice)
 }
 
 /// What a preprocessing run will produce and cost, estimated from the mesh and the settings

@@ -96,8 +96,9 @@ pub struct Scene {
     pub height: u32,
     /// Radiance -> display multiplier.
     pub exposure: f32,
-    /// Shadow-map edge length, texels.
-    pub shadow_map_size: u32,
+    /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
+    /// texel (`passes::frame::shadow_map_size`).
+    pub shadow_map: Option<u32>,
     /// The description with every default made explicit (what `render` prints).
     pub resolved: SceneDesc,
 }
@@ -386,12 +387,13 @@ impl Scene {
         if width > 16384 || height > 16384 {
             bail!("[output] size {width}x{height} exceeds 16384 pixels per side");
         }
-        // The shadow map resolves the object at least as finely as the image does.
-        let shadow_map_size = *od
-            .shadow_map
-            .get_or_insert((2 * width.max(height)).next_power_of_two().clamp(256, 4096));
-        if !(16..=16384).contains(&shadow_map_size) {
-            bail!("[output] shadow_map = {shadow_map_size} must lie between 16 and 16384");
+        // The default shadow map follows the atlas texel, known after the settings are chosen
+        // (`passes::frame::shadow_map_size`).
+        let shadow_map = od.shadow_map;
+        if let Some(s) = shadow_map {
+            if !(16..=16384).contains(&s) {
+                bail!("[output] shadow_map = {s} must lie between 16 and 16384");
+            }
         }
         // Auto exposure: a white Lambertian surface facing the strongest light (at the object's
         // centre) maps to 0.8 of full scale.
@@ -455,7 +457,7 @@ impl Scene {
             width,
             height,
             exposure: exposure as f32,
-            shadow_map_size,
+            shadow_map,
             resolved: desc,
         })
     }
@@ -482,13 +484,7 @@ mod tests {
         // The printed description makes every default explicit and reproduces the scene.
         let text = s.resolved.to_toml();
         for key in [
-            "builtin",
-            "fov_deg",
-            "position",
-            "preset",
-            "width",
-            "shadow_map",
-            "exposure",
+            "builtin", "fov_deg", "position", "preset", "width", "exposure",
         ] {
             assert!(text.contains(key), "{key} missing from\n{text}");
         }
