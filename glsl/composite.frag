@@ -21,6 +21,9 @@ layout(push_constant) uniform Push {
     float exposure;
 } push;
 
+// False for scenes without a texture (T = 1): the sample is compiled out.
+layout(constant_id = 0) const bool TEXTURED = true;
+
 // The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
 // (three square roots instead of a pow, which was a third of the former tone-mapping pass on
 // lavapipe), within 0.4 of an 8-bit step of the exact curve over [0, 1]; tests/render.rs checks
@@ -58,7 +61,10 @@ void main() {
     vec3 n = normalize(in_normal);
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
     float cos_o = abs(dot(n, v));
-    vec3 b = (local_response(in_atlas) + in_global) * texture(albedo_texture, in_uv).rgb;
+    vec3 b = local_response(in_atlas) + in_global;
+    if (TEXTURED) {
+        b *= texture(albedo_texture, in_uv).rgb;
+    }
     vec3 l = fresnel_transmittance(frame.material.x, cos_o) * b / PI;
     out_radiance = vec4(l, 1.0);
     out_display = vec4(srgb_encode(l * push.exposure), 1.0);

@@ -283,6 +283,7 @@ impl Renderer {
                 node_radiosity,
                 local,
                 texture,
+                textured: scene.texture.is_some(),
             },
             passes::composite::CompositeTargets {
                 hdr,

@@ -64,6 +64,9 @@ pub struct GraphicsDesc<'a> {
     pub cull: vk::CullModeFlags,
     /// Depth bias (constant, slope), if any.
     pub depth_bias: Option<(f32, f32)>,
+    /// Specialization constants of the fragment shader: `constant_id = i` gets value i (32-bit
+    /// words; a `bool` constant reads 0 or 1). Compiled in, so a branch on one costs nothing.
+    pub fragment_constants: &'a [u32],
 }
 
 /// A pipeline with its layout and its bound descriptor set.
@@ -263,13 +266,26 @@ impl Pipeline {
             .stage(vk::ShaderStageFlags::VERTEX)
             .module(vertex)
             .name(c"main")];
+        let entries: Vec<vk::SpecializationMapEntry> = (0..desc.fragment_constants.len())
+            .map(|i| {
+                vk::SpecializationMapEntry::default()
+                    .constant_id(i as u32)
+                    .offset(4 * i as u32)
+                    .size(4)
+            })
+            .collect();
+        let specialization = vk::SpecializationInfo::default()
+            .map_entries(&entries)
+            .data(bytemuck::cast_slice(desc.fragment_constants));
         if let Some(f) = fragment {
-            stages.push(
-                vk::PipelineShaderStageCreateInfo::default()
-                    .stage(vk::ShaderStageFlags::FRAGMENT)
-                    .module(f)
-                    .name(c"main"),
-            );
+            let mut stage = vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::FRAGMENT)
+                .module(f)
+                .name(c"main");
+            if !entries.is_empty() {
+                stage = stage.specialization_info(&specialization);
+            }
+            stages.push(stage);
         }
         let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
             .vertex_binding_descriptions(desc.vertex_bindings)

@@ -32,6 +32,9 @@ pub struct CompositeInputs {
     pub local: ResourceId,
     /// Albedo texture.
     pub texture: ResourceId,
+    /// Whether the scene has a texture; without one (T = 1) the shader is specialised without
+    /// the sample (a sixth of the pass on lavapipe).
+    pub textured: bool,
 }
 
 /// The images `composite` writes.
@@ -77,6 +80,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     depth_format: DEPTH_FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     depth_bias: None,
+                    fragment_constants: &[i.textured as u32],
                 },
                 &[
                     Binding::Uniform(res.buffer(i.frame).raw),
@@ -86,6 +90,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                 ],
                 4,
             )?;
+
             let hdr = res.image(t.hdr).clone();
             let display = res.image(t.display).clone();
             let depth = res.image(t.depth).clone();

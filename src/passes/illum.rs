@@ -51,6 +51,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                     color_formats: &[FORMAT],
                     depth_format: vk::Format::UNDEFINED,
                     cull: vk::CullModeFlags::NONE,
+                    fragment_constants: &[],
                     depth_bias: None,
                 },
                 &[

@@ -44,6 +44,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                     color_formats: &[],
                     depth_format: FORMAT,
                     cull: vk::CullModeFlags::NONE,
+                    fragment_constants: &[],
                     depth_bias: Some((1.0, 1.5)),
                 },
                 &[Binding::Uniform(res.buffer(inputs.frame).raw)],
