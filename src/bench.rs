@@ -62,7 +62,8 @@ pub struct Traffic {
 /// The data each pass must read and write, from the sizes of the scene's data:
 /// - shadow: the atlas mesh (vertices and indices) per light; writes the depth maps;
 /// - illum: the mesh and the shadow maps; writes the illumination map;
-/// - dilate: the covered-texel list and the map at those texels; writes nothing it must;
+/// - dilate: its list (covered texels whose centre a triangle may miss) and the map at those
+///   texels; writes nothing it must;
 /// - local: per covered texel its k*k kernel taps (f16 rgb, two per 16 bytes) and k*k map
 ///   texels, its seam-tap row and,
 ///   per seam tap (modes that have them), the tap and one map texel; writes its texel;
@@ -87,7 +88,10 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
     let (read, written) = match pass {
         "shadow" => (mesh * lights, shadow),
         "illum" => (mesh + shadow, atlas_px * 16),
-        "dilate" => (texels * (4 + 16), 0),
+        "dilate" => {
+            let listed = a.centres_surely_covered().iter().filter(|s| !**s).count() as u64;
+            (listed * (4 + 16), 0)
+        }
         "local" => {
             let taps = if mode.seam_taps() {
                 o.seams.nnz() as u64

@@ -241,7 +241,8 @@ impl Renderer {
             },
             map,
         );
-        compute::dilate(&mut g, texels, data.texel_count, charts, map);
+        let dilate_texels = g.import_buffer(data.dilate_texels.clone(), None);
+        compute::dilate(&mut g, dilate_texels, data.dilate_count, charts, map);
         compute::local(
             &mut g,
             compute::LocalInputs {

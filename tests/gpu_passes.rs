@@ -538,3 +538,44 @@ fn window_overlay_draws_text_over_the_display() {
     }
     common::assert_no_validation_messages(&gpu);
 }
+
+/// `dilate` visits only the covered texels whose centre a triangle may miss
+/// (`Atlas::centres_surely_covered`): afterwards every covered texel holds a value, rasterised
+/// (alpha 1) or dilated (alpha 0.5), and every texel the CPU calls surely covered was
+/// rasterised.
+#[test]
+fn every_covered_texel_is_rasterised_or_dilated() {
+    let scenes = [
+        "[output]\nwidth = 64\nheight = 64\n",
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 40\n\
+         [output]\nwidth = 64\nheight = 64\n",
+    ];
+    for text in scenes {
+        let s = scene(text);
+        let pre = common::preprocess(&s, SettingsOverrides::default());
+        let (cap, _) = capture(&s, &pre, Blend::Optimized);
+        let a = &pre.atlas;
+        let sure = a.centres_surely_covered();
+        let mut dilated = 0;
+        for (t, texel) in a.texels.iter().enumerate() {
+            let alpha = cap.irradiance[(texel.y * a.width + texel.x) as usize][3];
+            assert!(
+                alpha == 1.0 || alpha == 0.5,
+                "texel {t} at ({}, {}) neither rasterised nor dilated (alpha {alpha})",
+                texel.x,
+                texel.y
+            );
+            assert!(
+                !sure[t] || alpha == 1.0,
+                "texel {t} called surely covered was not rasterised"
+            );
+            dilated += (alpha == 0.5) as usize;
+        }
+        let listed = sure.iter().filter(|s| !**s).count();
+        println!(
+            "{} texels, {listed} listed for dilation, {dilated} dilated",
+            a.texels.len()
+        );
+        assert!(dilated > 0 && listed >= dilated && listed < a.texels.len());
+    }
+}

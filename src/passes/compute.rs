@@ -29,7 +29,8 @@ fn view(
     Ok(TexelView::new(gpu, res.buffer(id), format, bytes)?)
 }
 
-/// `dilate`: fills partly covered texels of `map` from rasterised neighbours of their chart.
+/// `dilate`: fills partly covered texels of `map` from rasterised neighbours of their chart;
+/// `texels` lists the covered texels whose centre a triangle may miss.
 pub fn dilate(
     graph: &mut RenderGraph,
     texels: ResourceId,

@@ -110,6 +110,11 @@ pub struct SubsurfaceData {
     pub texels: Arc<Buffer>,
     /// Number of covered texels.
     pub texel_count: u32,
+    /// Covered texels whose centre a triangle may not cover (packed coordinates): the ones
+    /// `dilate` visits (`Atlas::centres_surely_covered`).
+    pub dilate_texels: Arc<Buffer>,
+    /// Their number.
+    pub dilate_count: u32,
     /// Chart id + 1 per atlas texel.
     pub charts: Arc<Image>,
     /// Kernels and direct terms.
@@ -268,6 +273,10 @@ impl Requirements {
             ("atlas vertices".into(), a.vertex_mesh.len() as u64 * 80),
             ("atlas indices".into(), a.indices.len() as u64 * 4),
             ("covered texels".into(), texels * 4),
+            (
+                "texels to dilate".into(),
+                a.centres_surely_covered().iter().filter(|s| !**s).count() as u64 * 4,
+            ),
             ("chart ids".into(), atlas_px * 4),
             (
                 "kernels".into(),
@@ -396,6 +405,15 @@ impl SubsurfaceData {
 
         let packed: Vec<u32> = atlas.texels.iter().map(|t| t.x | (t.y << 16)).collect();
         let texels = upload(gpu, "covered texels", &packed, texel_usage)?;
+        let sure = atlas.centres_surely_covered();
+        let to_dilate: Vec<u32> = packed
+            .iter()
+            .zip(&sure)
+            .filter(|(_, &s)| !s)
+            .map(|(&p, _)| p)
+            .collect();
+        let dilate_count = to_dilate.len() as u32;
+        let dilate_texels = upload(gpu, "texels to dilate", &to_dilate, texel_usage)?;
         let mut chart_ids = vec![0u32; (atlas.width * atlas.height) as usize];
         for t in &atlas.texels {
             chart_ids[(t.y * atlas.width + t.x) as usize] = t.chart + 1;
@@ -526,6 +544,8 @@ impl SubsurfaceData {
             texel_mm: atlas.texel_mm,
             texels,
             texel_count: atlas.texels.len() as u32,
+            dilate_texels,
+            dilate_count,
             charts,
             kernels,
             kernel_size: ops.kernel_size,

@@ -539,7 +539,52 @@ impl Atlas {
     pub fn covered_area(&self) -> f64 {
         self.texels.iter().map(|t| t.area as f64).sum()
     }
+
+    /// Per covered texel: whether its centre lies inside one of the atlas triangles by at least
+    /// [`CENTRE_MARGIN`] texels from every edge, so that any rasteriser covers it (Vulkan
+    /// snaps vertices to at least 1/16 texel, `subPixelPrecisionBits` >= 4). The others are the
+    /// texels the illumination pass may leave without a fragment: the ones `dilate` visits.
+    pub fn centres_surely_covered(&self) -> Vec<bool> {
+        let mut covered = vec![false; self.texels.len()];
+        for tri in self.indices.chunks_exact(3) {
+            let [a, b, c] = [0, 1, 2].map(|k| self.vertex_uv[tri[k] as usize]);
+            let area2 = (b - a).perp_dot(c - a);
+            if area2.abs() < 1e-12 {
+                continue;
+            }
+            // Edges oriented so that the inside is on their left.
+            let corners = if area2 > 0.0 { [a, b, c] } else { [a, c, b] };
+            let lo = a.min(b).min(c);
+            let hi = a.max(b).max(c);
+            let (x0, y0) = ((lo.x - 0.5).ceil().max(0.0), (lo.y - 0.5).ceil().max(0.0));
+            let (x1, y1) = ((hi.x - 0.5).floor(), (hi.y - 0.5).floor());
+            let mut y = y0;
+            while y <= y1 {
+                let mut x = x0;
+                while x <= x1 {
+                    let p = DVec2::new(x + 0.5, y + 0.5);
+                    let inside = (0..3).all(|k| {
+                        let (e0, e1) = (corners[k], corners[(k + 1) % 3]);
+                        let edge = e1 - e0;
+                        edge.perp_dot(p - e0) >= CENTRE_MARGIN * edge.length()
+                    });
+                    if inside {
+                        if let Some(t) = self.texel_at(x as i64, y as i64) {
+                            covered[t] = true;
+                        }
+                    }
+                    x += 1.0;
+                }
+                y += 1.0;
+            }
+        }
+        covered
+    }
 }
+
+/// Distance from every edge, texels, at which a texel centre is covered whatever the
+/// rasteriser's sub-texel snapping: twice the coarsest snapping Vulkan allows (1/16 texel).
+pub const CENTRE_MARGIN: f64 = 1.0 / 8.0;
 
 #[cfg(test)]
 mod tests {
