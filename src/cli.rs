@@ -487,6 +487,11 @@ fn precompute(args: &PrecomputeArgs) -> Result<()> {
     for line in pre.summary() {
         println!("{line}");
     }
+    let need = crate::passes::data::Requirements::of(&scene, &pre, Blend::Optimized);
+    println!(
+        "device memory to render (optimized blending): {:.1} MiB",
+        need.total as f64 / (1u64 << 20) as f64
+    );
     Ok(())
 }
 

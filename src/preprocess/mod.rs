@@ -219,8 +219,10 @@ pub fn prepare(
 }
 
 impl Preprocessed {
-    /// Bytes of the per-frame data (kernels, gather, F of both blends, direct terms, texel data).
-    pub fn device_bytes(&self) -> u64 {
+    /// Bytes of the operators as built, for every blending mode (f32 kernels, F of both blends,
+    /// direct terms, texel data): what the cache holds. A renderer uploads one mode's share in
+    /// its own layouts (`passes::data::Requirements`).
+    pub fn operator_bytes(&self) -> u64 {
         let o = &self.ops;
         let csr = |nnz: usize, rows: usize| (nnz * 16 + (rows + 1) * 4) as u64;
         (o.kernels.len() * 12) as u64
@@ -271,7 +273,7 @@ impl Preprocessed {
                     .filter(|&t| o.seams.row(t).next().is_some())
                     .count()
             ),
-            format!("device memory for the per-frame data: {:.1} MiB", self.device_bytes() as f64 / (1u64 << 20) as f64),
+            format!("operators for every blending mode: {:.1} MiB", self.operator_bytes() as f64 / (1u64 << 20) as f64),
             format!(
                 "time: atlas {:.2} s, nodes {:.2} s, operators {:.2} s (kernels {:.2} s, global F {:.2} s, near-field fit {:.2} s)",
                 self.times.atlas_s, self.times.nodes_s, self.times.operators_s, o.seconds[0], o.seconds[1], o.seconds[2]
