@@ -90,7 +90,6 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                 ],
                 4,
             )?;
-
             let hdr = res.image(t.hdr).clone();
             let display = res.image(t.display).clone();
             let depth = res.image(t.depth).clone();
