@@ -8,7 +8,7 @@ layout(std430, set = 0, binding = 0) readonly buffer Rows {
     uint row_start[];
 };
 layout(std430, set = 0, binding = 1) readonly buffer Entries {
-    vec4 entries[];                                                   // (bits of p, W rgb)
+    uvec4 entries[];          // entry pairs: p0 | p1 << 16, W_p0 rgb and W_p1 rgb as six f16
 };
 layout(std430, set = 0, binding = 2) readonly buffer NodeIrradiance {
     vec4 node_irradiance[];
@@ -28,8 +28,12 @@ void main() {
     uint end = row_start[q + 1];
     vec3 b = vec3(0.0);
     for (uint j = begin; j < end; ++j) {
-        vec4 entry = entries[j];
-        b += entry.yzw * node_irradiance[floatBitsToUint(entry.x)].rgb;
+        uvec4 e = entries[j];
+        vec2 h0 = unpackHalf2x16(e.y);
+        vec2 h1 = unpackHalf2x16(e.z);
+        vec2 h2 = unpackHalf2x16(e.w);
+        b += vec3(h0, h1.x) * node_irradiance[e.x & 0xffffu].rgb;
+        b += vec3(h1.y, h2) * node_irradiance[e.x >> 16].rgb;
     }
     imageStore(node_radiosity, int(q), vec4(b, 0.0));
 }

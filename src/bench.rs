@@ -84,7 +84,7 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
     let atlas_px = a.width as u64 * a.height as u64;
     let pixels = scene.width as u64 * scene.height as u64;
     let kk = (o.kernel_size * o.kernel_size) as u64;
-    let global_nnz = o.global.nnz().max(o.optimized.nnz()) as u64;
+    let global_pairs = crate::passes::data::global_entry_pairs(o, mode);
     let (read, written) = match pass {
         "shadow" => (mesh * lights, shadow),
         "illum" => (mesh + shadow, atlas_px * 16),
@@ -107,7 +107,7 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
             4 * (nodes + 1) + o.gather.cols.len() as u64 * (8 + 16),
             nodes * 16,
         ),
-        "global" => (4 * (nodes + 1) + global_nnz * (16 + 16), nodes * 16),
+        "global" => (4 * (nodes + 1) + global_pairs * (16 + 2 * 16), nodes * 16),
         "composite" => (mesh + nodes * 16 + pixels * 16, pixels * 24),
         "readback" | "capture" => (pixels * 20, pixels * 20),
         _ => (0, 0),

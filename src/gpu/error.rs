@@ -50,12 +50,12 @@ pub enum GpuError {
         /// The allocator's reason.
         source: gpu_allocator::AllocationError,
     },
-    /// A request exceeds a limit of the device.
-    #[error("{what} needs {value}, above the device limit {limit} = {max}")]
+    /// A request exceeds a limit of the device or of a data layout.
+    #[error("{what} needs {value}, above the limit {limit} = {max}")]
     Limit {
         /// What was being created.
         what: String,
-        /// The name of the Vulkan limit.
+        /// The name of the limit (a Vulkan limit, or a layout's).
         limit: &'static str,
         /// The requested amount.
         value: u64,

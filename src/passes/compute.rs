@@ -229,7 +229,7 @@ pub fn global(
         .access(out, Access::TexelWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let rows = view(gpu, res, m.rows, vk::Format::R32_UINT, 4)?;
-            let entries = view(gpu, res, m.entries, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let entries = view(gpu, res, m.entries, vk::Format::R32G32B32A32_UINT, 16)?;
             let in_view = view(gpu, res, input, vk::Format::R32G32B32A32_SFLOAT, 16)?;
             let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
             let pipeline = Pipeline::compute(
