@@ -23,6 +23,19 @@ use crate::gpu::{Buffer, Gpu, GpuResult, Image};
 /// Most nodes the global matrix can index: its entries hold 16-bit node indices.
 pub const MAX_GLOBAL_NODES: u64 = 1 << 16;
 
+/// Refuses more nodes than the global matrix's 16-bit indices can name.
+fn check_nodes(nodes: u64) -> Result<(), crate::gpu::GpuError> {
+    if nodes > MAX_GLOBAL_NODES {
+        return Err(crate::gpu::GpuError::Limit {
+            what: "the global response's nodes (a larger --node-spacing-mm has fewer)".into(),
+            limit: "16-bit node indices of the global matrix",
+            value: nodes,
+            max: MAX_GLOBAL_NODES,
+        });
+    }
+    Ok(())
+}
+
 /// The global matrix `mode` uploads, and whether its diagonal is left out (simple blending:
 /// the local response carries the near field).
 fn global_matrix(
@@ -364,14 +377,7 @@ impl Requirements {
                 max: info.max_texel_buffer_elements,
             });
         }
-        if self.nodes > MAX_GLOBAL_NODES {
-            return Err(GpuError::Limit {
-                what: "the global response's nodes (a larger --node-spacing-mm has fewer)".into(),
-                limit: "16-bit node indices of the global matrix",
-                value: self.nodes,
-                max: MAX_GLOBAL_NODES,
-            });
-        }
+        check_nodes(self.nodes)?;
         if self.largest_image_side > info.max_image_dimension_2d {
             return Err(GpuError::Limit {
                 what: "the largest image (atlas, output or shadow map)".into(),
@@ -538,6 +544,7 @@ impl SubsurfaceData {
         // lavapipe follows its fetches (3 instead of 4 per two entries), and the matrix, the
         // largest item of device memory, halves. The rounding (2^-11 relative, unbiased)
         // moves the image by 0.001 % RMS.
+        check_nodes(pre.nodes.positions.len() as u64)?;
         let mut rows = vec![0u32];
         let mut entries: Vec<[u32; 4]> = Vec::new();
         let h = |x: f32| crate::gpu::half::to_f16(x) as u32;
