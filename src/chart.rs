@@ -129,14 +129,13 @@ pub fn mark_pareto(points: &mut [Point]) {
     }
 }
 
-/// A measured row from a preprocessing, a mode and a render compared with the reference.
-#[allow(clippy::too_many_arguments)]
+/// A measured row from a preprocessing, a mode and a render compared with the reference (its
+/// time is filled in once every timing round has run).
 pub fn point(
     setting: &str,
     mode: Blend,
     pre: &Preprocessed,
     asked_spacing: f64,
-    gpu_ms: f64,
     render: &[f32],
     reference: &[f32],
     auto: bool,
@@ -156,7 +155,7 @@ pub fn point(
             Blend::Local => 0,
             _ => pre.ops.global.nnz(),
         },
-        gpu_ms,
+        gpu_ms: f64::NAN,
         gpu_spread: 0.0,
         rel_rms: err.rel_rms,
         p99: err.channels.iter().map(|c| c.p99).fold(0.0, f64::max),

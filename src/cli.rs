@@ -788,7 +788,6 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
                         mode,
                         &pre,
                         choice.settings.node_spacing_mm,
-                        f64::NAN,
                         &out.radiance,
                         &reference.radiance,
                         label == "auto",
@@ -803,7 +802,7 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         let mut sorted = t.clone();
         sorted.sort_by(f64::total_cmp);
         let q = |f: f64| sorted[((sorted.len() - 1) as f64 * f).round() as usize];
-        p.gpu_spread = if sorted.is_empty() || p.gpu_ms <= 0.0 {
+        p.gpu_spread = if p.gpu_ms <= 0.0 {
             0.0
         } else {
             (q(0.75) - q(0.25)) / p.gpu_ms

@@ -19,6 +19,11 @@
 //! So B^T = B / T_p at texel and node scale, and T restores the detail per fragment.
 
 use crate::gpu::{Buffer, Gpu, GpuResult, Image};
+use crate::preprocess::{operators::Blend, Preprocessed};
+use crate::scene::Scene;
+use ash::vk;
+use bytemuck::{Pod, Zeroable};
+use std::sync::Arc;
 
 /// Most nodes the global matrix can index: its entries hold 16-bit node indices.
 pub const MAX_GLOBAL_NODES: u64 = 1 << 16;
@@ -70,11 +75,6 @@ pub fn global_entry_pairs(ops: &crate::preprocess::operators::Operators, mode: B
 pub fn kernel_pairs(kernel_size: u32) -> u32 {
     (kernel_size * kernel_size).div_ceil(2)
 }
-use crate::preprocess::{operators::Blend, Preprocessed};
-use crate::scene::Scene;
-use ash::vk;
-use bytemuck::{Pod, Zeroable};
-use std::sync::Arc;
 
 /// One vertex of the atlas mesh (80 bytes).
 #[repr(C)]
@@ -549,8 +549,9 @@ impl SubsurfaceData {
         let mut entries: Vec<[u32; 4]> = Vec::new();
         let h = |x: f32| crate::gpu::half::to_f16(x) as u32;
         let mut row: Vec<(u32, [f32; 3])> = Vec::new();
+        let matrix = global_matrix(ops, mode);
         for q in 0..pre.nodes.positions.len() {
-            if let Some((matrix, skip_diagonal)) = global_matrix(ops, mode) {
+            if let Some((matrix, skip_diagonal)) = matrix {
                 let inv = node_tex[q].map(|x| 1.0 / x);
                 row.clear();
                 row.extend(

@@ -556,26 +556,21 @@ impl Atlas {
             let corners = if area2 > 0.0 { [a, b, c] } else { [a, c, b] };
             let lo = a.min(b).min(c);
             let hi = a.max(b).max(c);
-            let (x0, y0) = ((lo.x - 0.5).ceil().max(0.0), (lo.y - 0.5).ceil().max(0.0));
-            let (x1, y1) = ((hi.x - 0.5).floor(), (hi.y - 0.5).floor());
-            let mut y = y0;
-            while y <= y1 {
-                let mut x = x0;
-                while x <= x1 {
-                    let p = DVec2::new(x + 0.5, y + 0.5);
+            // Texel x has its centre at x + 0.5.
+            let (x0, y0) = ((lo.x - 0.5).ceil() as i64, (lo.y - 0.5).ceil() as i64);
+            let (x1, y1) = ((hi.x - 0.5).floor() as i64, (hi.y - 0.5).floor() as i64);
+            for y in y0.max(0)..=y1 {
+                for x in x0.max(0)..=x1 {
+                    let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
                     let inside = (0..3).all(|k| {
                         let (e0, e1) = (corners[k], corners[(k + 1) % 3]);
                         let edge = e1 - e0;
                         edge.perp_dot(p - e0) >= CENTRE_MARGIN * edge.length()
                     });
-                    if inside {
-                        if let Some(t) = self.texel_at(x as i64, y as i64) {
-                            covered[t] = true;
-                        }
+                    if let (true, Some(t)) = (inside, self.texel_at(x, y)) {
+                        covered[t] = true;
                     }
-                    x += 1.0;
                 }
-                y += 1.0;
             }
         }
         covered

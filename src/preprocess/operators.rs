@@ -231,17 +231,13 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64;
                 );
                 let ry = x.distance(xs + u * a + v * b);
                 for c in 0..3 {
-                    let (f, lap) = dipoles[c].rd_and_laplacian(ry);
-                    acc[c] += (f + step * step / 24.0 * lap).max(0.0) * weight;
+                    acc[c] += dipoles[c].rd_cell_mean(ry, step * step / 24.0) * weight;
                 }
             }
         }
         acc
     } else {
-        rgb(dipoles, |d| {
-            let (f, lap) = d.rd_and_laplacian(r);
-            (f + h * h / 24.0 * lap).max(0.0)
-        })
+        rgb(dipoles, |d| d.rd_cell_mean(r, h * h / 24.0))
     }
 }
 
@@ -458,10 +454,7 @@ impl Operators {
                     } else {
                         let (c, m) = moments[p];
                         let rc = c.distance(xc);
-                        rgb(&dipoles, |d| {
-                            let (f, lap) = d.rd_and_laplacian(rc);
-                            node_area[p] * (f + 0.5 * m * lap).max(0.0)
-                        })
+                        rgb(&dipoles, |d| node_area[p] * d.rd_cell_mean(rc, 0.5 * m))
                     };
                     row.push((p as u32, f));
                 }

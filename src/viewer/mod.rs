@@ -235,15 +235,20 @@ fn renderer_options(mode: Blend, linear: bool) -> Options {
     }
 }
 
+/// The scene's material preset, or "custom".
+fn preset_name(scene: &Scene) -> &str {
+    scene
+        .resolved
+        .material
+        .preset
+        .as_deref()
+        .unwrap_or("custom")
+}
+
 impl Running {
     /// The material preset being shown.
     fn material(&self) -> &str {
-        self.scene
-            .resolved
-            .material
-            .preset
-            .as_deref()
-            .unwrap_or("custom")
+        preset_name(&self.scene)
     }
 
     fn linear(&self) -> bool {
@@ -684,16 +689,7 @@ impl App {
     fn start(&mut self, el: &ActiveEventLoop) -> Result<()> {
         let config = self.config.take().context("the viewer started twice")?;
         let attrs = Window::default_attributes()
-            .with_title(format!(
-                "translucent: {}",
-                config
-                    .scene
-                    .resolved
-                    .material
-                    .preset
-                    .as_deref()
-                    .unwrap_or("custom")
-            ))
+            .with_title(format!("translucent: {}", preset_name(&config.scene)))
             .with_inner_size(PhysicalSize::new(config.scene.width, config.scene.height));
         let window = el
             .create_window(attrs)
