@@ -40,6 +40,9 @@ pub enum Command {
     Bench(BenchArgs),
     /// Brute-force reference: B = integral of E R_d over the whole surface (no atlas, no F).
     Reference(ReferenceArgs),
+    /// Volumetric truth: a Monte Carlo path tracer of the medium inside the mesh (index-matched
+    /// boundary); writes truth.exr, noise.exr (per-pixel standard deviation) and truth.json.
+    Truth(TruthArgs),
     /// Error of a render against a reference: figures, error image (EXR) and false colour (PNG).
     Compare(CompareArgs),
     /// Speed against accuracy: sweep the method's knobs, time each point, compare each with the
@@ -113,6 +116,36 @@ pub struct ReferenceArgs {
     pub refine: bool,
 }
 
+/// Arguments of `truth`.
+#[derive(Debug, Args)]
+pub struct TruthArgs {
+    /// The scene and what replaces parts of it (the material needs eta = 1).
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Paths per pixel and channel, both halves together.
+    #[arg(long, default_value_t = 64)]
+    pub spp: u32,
+    /// Trace for this many seconds instead of a number of paths.
+    #[arg(long, conflicts_with = "spp")]
+    pub time: Option<f64>,
+    /// Seed of the random streams (the image is a function of the seed and the samples).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Henyey-Greenstein mean cosine (sigma_s = sigma_s' / (1 - g)); 0 is the isotropic phase
+    /// on the reduced coefficients that the dipole assumes.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub g: f64,
+    /// Count scattering orders from this one on (2: everything but single scattering).
+    #[arg(long, default_value_t = 1)]
+    pub min_order: u32,
+    /// Count scattering orders up to this one (1: single scattering alone).
+    #[arg(long)]
+    pub max_order: Option<u32>,
+}
+
 /// Arguments of `chart`.
 #[derive(Debug, Args)]
 pub struct ChartArgs {
@@ -144,6 +177,10 @@ pub struct CompareArgs {
     pub render: PathBuf,
     /// The reference (EXR).
     pub reference: PathBuf,
+    /// The reference's per-pixel standard deviation (`truth`'s noise.exr): removed from the
+    /// error in quadrature.
+    #[arg(long)]
+    pub noise: Option<PathBuf>,
     /// Output folder for error.exr, error.png and error.json.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
@@ -204,6 +241,9 @@ pub struct SceneArgs {
     /// Image height in pixels.
     #[arg(long)]
     pub height: Option<u32>,
+    /// Relative index of refraction replacing the material's (1 for `truth`).
+    #[arg(long)]
+    pub eta: Option<f64>,
 }
 
 impl SceneArgs {
@@ -218,6 +258,7 @@ impl SceneArgs {
             material: self.material.clone(),
             width: self.width,
             height: self.height,
+            eta: self.eta,
         }
     }
 }
@@ -669,6 +710,19 @@ fn compare(args: &CompareArgs) -> Result<()> {
     if (w, h) != (w2, h2) {
         bail!("the images differ in size: {w}x{h} vs {w2}x{h2}");
     }
+    let noise = match &args.noise {
+        None => None,
+        Some(p) => {
+            let (w3, h3, n) = output::read_exr(p)?;
+            if (w3, h3) != (w, h) {
+                bail!(
+                    "the noise image {} is {w3}x{h3}, the images are {w}x{h}",
+                    p.display()
+                );
+            }
+            Some(n)
+        }
+    };
     let (report, per_pixel) = metrics::compare(&a, &b, None);
     if report.pixels == 0 {
         bail!("no pixel is covered in both images");
@@ -691,8 +745,14 @@ fn compare(args: &CompareArgs) -> Result<()> {
         h,
         &metrics::false_colour(&per_pixel, args.full_scale),
     )?;
+    let binned: Vec<metrics::BinnedError> = [1, 2, 4]
+        .iter()
+        .map(|&k| metrics::compare_binned(&a, &b, noise.as_deref(), w, h, k))
+        .collect();
+    let mut json = serde_json::to_value(&report)?;
+    json["binned"] = serde_json::to_value(&binned)?;
     output::write_atomic(&args.out.join("error.json"), |p| {
-        Ok(std::fs::write(p, serde_json::to_string_pretty(&report)?)?)
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&json)?)?)
     })?;
     println!("{} pixels compared", report.pixels);
     for (name, c) in ["red", "green", "blue"].iter().zip(&report.channels) {
@@ -703,6 +763,132 @@ fn compare(args: &CompareArgs) -> Result<()> {
             100.0 * c.max
         );
     }
+    let pct = |v: [f64; 3]| {
+        format!(
+            "{:.2} / {:.2} / {:.2} %",
+            100.0 * v[0],
+            100.0 * v[1],
+            100.0 * v[2]
+        )
+    };
+    for e in &binned {
+        if noise.is_some() {
+            println!(
+                "{0}x{0} bins ({1}): relative RMS {2} with the reference's noise ({3}) removed; measured {4}",
+                e.bin,
+                e.bins,
+                pct(e.rel_rms),
+                pct(e.noise),
+                pct(e.measured)
+            );
+        } else {
+            println!(
+                "{0}x{0} bins ({1}): relative RMS {2}",
+                e.bin,
+                e.bins,
+                pct(e.rel_rms)
+            );
+        }
+    }
+    Ok(())
+}
+
+fn truth(args: &TruthArgs) -> Result<()> {
+    use crate::truth::{self, TruthSettings};
+    let scene = args.input.load()?;
+    let settings = TruthSettings {
+        spp: if args.time.is_some() {
+            u32::MAX
+        } else {
+            args.spp
+        },
+        time_s: args.time,
+        seed: args.seed,
+        g: args.g,
+        min_order: args.min_order,
+        max_order: args.max_order.unwrap_or(u32::MAX),
+    };
+    // Refuse before creating anything.
+    truth::Tracer::new(&scene, &settings)?;
+    output::create_dir(&args.out)?;
+    let medium = truth::Medium::new(&scene.material, args.g);
+    println!(
+        "truth: {}x{}, sigma_t {:.4} / {:.4} / {:.4} 1/mm, albedo {:.5} / {:.5} / {:.5}, g {}, {}",
+        scene.width,
+        scene.height,
+        medium.sigma_t[0],
+        medium.sigma_t[1],
+        medium.sigma_t[2],
+        medium.albedo[0],
+        medium.albedo[1],
+        medium.albedo[2],
+        args.g,
+        match args.time {
+            Some(t) => format!("{t} s"),
+            None => format!("{} paths per pixel and channel", args.spp),
+        }
+    );
+    let bar = ProgressBar::new(1000).with_style(
+        ProgressStyle::with_template("{bar:40} {percent:>3}% elapsed {elapsed} ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let t = truth::compute(&scene, &settings, &|f| {
+        bar.set_position((f * 1000.0) as u64)
+    })?;
+    bar.finish_and_clear();
+    let (mean, stderr) = t.object_mean();
+    let noise: Vec<_> = [1, 2, 4].iter().map(|&k| t.noise_at(k)).collect();
+    let out = &args.out;
+    output::write_exr(&out.join("truth.exr"), t.width, t.height, &t.radiance)?;
+    output::write_exr(&out.join("noise.exr"), t.width, t.height, &t.noise)?;
+    output::write_png(
+        &out.join("truth.png"),
+        t.width,
+        t.height,
+        &output::tonemap(&t.radiance, scene.exposure),
+    )?;
+    let info = serde_json::json!({
+        "spp": t.spp, "seconds": t.seconds, "events": t.events, "paths": t.paths,
+        "events_per_second": t.events_per_second(), "truncated_paths": t.truncated_paths,
+        "seed": args.seed, "g": args.g, "min_order": args.min_order, "max_order": args.max_order,
+        "width": t.width, "height": t.height, "pixels": t.pixels,
+        "sigma_t": medium.sigma_t, "albedo": medium.albedo,
+        "noise": noise, "object_mean": mean, "object_mean_stderr": stderr,
+    });
+    output::write_atomic(&out.join("truth.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
+    })?;
+    println!(
+        "{} paths per pixel and channel over {} pixels in {:.1} s: {:.3e} collisions ({:.2} M/s), {} paths cut",
+        t.spp,
+        t.pixels,
+        t.seconds,
+        t.events as f64,
+        t.events_per_second() / 1e6,
+        t.truncated_paths
+    );
+    for n in &noise {
+        println!(
+            "noise after {0}x{0} binning: {1:.2} / {2:.2} / {3:.2} % RMS",
+            n.bin,
+            100.0 * n.rel_noise[0],
+            100.0 * n.rel_noise[1],
+            100.0 * n.rel_noise[2]
+        );
+    }
+    println!(
+        "object mean {:.5e} / {:.5e} / {:.5e} (standard error {:.2} / {:.2} / {:.2} %)",
+        mean[0],
+        mean[1],
+        mean[2],
+        100.0 * stderr[0] / mean[0].max(1e-300),
+        100.0 * stderr[1] / mean[1].max(1e-300),
+        100.0 * stderr[2] / mean[2].max(1e-300)
+    );
+    println!(
+        "wrote truth.exr, noise.exr, truth.png, truth.json to {}",
+        out.display()
+    );
     Ok(())
 }
 
@@ -1033,6 +1219,7 @@ pub fn main() -> ExitCode {
         Some(Command::Precompute(args)) => precompute(args),
         Some(Command::Bench(args)) => bench(&cli, args),
         Some(Command::Reference(args)) => reference(args),
+        Some(Command::Truth(args)) => truth(args),
         Some(Command::Compare(args)) => compare(args),
         Some(Command::Chart(args)) => chart(&cli, args),
         Some(Command::Borders(args)) => borders(args),

@@ -13,6 +13,7 @@
 pub mod bench;
 pub mod chart;
 pub mod cli;
+pub mod geometry;
 pub mod gpu;
 pub mod graph;
 pub mod output;
@@ -22,4 +23,5 @@ pub mod preprocess;
 pub mod reference;
 pub mod renderer;
 pub mod scene;
+pub mod truth;
 pub mod viewer;

@@ -8,7 +8,8 @@
 //! ([`crate::preprocess::apply`]), and the result is compared with the reference's B at the same
 //! positions (dense area sampling of the mesh, no atlas, no kernels, no F).
 
-use super::{b_at, bvh::Bvh, irradiance, ReferenceSettings};
+use super::{b_at, irradiance, ReferenceSettings};
+use crate::geometry::bvh::Bvh;
 use crate::preprocess::{apply, atlas::Atlas, operators::Blend, Preprocessed};
 use crate::scene::Scene;
 use serde::Serialize;

@@ -85,6 +85,115 @@ pub fn compare(
     (report, per_pixel)
 }
 
+/// Means over `k` x `k` blocks of an RGBA image (alpha = coverage): a block is covered (alpha 1)
+/// when every pixel in it is, so that silhouettes, where a rasteriser and a ray caster may
+/// disagree by a pixel, do not enter; the pixels past the last whole block are dropped.
+pub fn bin(img: &[f32], w: u32, h: u32, k: u32) -> (u32, u32, Vec<f32>) {
+    bin_with(img, w, h, k, |values| {
+        values.iter().sum::<f64>() / values.len() as f64
+    })
+}
+
+/// The standard deviation of [`bin`]'s means from per-pixel standard deviations (pixels
+/// traced independently): sqrt(sum sigma^2) / k^2.
+pub fn bin_noise(noise: &[f32], w: u32, h: u32, k: u32) -> (u32, u32, Vec<f32>) {
+    bin_with(noise, w, h, k, |values| {
+        values.iter().map(|s| s * s).sum::<f64>().sqrt() / values.len() as f64
+    })
+}
+
+fn bin_with(
+    img: &[f32],
+    w: u32,
+    h: u32,
+    k: u32,
+    reduce: impl Fn(&[f64]) -> f64,
+) -> (u32, u32, Vec<f32>) {
+    let k = k.max(1);
+    let (bw, bh) = (w / k, h / k);
+    let mut out = vec![0.0f32; (4 * bw * bh) as usize];
+    let mut values = Vec::with_capacity((k * k) as usize);
+    for by in 0..bh {
+        for bx in 0..bw {
+            let pixels =
+                (0..k).flat_map(|j| (0..k).map(move |i| ((by * k + j) * w + bx * k + i) as usize));
+            if pixels.clone().any(|p| img[4 * p + 3] <= 0.5) {
+                continue;
+            }
+            let o = (4 * (by * bw + bx)) as usize;
+            for c in 0..3 {
+                values.clear();
+                values.extend(pixels.clone().map(|p| img[4 * p + c] as f64));
+                out[o + c] = reduce(&values) as f32;
+            }
+            out[o + 3] = 1.0;
+        }
+    }
+    (bw, bh, out)
+}
+
+/// Error of a render against a noisy reference after binning.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct BinnedError {
+    /// Bin edge in pixels.
+    pub bin: u32,
+    /// Bins compared (covered in both images).
+    pub bins: usize,
+    /// Relative RMS with the reference's noise removed in quadrature, per channel:
+    /// sqrt(max(0, sum (r - ref)^2 - sum sigma^2) / sum ref^2).
+    pub rel_rms: [f64; 3],
+    /// Relative RMS as measured, noise included.
+    pub measured: [f64; 3],
+    /// The reference's relative RMS noise on the same bins.
+    pub noise: [f64; 3],
+}
+
+impl BinnedError {
+    /// The largest channel of `rel_rms`.
+    pub fn worst(&self) -> f64 {
+        self.rel_rms.iter().cloned().fold(0.0, f64::max)
+    }
+}
+
+/// Relative RMS of `render` against `reference` after `k` x `k` binning ([`bin`]), with the
+/// reference's per-pixel standard deviation `noise` (if any) removed in quadrature.
+pub fn compare_binned(
+    render: &[f32],
+    reference: &[f32],
+    noise: Option<&[f32]>,
+    w: u32,
+    h: u32,
+    k: u32,
+) -> BinnedError {
+    let (_, _, r) = bin(render, w, h, k);
+    let (_, _, t) = bin(reference, w, h, k);
+    let sigma = noise.map(|n| bin_noise(n, w, h, k).2);
+    let used: Vec<usize> = (0..r.len() / 4)
+        .filter(|&i| r[4 * i + 3] > 0.5 && t[4 * i + 3] > 0.5)
+        .collect();
+    let mut e = BinnedError {
+        bin: k,
+        bins: used.len(),
+        ..Default::default()
+    };
+    for c in 0..3 {
+        let (mut num, mut den, mut s2) = (0.0, 0.0, 0.0);
+        for &i in &used {
+            let (a, b) = (r[4 * i + c] as f64, t[4 * i + c] as f64);
+            num += (a - b) * (a - b);
+            den += b * b;
+            if let Some(s) = &sigma {
+                s2 += (s[4 * i + c] as f64).powi(2);
+            }
+        }
+        let den = den.max(1e-300);
+        e.measured[c] = (num / den).sqrt();
+        e.noise[c] = (s2 / den).sqrt();
+        e.rel_rms[c] = ((num - s2).max(0.0) / den).sqrt();
+    }
+    e
+}
+
 /// False colour for a relative error: black (none) through blue, green, yellow to red at
 /// `full_scale` and above; uncompared pixels (NaN) dark grey.
 pub fn false_colour(per_pixel: &[f32], full_scale: f32) -> Vec<u8> {
@@ -138,6 +247,43 @@ mod tests {
         let mask = [true, false, false, false, false];
         assert_eq!(compare(&render, &reference, Some(&mask)).0.pixels, 1);
         let colours = false_colour(&px, 0.1);
+        // Binning: a 4x2 image, 2x2 bins; the right bin has an uncovered pixel.
+        let img: Vec<f32> = [1.0, 3.0, 5.0, 5.0, 1.0, 3.0, 5.0, 0.0]
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &v)| [v, 2.0 * v, v, if i == 7 { 0.0 } else { 1.0 }])
+            .collect();
+        let (bw, bh, b) = bin(&img, 4, 2, 2);
+        assert_eq!((bw, bh), (2, 1));
+        assert_eq!(&b[..4], &[2.0, 4.0, 2.0, 1.0]);
+        assert_eq!(b[7], 0.0, "a bin with an uncovered pixel is not covered");
+        let sigma: Vec<f32> = img
+            .iter()
+            .enumerate()
+            .map(|(i, a)| if i % 4 == 3 { *a } else { 2.0 })
+            .collect();
+        assert_eq!(bin_noise(&sigma, 4, 2, 2).2[0], 1.0, "sqrt(4 x 4) / 4");
+        // Noise removal: a render 10 % high against a reference whose noise is 5 %.
+        let reference: Vec<f32> = (0..16).flat_map(|_| [1.0, 1.0, 1.0, 1.0]).collect();
+        let render: Vec<f32> = reference
+            .iter()
+            .map(|v| if *v == 1.0 { 1.1 } else { *v })
+            .collect();
+        let render: Vec<f32> = render
+            .chunks(4)
+            .flat_map(|p| [p[0], p[1], p[2], 1.0])
+            .collect();
+        let noise: Vec<f32> = (0..16).flat_map(|_| [0.05, 0.05, 0.05, 1.0]).collect();
+        let e = compare_binned(&render, &reference, Some(&noise), 4, 4, 1);
+        assert_eq!(e.bins, 16);
+        assert!((e.measured[0] - 0.1).abs() < 1e-6);
+        assert!((e.noise[0] - 0.05).abs() < 1e-6);
+        assert!((e.rel_rms[0] - (0.01f64 - 0.0025).sqrt()).abs() < 1e-6);
+        let e2 = compare_binned(&render, &reference, Some(&noise), 4, 4, 2);
+        assert!(
+            (e2.noise[0] - 0.025).abs() < 1e-6,
+            "2x2 bins halve independent noise"
+        );
         assert_eq!(colours.len(), 20);
         assert_eq!(&colours[16..20], &[40, 40, 40, 255]);
     }

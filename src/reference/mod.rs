@@ -17,12 +17,11 @@
 //! Its own error is measured by halving the spacing and theta ([`Reference::refined`]).
 
 pub mod borders;
-pub mod bvh;
 pub mod metrics;
 
+use crate::geometry::bvh::Bvh;
 use crate::physics::{fresnel_transmittance, Dipole};
-use crate::scene::{desc::LightKind, Scene};
-use bvh::Bvh;
+use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -89,22 +88,7 @@ pub struct Reference {
 pub fn irradiance(scene: &Scene, bvh: &Bvh, x: DVec3, n: DVec3, f: DVec3, eps: f64) -> [f64; 3] {
     let mut e = [0.0; 3];
     for l in &scene.lights {
-        let (wi, dist, scale) = match l.kind {
-            LightKind::Directional => (-l.direction.as_dvec3().normalize(), f64::INFINITY, 1.0),
-            LightKind::Point | LightKind::Spot => {
-                let d = l.position.as_dvec3() - x;
-                let r2 = d.length_squared().max(1e-8);
-                let wi = d / r2.sqrt();
-                let mut s = 1.0 / r2;
-                if l.kind == LightKind::Spot {
-                    let c = (-wi).dot(l.direction.as_dvec3().normalize());
-                    let edge = l.cos_cone as f64;
-                    let t = ((c - edge) / (0.05 * (1.0 - edge))).clamp(0.0, 1.0);
-                    s *= t * t * (3.0 - 2.0 * t);
-                }
-                (wi, r2.sqrt(), s)
-            }
-        };
+        let (wi, dist, scale) = l.towards(x);
         let cos = n.dot(wi);
         if cos <= 0.0 || scale <= 0.0 {
             continue;

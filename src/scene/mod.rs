@@ -33,6 +33,8 @@ pub struct Overrides {
     pub width: Option<u32>,
     /// `--height`.
     pub height: Option<u32>,
+    /// `--eta`: the relative index of refraction, replacing the material's.
+    pub eta: Option<f64>,
 }
 
 /// A light, resolved.
@@ -48,6 +50,32 @@ pub struct Light {
     pub radiance: Vec3,
     /// cos of the spot half-angle (-1 for other kinds).
     pub cos_cone: f32,
+}
+
+impl Light {
+    /// Where light arrives from at `x`: the unit direction towards the light, the distance to it
+    /// (infinite for a directional light) and the factor on `radiance` there (1 for a
+    /// directional light; 1 / r^2 for point and spot lights, `radiance` being their intensity at
+    /// 1 mm, times the spot's smooth cone edge, which falls from 1 to 0 over the outer 5 % of
+    /// 1 - cos of the half-angle).
+    pub fn towards(&self, x: DVec3) -> (DVec3, f64, f64) {
+        match self.kind {
+            LightKind::Directional => (-self.direction.as_dvec3().normalize(), f64::INFINITY, 1.0),
+            LightKind::Point | LightKind::Spot => {
+                let d = self.position.as_dvec3() - x;
+                let r2 = d.length_squared().max(1e-8);
+                let wi = d / r2.sqrt();
+                let mut s = 1.0 / r2;
+                if self.kind == LightKind::Spot {
+                    let c = (-wi).dot(self.direction.as_dvec3().normalize());
+                    let edge = self.cos_cone as f64;
+                    let t = ((c - edge) / (0.05 * (1.0 - edge))).clamp(0.0, 1.0);
+                    s *= t * t * (3.0 - 2.0 * t);
+                }
+                (wi, r2.sqrt(), s)
+            }
+        }
+    }
 }
 
 /// The camera, resolved.
@@ -150,6 +178,9 @@ impl Scene {
                 preset: Some(m.clone()),
                 ..Default::default()
             };
+        }
+        if let Some(eta) = overrides.eta {
+            desc.material.eta = Some(eta);
         }
         if let Some(w) = overrides.width {
             desc.output.width = Some(w);
@@ -422,7 +453,7 @@ impl Scene {
         };
 
         // Where the camera and the lights stand relative to the object.
-        let bvh = crate::reference::bvh::Bvh::new(&mesh.positions, &mesh.indices);
+        let bvh = crate::geometry::bvh::Bvh::new(&mesh.positions, &mesh.indices);
         if bvh.contains(camera.position.as_dvec3()) {
             bail!("[camera] position {:?} lies inside the object", position);
         }

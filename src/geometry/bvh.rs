@@ -104,24 +104,28 @@ impl Bvh {
         (a + b + c) / 3.0
     }
 
-    fn slab(lo: DVec3, hi: DVec3, o: DVec3, d: DVec3, t_max: f64) -> bool {
+    /// Distance at which the ray enters the box (0 when it starts inside), if it does so before
+    /// `t_max`.
+    fn slab(lo: DVec3, hi: DVec3, ray: &Ray, t_max: f64) -> Option<f64> {
         let (mut t0, mut t1) = (0.0f64, t_max);
         for k in 0..3 {
-            if d[k] == 0.0 {
-                if o[k] < lo[k] || o[k] > hi[k] {
-                    return false;
+            if ray.d[k] == 0.0 {
+                if ray.o[k] < lo[k] || ray.o[k] > hi[k] {
+                    return None;
                 }
                 continue;
             }
-            let inv = 1.0 / d[k];
-            let (a, b) = ((lo[k] - o[k]) * inv, (hi[k] - o[k]) * inv);
+            let (a, b) = (
+                (lo[k] - ray.o[k]) * ray.inv[k],
+                (hi[k] - ray.o[k]) * ray.inv[k],
+            );
             t0 = t0.max(a.min(b));
             t1 = t1.min(a.max(b));
             if t0 > t1 {
-                return false;
+                return None;
             }
         }
-        true
+        Some(t0)
     }
 
     /// Möller-Trumbore intersection; two-sided.
@@ -148,55 +152,108 @@ impl Bvh {
         (t > 0.0).then_some((t, u, v))
     }
 
-    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`), if any.
-    pub fn intersect(&self, o: DVec3, d: DVec3, t_max: f64) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut stack = vec![0usize];
-        while let Some(n) = stack.pop() {
-            let node = self.nodes[n];
-            let limit = best.map(|h| h.t).unwrap_or(t_max);
-            if !Self::slab(node.lo, node.hi, o, d, limit) {
+    /// Visits the leaves whose boxes the ray enters before the current limit, nearer child
+    /// first; `leaf` gets the triangle range and returns the new limit (`None` stops).
+    fn traverse(
+        &self,
+        ray: &Ray,
+        mut limit: f64,
+        mut leaf: impl FnMut(&[u32], f64) -> Option<f64>,
+    ) {
+        // Median splits halve the triangles per level: 64 entries cover any mesh that fits in
+        // memory (the stack holds at most one pending sibling per level).
+        let mut stack = [0u32; 64];
+        let mut top = 1usize;
+        while top > 0 {
+            top -= 1;
+            let node = self.nodes[stack[top] as usize];
+            if Self::slab(node.lo, node.hi, ray, limit).is_none() {
                 continue;
             }
             if node.count > 0 {
-                for &t in &self.order[node.start as usize..(node.start + node.count) as usize] {
-                    if let Some((dist, u, v)) = self.triangle(t, o, d) {
-                        if dist < best.map(|h| h.t).unwrap_or(t_max) {
-                            best = Some(Hit {
-                                t: dist,
-                                triangle: t,
-                                bary: [1.0 - u - v, u, v],
-                            });
-                        }
-                    }
+                match leaf(
+                    &self.order[node.start as usize..(node.start + node.count) as usize],
+                    limit,
+                ) {
+                    Some(l) => limit = l,
+                    None => return,
                 }
             } else {
-                stack.push(node.start as usize);
-                stack.push(node.start as usize + 1);
+                let (l, r) = (node.start, node.start + 1);
+                let near = |i: u32| {
+                    let n = self.nodes[i as usize];
+                    Self::slab(n.lo, n.hi, ray, limit)
+                };
+                let (a, b) = (near(l), near(r));
+                // Push the farther child first so that the nearer one is visited next.
+                let order = match (a, b) {
+                    (Some(ta), Some(tb)) if ta <= tb => [Some(r), Some(l)],
+                    (Some(_), Some(_)) => [Some(l), Some(r)],
+                    (Some(_), None) => [None, Some(l)],
+                    (None, Some(_)) => [None, Some(r)],
+                    (None, None) => [None, None],
+                };
+                for i in order.into_iter().flatten() {
+                    stack[top] = i;
+                    top += 1;
+                }
             }
         }
+    }
+
+    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`), if any.
+    pub fn intersect(&self, o: DVec3, d: DVec3, t_max: f64) -> Option<Hit> {
+        let ray = Ray::new(o, d);
+        let mut best: Option<Hit> = None;
+        self.traverse(&ray, t_max, |tris, limit| {
+            let mut limit = limit;
+            for &t in tris {
+                if let Some((dist, u, v)) = self.triangle(t, o, d) {
+                    if dist < limit {
+                        limit = dist;
+                        best = Some(Hit {
+                            t: dist,
+                            triangle: t,
+                            bary: [1.0 - u - v, u, v],
+                        });
+                    }
+                }
+            }
+            Some(limit)
+        });
         best
+    }
+
+    /// Every surface crossing of the ray `o + t d` with `t` in (0, `t_max`), appended to `out`
+    /// in increasing order (`out` is cleared first). Crossings closer together than `merge`
+    /// count once: a ray through a shared edge or vertex hits every triangle there.
+    pub fn hits(&self, o: DVec3, d: DVec3, t_max: f64, merge: f64, out: &mut Vec<f64>) {
+        out.clear();
+        let ray = Ray::new(o, d);
+        self.traverse(&ray, t_max, |tris, limit| {
+            for &t in tris {
+                if let Some((dist, _, _)) = self.triangle(t, o, d) {
+                    if dist < limit {
+                        out.push(dist);
+                    }
+                }
+            }
+            Some(limit)
+        });
+        out.sort_unstable_by(f64::total_cmp);
+        out.dedup_by(|later, earlier| *later - *earlier < merge);
     }
 
     /// Number of surface crossings of the ray `o + t d`, t > 0.
     pub fn crossings(&self, o: DVec3, d: DVec3) -> usize {
         let mut n = 0;
-        let mut stack = vec![0usize];
-        while let Some(i) = stack.pop() {
-            let node = self.nodes[i];
-            if !Self::slab(node.lo, node.hi, o, d, f64::INFINITY) {
-                continue;
-            }
-            if node.count > 0 {
-                n += self.order[node.start as usize..(node.start + node.count) as usize]
-                    .iter()
-                    .filter(|&&t| self.triangle(t, o, d).is_some())
-                    .count();
-            } else {
-                stack.push(node.start as usize);
-                stack.push(node.start as usize + 1);
-            }
-        }
+        self.traverse(&Ray::new(o, d), f64::INFINITY, |tris, limit| {
+            n += tris
+                .iter()
+                .filter(|&&t| self.triangle(t, o, d).is_some())
+                .count();
+            Some(limit)
+        });
         n
     }
 
@@ -217,24 +274,35 @@ impl Bvh {
 
     /// Whether anything blocks the segment from `o` along `d` up to `t_max`.
     pub fn occluded(&self, o: DVec3, d: DVec3, t_max: f64) -> bool {
-        let mut stack = vec![0usize];
-        while let Some(n) = stack.pop() {
-            let node = self.nodes[n];
-            if !Self::slab(node.lo, node.hi, o, d, t_max) {
-                continue;
+        let mut blocked = false;
+        self.traverse(&Ray::new(o, d), t_max, |tris, limit| {
+            if tris
+                .iter()
+                .any(|&t| matches!(self.triangle(t, o, d), Some((dist, _, _)) if dist < t_max))
+            {
+                blocked = true;
+                return None;
             }
-            if node.count > 0 {
-                for &t in &self.order[node.start as usize..(node.start + node.count) as usize] {
-                    if matches!(self.triangle(t, o, d), Some((dist, _, _)) if dist < t_max) {
-                        return true;
-                    }
-                }
-            } else {
-                stack.push(node.start as usize);
-                stack.push(node.start as usize + 1);
-            }
+            Some(limit)
+        });
+        blocked
+    }
+}
+
+/// A ray with its reciprocal direction (for the box tests).
+struct Ray {
+    o: DVec3,
+    d: DVec3,
+    inv: DVec3,
+}
+
+impl Ray {
+    fn new(o: DVec3, d: DVec3) -> Ray {
+        Ray {
+            o,
+            d,
+            inv: DVec3::ONE / d,
         }
-        false
     }
 }
 
@@ -262,6 +330,37 @@ mod tests {
         assert!(bvh.contains(DVec3::new(1.0, 2.0, 3.0)));
         assert!(!bvh.contains(DVec3::new(1.0, 2.0, 30.0)));
         assert!(!bvh.occluded(DVec3::new(0.0, 0.0, 100.0), DVec3::NEG_Z, 80.0));
+        // Every crossing, in order; the ray along a face diagonal crosses shared edges once.
+        let mut hits = Vec::new();
+        bvh.hits(
+            DVec3::new(1.0, 2.0, 100.0),
+            DVec3::NEG_Z,
+            f64::INFINITY,
+            1e-9,
+            &mut hits,
+        );
+        assert_eq!(hits.len(), 2);
+        assert!((hits[0] - 85.0).abs() < 1e-9 && (hits[1] - 115.0).abs() < 1e-9);
+        bvh.hits(
+            DVec3::new(0.0, 0.0, 100.0),
+            DVec3::NEG_Z,
+            90.0,
+            1e-9,
+            &mut hits,
+        );
+        assert_eq!(
+            hits.len(),
+            1,
+            "a vertex shared by several triangles is one crossing"
+        );
+        bvh.hits(
+            DVec3::new(1.0, 2.0, 0.0),
+            DVec3::X,
+            f64::INFINITY,
+            1e-9,
+            &mut hits,
+        );
+        assert!(hits.len() == 1 && (hits[0] - 4.0).abs() < 1e-9, "{hits:?}");
         // Brute force agrees on random rays.
         for i in 0..200 {
             let a = i as f64 * 0.37;

@@ -1,0 +1,474 @@
+//! Volumetric truth: a Monte Carlo path tracer of light transport inside the scene's
+//! homogeneous medium, independent of the dipole, the atlas and every operator of the method.
+//!
+//! The object is a closed mesh filled with the material's medium: scattering sigma_s =
+//! sigma_s' / (1 - g) with a Henyey-Greenstein phase function of mean cosine g (g = 0, the
+//! default, is the isotropic phase on the reduced coefficients that the dipole assumes), and
+//! absorption sigma_a, per RGB channel. The boundary is index-matched (eta = 1): no reflection,
+//! no refraction, so light enters and leaves along straight lines and the transport equation is
+//! solved without approximation:
+//!
+//! - A camera ray through each pixel centre (the same rays as `reference`) enters the medium.
+//!   Free-flight distances are sampled exactly (pdf sigma_t e^(-sigma_t s)); a flight that
+//!   reaches the boundary leaves the object and continues in air, and may enter it again.
+//! - At every collision, next-event estimation adds the light of every lamp scattered towards
+//!   the camera: albedo x phase x the lamp's radiance x the transmittance e^(-sigma_t l), where
+//!   l is the length of the shadow ray inside the medium, over every segment (concave parts,
+//!   ears in front of the body). Delta lights are reached by this estimate only, so nothing is
+//!   counted twice.
+//! - Absorption is analog: a collision scatters with probability albedo and ends the path
+//!   otherwise, with the weight staying one. Both choices are unbiased (no Russian roulette,
+//!   no cut-off depth); a path ends by absorption or by leaving the object for good. A safety
+//!   cap of [`MAX_EVENTS`] collisions per path is counted in `truncated_paths` (0 in every run
+//!   measured).
+//! - Each channel has its own paths (sigma_t differs per channel, so one path cannot serve all
+//!   three without weights of large variance).
+//! - Samples are split into two independent halves A and B: the image is (A + B) / 2 and the
+//!   standard deviation of each pixel is estimated by |A - B| / 2.
+//!
+//! A smooth dielectric boundary (eta != 1) is refused: a delta light seen through a smooth
+//! interface is reached only by a path that refracts exactly into the light's direction, which
+//! a path tracer samples with probability zero.
+
+pub mod rng;
+
+use crate::geometry::bvh::Bvh;
+use crate::reference::{camera_ray, metrics};
+use crate::scene::Scene;
+use glam::DVec3;
+use rayon::prelude::*;
+use rng::Rng;
+use serde::Serialize;
+use std::f64::consts::PI;
+use std::time::Instant;
+
+/// Collisions after which a path is cut (counted; it would take an unbounded walk).
+pub const MAX_EVENTS: u64 = 100_000_000;
+
+/// How much to trace.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthSettings {
+    /// Paths per pixel and channel, both halves together (rounded up to even).
+    pub spp: u32,
+    /// Stop after this many seconds instead (at least one sample per half); `spp` is then a cap.
+    pub time_s: Option<f64>,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Henyey-Greenstein mean cosine; sigma_s = sigma_s' / (1 - g).
+    pub g: f64,
+    /// Scattering orders counted: `min_order..=max_order` (1..=u32::MAX is all the light;
+    /// 1..=1 single scattering alone).
+    pub min_order: u32,
+    /// See `min_order`.
+    pub max_order: u32,
+}
+
+impl Default for TruthSettings {
+    fn default() -> TruthSettings {
+        TruthSettings {
+            spp: 64,
+            time_s: None,
+            seed: 1,
+            g: 0.0,
+            min_order: 1,
+            max_order: u32::MAX,
+        }
+    }
+}
+
+/// Why a scene cannot be traced.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TruthError {
+    /// The boundary is a smooth dielectric.
+    #[error(
+        "truth traces an index-matched boundary only (eta = 1.0), the scene has eta = {0}: \
+         through a smooth dielectric a point or directional light is reached only by a path \
+         that refracts exactly towards it, which a path tracer never samples. Set `eta = 1.0` \
+         under [material] (or pass --eta 1) and compare with a render of the same scene"
+    )]
+    Eta(f64),
+    /// The Henyey-Greenstein parameter is out of range.
+    #[error("--g {0} must lie in (-1, 1)")]
+    BadG(f64),
+    /// Orders out of order.
+    #[error(
+        "scattering orders {0}..={1}: the first order must be at least 1 and at most the last"
+    )]
+    BadOrders(u32, u32),
+    /// Nothing to trace.
+    #[error("--spp must be at least 1 (got {0})")]
+    BadSpp(u32),
+    /// Bad time budget.
+    #[error("--time {0} must be a positive number of seconds")]
+    BadTime(f64),
+    /// A textured scene.
+    #[error(
+        "truth traces a homogeneous medium; the scene's texture has no volumetric counterpart \
+         (remove `texture` from [mesh] to compare the medium alone)"
+    )]
+    Texture,
+}
+
+/// The medium of one scene, per channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Medium {
+    /// Extinction sigma_s + sigma_a, 1/mm.
+    pub sigma_t: [f64; 3],
+    /// sigma_s / sigma_t.
+    pub albedo: [f64; 3],
+    /// Henyey-Greenstein mean cosine.
+    pub g: f64,
+}
+
+impl Medium {
+    /// The medium of `material` with phase parameter `g` (sigma_s = sigma_s' / (1 - g)).
+    pub fn new(material: &crate::physics::Material, g: f64) -> Medium {
+        let sigma_s = material.sigma_s_prime.map(|s| s / (1.0 - g));
+        let sigma_t = [0, 1, 2].map(|c| sigma_s[c] + material.sigma_a[c]);
+        Medium {
+            sigma_t,
+            albedo: [0, 1, 2].map(|c| sigma_s[c] / sigma_t[c]),
+            g,
+        }
+    }
+
+    /// Henyey-Greenstein phase function of the cosine between the propagation directions
+    /// before and after scattering (1 / 4 pi for g = 0).
+    pub fn phase(&self, cos: f64) -> f64 {
+        let g = self.g;
+        if g == 0.0 {
+            return 0.25 / PI;
+        }
+        let denom = 1.0 + g * g - 2.0 * g * cos;
+        0.25 / PI * (1.0 - g * g) / (denom * denom.sqrt())
+    }
+
+    /// A propagation direction after scattering from `d`, distributed as [`Medium::phase`].
+    pub fn sample_phase(&self, d: DVec3, rng: &mut Rng) -> DVec3 {
+        let (u1, u2) = (rng.uniform(), rng.uniform());
+        let g = self.g;
+        let cos = if g.abs() < 1e-4 {
+            1.0 - 2.0 * u1
+        } else {
+            let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u1);
+            ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
+        };
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let phi = 2.0 * PI * u2;
+        let (t1, t2) = d.any_orthonormal_pair();
+        (d * cos + (t1 * phi.cos() + t2 * phi.sin()) * sin).normalize()
+    }
+}
+
+/// One path's result.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PathResult {
+    /// Radiance estimate.
+    pub radiance: f64,
+    /// Collisions.
+    pub events: u64,
+    /// Whether [`MAX_EVENTS`] cut the path.
+    pub truncated: bool,
+}
+
+/// The path tracer of one scene.
+pub struct Tracer<'a> {
+    scene: &'a Scene,
+    bvh: Bvh,
+    /// The medium traced.
+    pub medium: Medium,
+    eps: f64,
+    min_order: u32,
+    max_order: u32,
+}
+
+impl<'a> Tracer<'a> {
+    /// Checks that the scene can be traced and builds the ray-casting structure.
+    pub fn new(scene: &'a Scene, settings: &TruthSettings) -> Result<Tracer<'a>, TruthError> {
+        let eta = scene.material.eta;
+        if (eta - 1.0).abs() > 1e-9 {
+            return Err(TruthError::Eta(eta));
+        }
+        if !(settings.g.is_finite() && settings.g.abs() < 1.0) {
+            return Err(TruthError::BadG(settings.g));
+        }
+        if settings.min_order < 1 || settings.min_order > settings.max_order {
+            return Err(TruthError::BadOrders(
+                settings.min_order,
+                settings.max_order,
+            ));
+        }
+        if scene.texture.is_some() {
+            return Err(TruthError::Texture);
+        }
+        let (_, radius) = scene.bounds();
+        Ok(Tracer {
+            scene,
+            bvh: Bvh::new(&scene.mesh.positions, &scene.mesh.indices),
+            medium: Medium::new(&scene.material, settings.g),
+            eps: 1e-9 * radius.max(1e-3) as f64,
+            min_order: settings.min_order,
+            max_order: settings.max_order,
+        })
+    }
+
+    /// Whether the ray hits the object.
+    pub fn covers(&self, o: DVec3, d: DVec3) -> bool {
+        self.bvh.intersect(o, d, f64::INFINITY).is_some()
+    }
+
+    /// Length of the segment from `x` (inside the medium) along `w` up to `dist` that lies
+    /// inside the medium: the crossings alternate exit, entry, exit...
+    fn inside_length(&self, x: DVec3, w: DVec3, dist: f64, hits: &mut Vec<f64>) -> f64 {
+        self.bvh.hits(x, w, dist, self.eps, hits);
+        let mut length = 0.0;
+        let mut from = 0.0;
+        for (i, &t) in hits.iter().enumerate() {
+            if i % 2 == 0 {
+                length += t - from;
+            } else {
+                from = t;
+            }
+        }
+        if hits.len() % 2 == 1 || hits.is_empty() {
+            length
+        } else {
+            // Still inside at the light (a point light inside the object): up to it.
+            length + (dist - from).max(0.0)
+        }
+    }
+
+    /// Light of every lamp arriving at `x` and scattered into the direction opposite to the
+    /// path's propagation direction `d` (towards the camera), per unit sigma_s: phase x
+    /// radiance x transmittance.
+    fn next_event(&self, x: DVec3, d: DVec3, c: usize, hits: &mut Vec<f64>) -> f64 {
+        let mut sum = 0.0;
+        for l in &self.scene.lights {
+            let le = l.radiance[c] as f64;
+            if le <= 0.0 {
+                continue;
+            }
+            let (wi, dist, scale) = l.towards(x);
+            if scale <= 0.0 {
+                continue;
+            }
+            let tau = self.medium.sigma_t[c] * self.inside_length(x, wi, dist, hits);
+            sum += le * scale * self.medium.phase(d.dot(wi)) * (-tau).exp();
+        }
+        sum
+    }
+
+    /// Radiance of channel `c` arriving at `o` from the direction `-d` (`o` outside the object).
+    pub fn radiance(
+        &self,
+        o: DVec3,
+        d: DVec3,
+        c: usize,
+        rng: &mut Rng,
+        hits: &mut Vec<f64>,
+    ) -> PathResult {
+        let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
+        let mut r = PathResult::default();
+        let (mut o, mut d) = (o, d);
+        let mut order = 0u32;
+        loop {
+            // In air: find the next entry.
+            match self.bvh.intersect(o, d, f64::INFINITY) {
+                None => return r,
+                Some(h) => o += d * (h.t + self.eps),
+            }
+            // In the medium until the flight leaves it.
+            loop {
+                let s = -(1.0 - rng.uniform()).ln() / sigma_t;
+                if let Some(h) = self.bvh.intersect(o, d, s) {
+                    o += d * (h.t + self.eps);
+                    break;
+                }
+                o += d * s;
+                order += 1;
+                r.events += 1;
+                if order >= self.min_order {
+                    r.radiance += albedo * self.next_event(o, d, c, hits);
+                }
+                if order >= self.max_order || rng.uniform() >= albedo {
+                    return r;
+                }
+                if r.events >= MAX_EVENTS {
+                    r.truncated = true;
+                    return r;
+                }
+                d = self.medium.sample_phase(d, rng);
+            }
+        }
+    }
+}
+
+/// Noise and error figures of one image at one binning.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct BinnedNoise {
+    /// Bin edge in pixels.
+    pub bin: u32,
+    /// Relative RMS standard deviation per channel: sqrt(sum sigma^2 / sum value^2) over the
+    /// covered bins.
+    pub rel_noise: [f64; 3],
+}
+
+/// The result of a truth computation.
+#[derive(Debug, Clone)]
+pub struct Truth {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Radiance, RGBA f32, alpha 1 where the object is seen.
+    pub radiance: Vec<f32>,
+    /// Per-pixel standard deviation of `radiance` (|A - B| / 2), RGBA, same alpha.
+    pub noise: Vec<f32>,
+    /// Paths per pixel and channel (both halves).
+    pub spp: u32,
+    /// Wall time of the tracing, s.
+    pub seconds: f64,
+    /// Collisions traced in all.
+    pub events: u64,
+    /// Paths traced in all.
+    pub paths: u64,
+    /// Paths cut by [`MAX_EVENTS`].
+    pub truncated_paths: u64,
+    /// Covered pixels.
+    pub pixels: usize,
+}
+
+impl Truth {
+    /// Mean radiance over the covered pixels and its standard error, per channel.
+    pub fn object_mean(&self) -> ([f64; 3], [f64; 3]) {
+        let mut mean = [0.0; 3];
+        let mut var = [0.0; 3];
+        let n = self.pixels.max(1) as f64;
+        for i in 0..(self.width * self.height) as usize {
+            if self.radiance[4 * i + 3] > 0.5 {
+                for c in 0..3 {
+                    mean[c] += self.radiance[4 * i + c] as f64 / n;
+                    var[c] += (self.noise[4 * i + c] as f64).powi(2);
+                }
+            }
+        }
+        (mean, var.map(|v| v.sqrt() / n))
+    }
+
+    /// Relative noise after binning by `bin` x `bin` pixels.
+    pub fn noise_at(&self, bin: u32) -> BinnedNoise {
+        let (_, _, value) = metrics::bin(&self.radiance, self.width, self.height, bin);
+        let (_, _, sigma) = metrics::bin_noise(&self.noise, self.width, self.height, bin);
+        let mut rel_noise = [0.0; 3];
+        for c in 0..3 {
+            let (mut s2, mut v2) = (0.0, 0.0);
+            for i in 0..value.len() / 4 {
+                if value[4 * i + 3] > 0.5 {
+                    s2 += (sigma[4 * i + c] as f64).powi(2);
+                    v2 += (value[4 * i + c] as f64).powi(2);
+                }
+            }
+            rel_noise[c] = (s2 / v2.max(1e-300)).sqrt();
+        }
+        BinnedNoise { bin, rel_noise }
+    }
+
+    /// Collisions per second of wall time.
+    pub fn events_per_second(&self) -> f64 {
+        self.events as f64 / self.seconds.max(1e-9)
+    }
+}
+
+/// Traces `scene`; `progress` gets the fraction done (of the samples, or of the time budget).
+pub fn compute(
+    scene: &Scene,
+    settings: &TruthSettings,
+    progress: &(dyn Fn(f64) + Sync),
+) -> Result<Truth, TruthError> {
+    if settings.spp == 0 {
+        return Err(TruthError::BadSpp(settings.spp));
+    }
+    if let Some(t) = settings.time_s {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(TruthError::BadTime(t));
+        }
+    }
+    let tracer = Tracer::new(scene, settings)?;
+    let (w, h) = (scene.width, scene.height);
+    let start = Instant::now();
+    let covered: Vec<u32> = (0..w * h)
+        .into_par_iter()
+        .filter(|&i| {
+            let (o, d) = camera_ray(scene, i % w, i / w);
+            tracer.covers(o, d)
+        })
+        .collect();
+    let per_half = settings.spp.div_ceil(2);
+    // Sums of each half per covered pixel and channel.
+    let mut sums = vec![[[0.0f64; 3]; 2]; covered.len()];
+    let (mut events, mut paths, mut truncated) = (0u64, 0u64, 0u64);
+    let mut done = 0u32;
+    while done < per_half {
+        let round_start = Instant::now();
+        let k = done as u64;
+        let (e, p, t) = sums
+            .par_iter_mut()
+            .zip(&covered)
+            .map_init(Vec::new, |hits, (sum, &i)| {
+                let (o, d) = camera_ray(scene, i % w, i / w);
+                let (mut e, mut p, mut t) = (0u64, 0u64, 0u64);
+                for (half, s) in sum.iter_mut().enumerate() {
+                    let mut rng = Rng::new(&[settings.seed, i as u64, half as u64, k]);
+                    for (c, v) in s.iter_mut().enumerate() {
+                        let r = tracer.radiance(o, d, c, &mut rng, hits);
+                        *v += r.radiance;
+                        e += r.events;
+                        p += 1;
+                        t += r.truncated as u64;
+                    }
+                }
+                (e, p, t)
+            })
+            .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+        events += e;
+        paths += p;
+        truncated += t;
+        done += 1;
+        let elapsed = start.elapsed().as_secs_f64();
+        match settings.time_s {
+            Some(budget) => {
+                progress((elapsed / budget).min(1.0));
+                // Stop when another round would overrun the budget.
+                if elapsed + round_start.elapsed().as_secs_f64() > budget {
+                    break;
+                }
+            }
+            None => progress(done as f64 / per_half as f64),
+        }
+    }
+    let n = done as f64;
+    let mut radiance = vec![0.0f32; (4 * w * h) as usize];
+    let mut noise = vec![0.0f32; (4 * w * h) as usize];
+    for (sum, &i) in sums.iter().zip(&covered) {
+        let i = i as usize;
+        for c in 0..3 {
+            let (a, b) = (sum[0][c] / n, sum[1][c] / n);
+            radiance[4 * i + c] = (0.5 * (a + b)) as f32;
+            noise[4 * i + c] = (0.5 * (a - b).abs()) as f32;
+        }
+        radiance[4 * i + 3] = 1.0;
+        noise[4 * i + 3] = 1.0;
+    }
+    Ok(Truth {
+        width: w,
+        height: h,
+        radiance,
+        noise,
+        spp: 2 * done,
+        seconds: start.elapsed().as_secs_f64(),
+        events,
+        paths,
+        truncated_paths: truncated,
+        pixels: covered.len(),
+    })
+}

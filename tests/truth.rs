@@ -1,0 +1,322 @@
+//! The volumetric path tracer (`truth`) against closed forms and conservation laws, on the CPU.
+
+mod common;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use translucent::truth::{self, rng::Rng, Tracer, TruthSettings};
+
+fn quiet(_: f64) {}
+
+/// A flat, deep box seen and lit from chosen directions, a few pixels about its centre.
+fn slab(material: &str, light_from: [f64; 3], view_from: [f64; 3], size: [f64; 3]) -> String {
+    let v = DVec3::from_array(view_from).normalize() * 400.0 + DVec3::new(0.0, size[1] / 2.0, 0.0);
+    format!(
+        r#"
+        [mesh]
+        builtin = "box"
+        size = [{}, {}, {}]
+        segments = 4
+        [camera]
+        position = [{}, {}, {}]
+        target = [0.0, {}, 0.0]
+        up = [0.0, 0.0, -1.0]
+        fov_deg = 2.0
+        [[lights]]
+        kind = "directional"
+        direction = [{}, {}, {}]
+        [material]
+        {material}
+        [output]
+        width = 4
+        height = 4
+        "#,
+        size[0],
+        size[1],
+        size[2],
+        v.x,
+        v.y,
+        v.z,
+        size[1] / 2.0,
+        -light_from[0],
+        -light_from[1],
+        -light_from[2],
+    )
+}
+
+/// Single scattering alone on a half-space: L = albedo p(theta) E mu_i / (mu_i + mu_o), exactly
+/// (Jensen et al. 2001, the first-order term at eta = 1), for the isotropic phase function and
+/// for Henyey-Greenstein g = 0.6 (forward scattering, sigma_s = sigma_s' / (1 - g)).
+#[test]
+fn single_scattering_matches_the_closed_form() {
+    let light = [0.5, 1.0, 0.2];
+    let view = [-0.4, 1.0, 0.3];
+    let (mu_i, mu_o) = (
+        DVec3::from_array(light).normalize().y,
+        DVec3::from_array(view).normalize().y,
+    );
+    // Propagation directions: the light travels along -light, the scattered light along +view.
+    let cos = DVec3::from_array(light)
+        .normalize()
+        .dot(-DVec3::from_array(view).normalize());
+    for g in [0.0, 0.6] {
+        let scene = common::scene(&slab(
+            "sigma_s_prime = [0.9, 0.5, 1.2]\nsigma_a = [0.1, 0.5, 0.02]\neta = 1.0",
+            light,
+            view,
+            [400.0, 60.0, 400.0],
+        ));
+        let settings = TruthSettings {
+            spp: 6000,
+            g,
+            max_order: 1,
+            ..Default::default()
+        };
+        let t = truth::compute(&scene, &settings, &quiet).unwrap();
+        assert_eq!(t.pixels, 16);
+        let medium = truth::Medium::new(&scene.material, g);
+        let (mean, stderr) = t.object_mean();
+        for c in 0..3 {
+            let want = medium.albedo[c] * medium.phase(cos) * mu_i / (mu_i + mu_o);
+            let err = (mean[c] - want).abs();
+            println!(
+                "g {g}, channel {c}: {} vs {want} (standard error {})",
+                mean[c], stderr[c]
+            );
+            assert!(
+                err < 4.0 * stderr[c] + 1e-3 * want,
+                "g {g}, channel {c}: {} vs {want} (standard error {})",
+                mean[c],
+                stderr[c]
+            );
+            assert!(stderr[c] < 0.01 * want, "too noisy to tell: {}", stderr[c]);
+        }
+    }
+}
+
+/// The Henyey-Greenstein sampling follows its density: the mean cosine is g, and the sampled
+/// cosines' histogram matches p(cos) 2 pi.
+#[test]
+fn phase_sampling_follows_the_phase_function() {
+    let material = translucent::physics::Material::custom([1.0; 3], [0.0; 3], 1.0).unwrap();
+    for g in [0.0, 0.3, -0.7] {
+        let m = truth::Medium::new(&material, g);
+        let mut rng = Rng::new(&[7]);
+        let d = DVec3::new(0.3, -0.5, 0.8).normalize();
+        let n = 200_000;
+        let mut hist = [0usize; 10];
+        let mut mean = 0.0;
+        for _ in 0..n {
+            let c = m.sample_phase(d, &mut rng).dot(d);
+            mean += c / n as f64;
+            hist[(((c + 1.0) * 5.0) as usize).min(9)] += 1;
+        }
+        assert!((mean - g).abs() < 0.01, "g {g}: mean cosine {mean}");
+        for (k, &count) in hist.iter().enumerate() {
+            // The bin's probability by the midpoint rule on a fine sub-grid.
+            let p: f64 = (0..100)
+                .map(|j| {
+                    let c = -1.0 + 0.2 * k as f64 + 0.002 * (j as f64 + 0.5);
+                    m.phase(c) * 2.0 * PI * 0.002
+                })
+                .sum();
+            let got = count as f64 / n as f64;
+            assert!(
+                (got - p).abs() < 4.0 * (p / n as f64).sqrt() + 1e-4,
+                "g {g}, bin {k}: {got} vs {p}"
+            );
+        }
+    }
+}
+
+/// With sigma_a = 0 every photon leaves: the flux leaving a sphere (radiance integrated over
+/// all lines through a bounding sphere) equals the flux it intercepts, E times its projected
+/// area, less the uncollided part that passes straight through.
+#[test]
+fn without_absorption_all_light_leaves() {
+    let scene = common::scene(
+        r#"
+        [mesh]
+        builtin = "sphere"
+        radius = 8.0
+        segments = 48
+        [camera]
+        position = [0.0, 0.0, 100.0]
+        target = [0.0, 0.0, 0.0]
+        [[lights]]
+        kind = "directional"
+        direction = [0.3, -1.0, -0.2]
+        intensity = 1.0
+        [material]
+        sigma_s_prime = [2.0, 1.0, 3.0]
+        sigma_a = [0.0, 0.0, 0.0]
+        eta = 1.0
+        [output]
+        width = 4
+        height = 4
+        "#,
+    );
+    let tracer = Tracer::new(&scene, &TruthSettings::default()).unwrap();
+    let m = &scene.mesh;
+    let (centre, _) = scene.bounds();
+    let centre = centre.as_dvec3();
+    let radius_b = m
+        .positions
+        .iter()
+        .map(|p| p.as_dvec3().distance(centre))
+        .fold(0.0, f64::max)
+        * 1.02;
+    // Projected area of the (convex) mesh along the light: half the sum of |n . l| A.
+    let l = scene.lights[0].direction.as_dvec3().normalize();
+    let projected: f64 = m
+        .indices
+        .chunks(3)
+        .map(|t| {
+            let p = [t[0], t[1], t[2]].map(|i| m.positions[i as usize].as_dvec3());
+            0.5 * 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).dot(l).abs()
+        })
+        .sum();
+    let lines = 120_000usize;
+    let sums: Vec<[f64; 3]> = (0..lines)
+        .into_par_iter()
+        .map(|i| {
+            let mut rng = Rng::new(&[11, i as u64]);
+            // A uniform direction and a uniform point on the disc across it.
+            let z = 1.0 - 2.0 * rng.uniform();
+            let phi = 2.0 * PI * rng.uniform();
+            let s = (1.0 - z * z).sqrt();
+            let d = DVec3::new(s * phi.cos(), s * phi.sin(), z);
+            let (a, b) = d.any_orthonormal_pair();
+            let r = radius_b * rng.uniform().sqrt();
+            let psi = 2.0 * PI * rng.uniform();
+            let o = centre + (a * psi.cos() + b * psi.sin()) * r - d * (2.0 * radius_b);
+            let mut hits = Vec::new();
+            [0, 1, 2].map(|c| tracer.radiance(o, d, c, &mut rng, &mut hits).radiance)
+        })
+        .collect();
+    let measure = 4.0 * PI * PI * radius_b * radius_b;
+    for c in 0..3 {
+        let sigma_t = scene.material.sigma_s_prime[c];
+        // Uncollided fraction through an ideal sphere: 2 int_0^1 e^(-2 sigma_t R mu) mu dmu.
+        let x = 2.0 * sigma_t * 8.0;
+        let uncollided = 2.0 * (1.0 - (1.0 + x) * (-x).exp()) / (x * x);
+        let want = projected * (1.0 - uncollided);
+        let values: Vec<f64> = sums.iter().map(|v| v[c] * measure).collect();
+        let mean = values.iter().sum::<f64>() / lines as f64;
+        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (lines - 1) as f64;
+        let se = (var / lines as f64).sqrt();
+        println!("channel {c}: flux out {mean} vs in {want} (standard error {se})");
+        assert!(
+            (mean - want).abs() < 4.0 * se + 2e-3 * want,
+            "channel {c}: flux out {mean} vs in {want} (standard error {se})"
+        );
+        assert!(se < 0.01 * want, "too noisy to tell: {se} of {want}");
+    }
+}
+
+/// A 400 x 400 x 50 mm box of skim milk seen and lit along its normal is a half-space to
+/// 0.14 %: its radiance per unit irradiance is 0.2883 / 0.2887 / 0.2522 (Mitsuba 3,
+/// volpathmis, index-matched).
+#[test]
+fn semi_infinite_skim_milk() {
+    let scene = common::scene(&slab(
+        "preset = \"skimmilk\"\neta = 1.0",
+        [0.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [400.0, 50.0, 400.0],
+    ));
+    let t = truth::compute(
+        &scene,
+        &TruthSettings {
+            spp: 6000,
+            seed: 3,
+            ..Default::default()
+        },
+        &quiet,
+    )
+    .unwrap();
+    let (mean, stderr) = t.object_mean();
+    assert_eq!(t.truncated_paths, 0);
+    for (c, want) in [0.2883, 0.2887, 0.2522].into_iter().enumerate() {
+        println!(
+            "channel {c}: {:.5} vs {want} ({:+.2} %, standard error {:.2} %)",
+            mean[c],
+            100.0 * (mean[c] / want - 1.0),
+            100.0 * stderr[c] / want
+        );
+        assert!(
+            (mean[c] / want - 1.0).abs() < 0.01 + 3.0 * stderr[c] / want,
+            "channel {c}: {} vs {want} (standard error {})",
+            mean[c],
+            stderr[c]
+        );
+    }
+}
+
+/// The image is a function of the seed and the samples, whatever the threads did; another
+/// seed gives another image.
+#[test]
+fn deterministic_per_seed() {
+    let scene = common::scene(&slab(
+        "preset = \"ketchup\"\neta = 1.0",
+        [0.3, 1.0, 0.0],
+        [0.0, 1.0, 0.2],
+        [100.0, 30.0, 100.0],
+    ));
+    let s = TruthSettings {
+        spp: 4,
+        ..Default::default()
+    };
+    let a = truth::compute(&scene, &s, &quiet).unwrap();
+    let b = truth::compute(&scene, &s, &quiet).unwrap();
+    assert_eq!(a.radiance, b.radiance);
+    let c = truth::compute(&scene, &TruthSettings { seed: 9, ..s }, &quiet).unwrap();
+    assert_ne!(a.radiance, c.radiance);
+}
+
+/// eta != 1 and a texture are refused with a reason.
+#[test]
+fn refuses_what_it_cannot_trace() {
+    let scene = common::scene(&slab(
+        "preset = \"skimmilk\"",
+        [0.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [100.0, 30.0, 100.0],
+    ));
+    let e = truth::compute(&scene, &TruthSettings::default(), &quiet).unwrap_err();
+    assert!(e.to_string().contains("eta = 1.3"), "{e}");
+    let scene = common::scene(&slab(
+        "preset = \"skimmilk\"\neta = 1.0",
+        [0.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [100.0, 30.0, 100.0],
+    ));
+    for (s, needle) in [
+        (
+            TruthSettings {
+                g: 1.0,
+                ..Default::default()
+            },
+            "--g",
+        ),
+        (
+            TruthSettings {
+                min_order: 3,
+                max_order: 2,
+                ..Default::default()
+            },
+            "orders",
+        ),
+        (
+            TruthSettings {
+                spp: 0,
+                ..Default::default()
+            },
+            "--spp",
+        ),
+    ] {
+        let e = truth::compute(&scene, &s, &quiet).unwrap_err();
+        assert!(e.to_string().contains(needle), "{e}");
+    }
+}
