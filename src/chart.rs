@@ -37,15 +37,32 @@ pub struct Point {
     pub gpu_ms: f64,
     /// Spread of the frame times: the interquartile range over the median.
     pub gpu_spread: f64,
-    /// Relative RMS error, worst channel.
+    /// Relative RMS error against the exact model (`reference`), worst channel.
     pub rel_rms: f64,
+    /// Relative RMS error against volumetric truth after 4x4 binning with the truth's noise
+    /// removed, worst channel (NaN where the scene has no truth: eta != 1).
+    pub rel_rms_truth: f64,
     /// 99th percentile of the per-pixel relative error, worst channel.
     pub p99: f64,
     /// Whether this is the automatic setting.
     pub auto: bool,
     /// Whether no other point is both faster and more accurate beyond the measurement noise
-    /// (see [`mark_pareto`]).
+    /// (see [`mark_pareto`]), in the error the chart leads with (against truth where there is
+    /// one, else against the exact model).
     pub pareto: bool,
+    /// The same against the exact model.
+    pub pareto_model: bool,
+}
+
+impl Point {
+    /// The error the chart leads with: against truth where there is one.
+    pub fn primary_error(&self) -> f64 {
+        if self.rel_rms_truth.is_nan() {
+            self.rel_rms
+        } else {
+            self.rel_rms_truth
+        }
+    }
 }
 
 /// The settings to sweep: the automatic one, then one knob at a time.
@@ -113,20 +130,31 @@ pub const ERROR_TIE: f64 = 0.005;
 /// 2-core machine under lavapipe, identical settings timed up to 15 % apart even with
 /// interleaved rounds; without the tolerance that noise would decide the front.
 pub fn mark_pareto(points: &mut [Point]) {
+    let primary = front(points, Point::primary_error);
+    let model = front(points, |p| p.rel_rms);
+    for ((p, a), b) in points.iter_mut().zip(primary).zip(model) {
+        p.pareto = a;
+        p.pareto_model = b;
+    }
+}
+
+fn front(points: &[Point], error: impl Fn(&Point) -> f64) -> Vec<bool> {
     let copy: Vec<(f64, f64, f64)> = points
         .iter()
-        .map(|p| (p.gpu_ms, p.rel_rms, p.gpu_spread))
+        .map(|p| (p.gpu_ms, error(p), p.gpu_spread))
         .collect();
-    for (i, p) in points.iter_mut().enumerate() {
-        p.pareto = !copy.iter().enumerate().any(|(j, q)| {
-            let noise = q.2.max(p.gpu_spread).max(0.05);
-            let (t, e) = (p.gpu_ms, p.rel_rms);
-            j != i
-                && q.0 <= t * (1.0 + noise)
-                && q.1 <= e * (1.0 + ERROR_TIE)
-                && (q.0 < t * (1.0 - noise) || q.1 < e * (1.0 - ERROR_TIE))
-        });
-    }
+    copy.iter()
+        .enumerate()
+        .map(|(i, &(t, e, spread))| {
+            !copy.iter().enumerate().any(|(j, q)| {
+                let noise = q.2.max(spread).max(0.05);
+                j != i
+                    && q.0 <= t * (1.0 + noise)
+                    && q.1 <= e * (1.0 + ERROR_TIE)
+                    && (q.0 < t * (1.0 - noise) || q.1 < e * (1.0 - ERROR_TIE))
+            })
+        })
+        .collect()
 }
 
 /// A measured row from a preprocessing, a mode and a render compared with the reference (its
@@ -138,9 +166,13 @@ pub fn point(
     asked_spacing: f64,
     render: &[f32],
     reference: &[f32],
+    truth: Option<(&[f32], &[f32], u32, u32)>,
     auto: bool,
 ) -> Point {
     let (err, _) = metrics::compare(render, reference, None);
+    let rel_rms_truth = truth.map_or(f64::NAN, |(t, noise, w, h)| {
+        metrics::compare_binned(render, t, Some(noise), w, h, TRUTH_BIN).worst()
+    });
     Point {
         setting: setting.to_string(),
         mode: mode.name().to_string(),
@@ -158,18 +190,24 @@ pub fn point(
         gpu_ms: f64::NAN,
         gpu_spread: 0.0,
         rel_rms: err.rel_rms,
+        rel_rms_truth,
         p99: err.channels.iter().map(|c| c.p99).fold(0.0, f64::max),
         auto,
         pareto: false,
+        pareto_model: false,
     }
 }
 
+/// Bin edge (pixels) of the error against truth: binning averages the truth's noise down
+/// where the model's error, smooth at this scale, stays.
+pub const TRUTH_BIN: u32 = 4;
+
 /// `chart.csv`.
 pub fn csv(points: &[Point]) -> String {
-    let mut s = String::from("setting,mode,texel_mm,kernel,node_spacing_mm,prune,nodes,texels,nonzeros,gpu_ms,gpu_spread,rel_rms,p99,auto,pareto\n");
+    let mut s = String::from("setting,mode,texel_mm,kernel,node_spacing_mm,prune,nodes,texels,nonzeros,gpu_ms,gpu_spread,rel_rms,p99,auto,pareto,rel_rms_truth,pareto_model\n");
     for p in points {
         s.push_str(&format!(
-            "{},{},{:.4},{},{:.3},{},{},{},{},{:.3},{:.3},{:.5},{:.5},{},{}\n",
+            "{},{},{:.4},{},{:.3},{},{},{},{},{:.3},{:.3},{:.5},{:.5},{},{},{:.5},{}\n",
             p.setting,
             p.mode,
             p.texel_mm,
@@ -184,7 +222,9 @@ pub fn csv(points: &[Point]) -> String {
             p.rel_rms,
             p.p99,
             p.auto,
-            p.pareto
+            p.pareto,
+            p.rel_rms_truth,
+            p.pareto_model
         ));
     }
     s
@@ -211,6 +251,13 @@ fn colour(mode: &str) -> RGBColor {
     }
 }
 
+/// What one panel plots.
+struct Panel {
+    y_desc: &'static str,
+    error: fn(&Point) -> f64,
+    front: fn(&Point) -> bool,
+}
+
 fn draw<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     title: &str,
@@ -220,15 +267,48 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let model = Panel {
+        y_desc: "relative RMS error vs exact dipole (%)",
+        error: |p| p.rel_rms,
+        front: |p| p.pareto_model,
+    };
+    if points.iter().any(|p| !p.rel_rms_truth.is_nan()) {
+        let root = root
+            .titled(title, ("sans-serif", 20))
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let (left, right) = root.split_horizontally(root.dim_in_pixel().0 / 2);
+        let truth = Panel {
+            y_desc: "relative RMS error vs volumetric truth (%, 4x4 bins, noise removed)",
+            error: |p| p.rel_rms_truth,
+            front: |p| p.pareto,
+        };
+        panel(left, "against volumetric truth", points, &truth)?;
+        panel(right, "against the exact model", points, &model)?;
+    } else {
+        panel(root.clone(), title, points, &model)?;
+    }
+    root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    Ok(())
+}
+
+fn panel<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    title: &str,
+    points: &[Point],
+    what: &Panel,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let xmax = points.iter().map(|p| p.gpu_ms).fold(0.0, f64::max) * 1.1;
     let ymin = points
         .iter()
-        .map(|p| p.rel_rms)
+        .map(what.error)
         .fold(f64::INFINITY, f64::min)
         .max(1e-4)
         * 100.0
         * 0.7;
-    let ymax = points.iter().map(|p| p.rel_rms).fold(0.0, f64::max) * 100.0 * 1.4;
+    let ymax = points.iter().map(what.error).fold(0.0, f64::max) * 100.0 * 1.4;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
         .margin(15)
@@ -242,7 +322,7 @@ where
     chart
         .configure_mesh()
         .x_desc("median GPU frame time (ms)")
-        .y_desc("relative RMS error vs reference (%)")
+        .y_desc(what.y_desc)
         .label_style(("sans-serif", 14))
         .draw()
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
@@ -251,7 +331,7 @@ where
         let series: Vec<(f64, f64)> = points
             .iter()
             .filter(|p| p.mode == mode)
-            .map(|p| (p.gpu_ms, 100.0 * p.rel_rms))
+            .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
             .collect();
         chart
             .draw_series(
@@ -265,8 +345,8 @@ where
     }
     let mut front: Vec<(f64, f64)> = points
         .iter()
-        .filter(|p| p.pareto)
-        .map(|p| (p.gpu_ms, 100.0 * p.rel_rms))
+        .filter(|p| (what.front)(p))
+        .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
         .collect();
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
     chart
@@ -277,7 +357,7 @@ where
     let autos: Vec<(f64, f64)> = points
         .iter()
         .filter(|p| p.auto && p.mode == "optimized")
-        .map(|p| (p.gpu_ms, 100.0 * p.rel_rms))
+        .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
         .collect();
     chart
         .draw_series(
@@ -295,14 +375,18 @@ where
         .label_font(("sans-serif", 14))
         .draw()
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
     Ok(())
 }
 
 /// Writes `chart.svg` and `chart.png` into `dir`.
 pub fn plot(dir: &Path, title: &str, points: &[Point]) -> Result<()> {
     register_font();
-    let (w, h) = (900u32, 600u32);
+    let panels = if points.iter().any(|p| !p.rel_rms_truth.is_nan()) {
+        2
+    } else {
+        1
+    };
+    let (w, h) = (900u32 * panels, 600u32);
     let svg_path = dir.join("chart.svg");
     crate::output::write_atomic(&svg_path, |tmp| {
         draw(
@@ -342,9 +426,11 @@ mod tests {
             gpu_ms: t,
             gpu_spread: 0.05,
             rel_rms: e,
+            rel_rms_truth: f64::NAN,
             p99: e,
             auto: mode == "optimized",
             pareto: false,
+            pareto_model: false,
         }
     }
 
@@ -376,6 +462,21 @@ mod tests {
         let png = image::open(dir.join("chart.png")).unwrap();
         assert_eq!(png.width(), 900);
         assert!(csv(&pts).lines().count() == 5);
+        // With truth: the front follows the error against truth, the model's its own; two panels.
+        let truth_err = [0.2, 0.06, 0.05, 0.07];
+        for (p, e) in pts.iter_mut().zip(truth_err) {
+            p.rel_rms_truth = e;
+        }
+        mark_pareto(&mut pts);
+        let front: Vec<(bool, bool)> = pts.iter().map(|p| (p.pareto, p.pareto_model)).collect();
+        assert_eq!(
+            front,
+            vec![(true, true), (true, true), (true, false), (false, true)]
+        );
+        plot(&dir, "test", &pts).unwrap();
+        let svg = std::fs::read_to_string(dir.join("chart.svg")).unwrap();
+        assert!(svg.contains("volumetric truth") && svg.contains("exact dipole"));
+        assert_eq!(image::open(dir.join("chart.png")).unwrap().width(), 1800);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -165,9 +165,13 @@ pub struct ChartArgs {
     /// Target relative error for the automatic setting.
     #[arg(long, default_value_t = 0.02)]
     pub target_error: f64,
-    /// Cache folder for the preprocessing.
+    /// Cache folder for the preprocessing and the truth.
     #[arg(long)]
     pub cache: Option<PathBuf>,
+    /// Paths per pixel and channel of the volumetric truth (traced once per scene and cached;
+    /// scenes with eta = 1 only); 0 leaves the truth out.
+    #[arg(long, default_value_t = 128)]
+    pub truth_spp: u32,
 }
 
 /// Arguments of `compare`.
@@ -917,12 +921,13 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         reference.height,
         &reference.radiance,
     )?;
+    let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
+    let truth = chart_truth(&scene, args, &cache_dir)?;
     let gpu = Gpu::new(&GpuOptions {
         validate: cli.validate,
         device: cli.device.clone(),
         ..Default::default()
     })?;
-    let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
     let quiet = |_: &str, _: u64, _: u64| {};
     // Warm the device up before the first timed point (JIT caches, first-touch of memory):
     // without it the first point of the sweep, the automatic one, timed 15 to 25 % slower
@@ -976,6 +981,9 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
                         choice.settings.node_spacing_mm,
                         &out.radiance,
                         &reference.radiance,
+                        truth
+                            .as_ref()
+                            .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
                         label == "auto",
                     ));
                 }
@@ -994,11 +1002,12 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             (q(0.75) - q(0.25)) / p.gpu_ms
         };
         println!(
-            "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS",
+            "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS vs model  {:>7.3} % vs truth",
             p.setting,
             p.mode,
             p.gpu_ms,
-            100.0 * p.rel_rms
+            100.0 * p.rel_rms,
+            100.0 * p.rel_rms_truth
         );
     }
     check_validation(&gpu)?;
@@ -1028,9 +1037,10 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     )?;
     if let Some(a) = points.iter().find(|p| p.auto && p.mode == "optimized") {
         println!(
-            "automatic setting (optimized): {:.2} ms, {:.3} % RMS, {}",
+            "automatic setting (optimized): {:.2} ms, {:.3} % RMS vs model, {:.3} % vs truth, {}",
             a.gpu_ms,
             100.0 * a.rel_rms,
+            100.0 * a.rel_rms_truth,
             if a.pareto {
                 "on the Pareto front"
             } else {
@@ -1043,6 +1053,50 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// The chart's volumetric truth: traced once per scene (and sample count) and cached; none
+/// where the scene's boundary is not index-matched, or with `--truth-spp 0`.
+fn chart_truth(
+    scene: &Scene,
+    args: &ChartArgs,
+    cache_dir: &std::path::Path,
+) -> Result<Option<crate::truth::TruthImages>> {
+    use crate::truth::{self, TruthSettings};
+    if args.truth_spp == 0 {
+        println!("truth: left out (--truth-spp 0)");
+        return Ok(None);
+    }
+    if (scene.material.eta - 1.0).abs() > 1e-9 || scene.texture.is_some() {
+        println!(
+            "truth: none for this scene (it needs eta = 1 and no texture; --eta 1 gives one): error against the exact model only"
+        );
+        return Ok(None);
+    }
+    let settings = TruthSettings {
+        spp: args.truth_spp,
+        ..Default::default()
+    };
+    let start = std::time::Instant::now();
+    let bar = ProgressBar::new(1000).with_style(
+        ProgressStyle::with_template("truth {bar:40} {percent:>3}% ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let t = truth::cached(scene, &settings, cache_dir, &|f| {
+        bar.set_position((f * 1000.0) as u64)
+    })?;
+    bar.finish_and_clear();
+    println!(
+        "truth: {} paths per pixel and channel, {} ({:.1} s)",
+        args.truth_spp,
+        if t.loaded {
+            "from the cache"
+        } else {
+            "traced and cached"
+        },
+        start.elapsed().as_secs_f64()
+    );
+    Ok(Some(t))
 }
 
 /// Opens the device, chooses the settings, checks the estimate against the device before any

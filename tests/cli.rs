@@ -287,11 +287,20 @@ fn chart_runs_on_a_small_scene() {
     let dir = temp_dir("chart");
     std::fs::write(
         dir.join("scene.toml"),
-        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"ketchup\"\n[output]\nwidth = 48\nheight = 48\n",
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"ketchup\"\neta = 1.0\n[output]\nwidth = 48\nheight = 48\n",
     )
     .unwrap();
     let o = bin()
-        .args(["--validate", "chart", "--quick", "--frames", "1", "--cache"])
+        .args([
+            "--validate",
+            "chart",
+            "--quick",
+            "--frames",
+            "1",
+            "--truth-spp",
+            "16",
+            "--cache",
+        ])
         .arg(dir.join("cache"))
         .arg("--out")
         .arg(&dir)
@@ -311,7 +320,13 @@ fn chart_runs_on_a_small_scene() {
     for r in &rows {
         let err: f64 = r.split(',').nth(11).unwrap().parse().unwrap();
         assert!(err.is_finite() && err >= 0.0, "{r}");
+        // Against truth (eta = 1): the dipole misses ketchup's single scattering, so every
+        // point is far from it.
+        let truth: f64 = r.split(',').nth(15).unwrap().parse().unwrap();
+        assert!(truth.is_finite() && truth > 0.1, "{r}");
     }
+    assert!(String::from_utf8_lossy(&o.stdout)
+        .contains("truth: 16 paths per pixel and channel, traced and cached"));
     assert!(std::fs::read_to_string(dir.join("chart.svg"))
         .unwrap()
         .contains("<svg"));
@@ -412,5 +427,75 @@ fn borders_reports_every_mode_by_distance() {
             .fold(0.0, f64::max)
     };
     assert!(worst("optimized") < worst("simple"), "{json}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn truth_writes_image_noise_and_figures_and_compare_removes_its_noise() {
+    let dir = temp_dir("truth");
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"ketchup\"\neta = 1.0\n[output]\nwidth = 32\nheight = 32\n").unwrap();
+    let run = |seed: &str, out: &std::path::Path| {
+        let o = bin()
+            .args(["truth", "--spp", "8", "--seed", seed, "--out"])
+            .arg(out)
+            .arg(&scene)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let text = run("1", &dir.join("a"));
+    assert!(text.contains("noise after 4x4 binning"), "{text}");
+    for f in ["truth.exr", "noise.exr", "truth.png", "truth.json"] {
+        assert!(dir.join("a").join(f).is_file(), "{f} missing");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("a/truth.json")).unwrap()).unwrap();
+    assert_eq!(json["spp"], 8);
+    assert!(json["events_per_second"].as_f64().unwrap() > 0.0);
+    assert_eq!(json["noise"].as_array().unwrap().len(), 3);
+    let mean = json["object_mean"][0].as_f64().unwrap();
+    let se = json["object_mean_stderr"][0].as_f64().unwrap();
+    assert!(mean > 0.0 && se > 0.0 && se < 0.1 * mean, "{mean} +- {se}");
+    // Two seeds of the same truth differ by their noise only: with it removed the error is
+    // small, without it it is not.
+    run("2", &dir.join("b"));
+    let o = bin()
+        .arg("compare")
+        .arg(dir.join("b/truth.exr"))
+        .arg(dir.join("a/truth.exr"))
+        .arg("--noise")
+        .arg(dir.join("a/noise.exr"))
+        .arg("--out")
+        .arg(dir.join("cmp"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("4x4 bins") && text.contains("noise"),
+        "{text}"
+    );
+    let e: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cmp/error.json")).unwrap())
+            .unwrap();
+    let b1 = &e["binned"][0];
+    for c in 0..3 {
+        let (measured, noise) = (
+            b1["measured"][c].as_f64().unwrap(),
+            b1["noise"][c].as_f64().unwrap(),
+        );
+        assert!(measured > 0.0 && noise > 0.0);
+        // The second image has its own noise too, so the difference is about sqrt(2) times
+        // the first's noise.
+        assert!(measured / noise > 1.0 && measured / noise < 2.0, "{b1}");
+    }
+    let mut c = bin();
+    c.args(["truth", "--spp", "2", "--eta", "1.3", "--out"])
+        .arg(dir.join("c"))
+        .arg(&scene);
+    fails_with(c, "eta = 1.3");
+    assert!(!dir.join("c").exists(), "a refused run creates nothing");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -472,3 +472,96 @@ pub fn compute(
         pixels: covered.len(),
     })
 }
+
+/// Bump whenever the truth's results change for the same inputs.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Key of a truth computation: everything the image depends on (geometry, medium, lights,
+/// camera, size, samples, seed, phase, orders) and the format version.
+pub fn key(scene: &Scene, settings: &TruthSettings) -> u64 {
+    use crate::preprocess::cache::Fnv;
+    let mut h = Fnv::default();
+    h.write(b"truth");
+    h.write(&FORMAT_VERSION.to_le_bytes());
+    h.write(bytemuck::cast_slice(&scene.mesh.positions));
+    h.write(bytemuck::cast_slice(&scene.mesh.indices));
+    let m = &scene.material;
+    for v in m.sigma_s_prime.iter().chain(&m.sigma_a).chain([&m.eta]) {
+        h.write(&v.to_le_bytes());
+    }
+    for l in &scene.lights {
+        h.write(format!("{:?}", l.kind).as_bytes());
+        for v in [l.position, l.direction, l.radiance] {
+            h.write(bytemuck::bytes_of(&v));
+        }
+        h.write(&l.cos_cone.to_le_bytes());
+    }
+    let c = &scene.camera;
+    for v in [c.position, c.target, c.up] {
+        h.write(bytemuck::bytes_of(&v));
+    }
+    h.write(&c.fov_y.to_le_bytes());
+    h.write(&scene.width.to_le_bytes());
+    h.write(&scene.height.to_le_bytes());
+    h.write(&settings.spp.to_le_bytes());
+    h.write(&settings.seed.to_le_bytes());
+    h.write(&settings.g.to_le_bytes());
+    h.write(&settings.min_order.to_le_bytes());
+    h.write(&settings.max_order.to_le_bytes());
+    h.finish()
+}
+
+/// A truth image and its per-pixel standard deviation.
+#[derive(Debug, Clone)]
+pub struct TruthImages {
+    /// Radiance, RGBA (alpha = coverage).
+    pub radiance: Vec<f32>,
+    /// Standard deviation, RGBA.
+    pub noise: Vec<f32>,
+    /// Whether they came from the cache.
+    pub loaded: bool,
+}
+
+/// The truth of `scene` (a fixed number of samples: `settings.time_s` must be `None`) from the
+/// cache folder `dir`, or traced and stored there as `truth-KEY.exr` and `truth-KEY-noise.exr`.
+/// A cache file of the wrong size is traced again.
+pub fn cached(
+    scene: &Scene,
+    settings: &TruthSettings,
+    dir: &std::path::Path,
+    progress: &(dyn Fn(f64) + Sync),
+) -> anyhow::Result<TruthImages> {
+    use crate::output;
+    anyhow::ensure!(
+        settings.time_s.is_none(),
+        "a cached truth needs a number of samples, not a time budget"
+    );
+    let k = key(scene, settings);
+    let (image, noise) = (
+        dir.join(format!("truth-{k:016x}.exr")),
+        dir.join(format!("truth-{k:016x}-noise.exr")),
+    );
+    if image.is_file() && noise.is_file() {
+        if let (Ok((w, h, radiance)), Ok((w2, h2, n))) =
+            (output::read_exr(&image), output::read_exr(&noise))
+        {
+            if (w, h) == (scene.width, scene.height) && (w2, h2) == (w, h) {
+                return Ok(TruthImages {
+                    radiance,
+                    noise: n,
+                    loaded: true,
+                });
+            }
+        }
+        tracing::warn!("truth cache {} unreadable: tracing again", image.display());
+    }
+    let t = compute(scene, settings, progress)?;
+    output::create_dir(dir)?;
+    output::write_exr(&image, t.width, t.height, &t.radiance)?;
+    output::write_exr(&noise, t.width, t.height, &t.noise)?;
+    Ok(TruthImages {
+        radiance: t.radiance,
+        noise: t.noise,
+        loaded: false,
+    })
+}
