@@ -157,6 +157,15 @@ fn front(points: &[Point], error: impl Fn(&Point) -> f64) -> Vec<bool> {
         .collect()
 }
 
+/// What each point's render is compared with.
+pub struct Baselines<'a> {
+    /// The exact model (`reference`), RGBA.
+    pub reference: &'a [f32],
+    /// Volumetric truth, its per-pixel standard deviation and the image size, if the scene has
+    /// a truth.
+    pub truth: Option<(&'a [f32], &'a [f32], u32, u32)>,
+}
+
 /// A measured row from a preprocessing, a mode and a render compared with the reference (its
 /// time is filled in once every timing round has run).
 pub fn point(
@@ -165,12 +174,11 @@ pub fn point(
     pre: &Preprocessed,
     asked_spacing: f64,
     render: &[f32],
-    reference: &[f32],
-    truth: Option<(&[f32], &[f32], u32, u32)>,
+    against: &Baselines<'_>,
     auto: bool,
 ) -> Point {
-    let (err, _) = metrics::compare(render, reference, None);
-    let rel_rms_truth = truth.map_or(f64::NAN, |(t, noise, w, h)| {
+    let (err, _) = metrics::compare(render, against.reference, None);
+    let rel_rms_truth = against.truth.map_or(f64::NAN, |(t, noise, w, h)| {
         metrics::compare_binned(render, t, Some(noise), w, h, TRUTH_BIN).worst()
     });
     Point {

@@ -666,12 +666,13 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
         settings.spacing_mm, settings.theta, r.samples, r.lit_samples, seconds
     );
     let out = &args.out;
-    output::write_exr(&out.join("reference.exr"), r.width, r.height, &r.radiance)?;
-    output::write_png(
-        &out.join("reference.png"),
+    output::write_radiance(
+        out,
+        "reference",
         r.width,
         r.height,
-        &output::tonemap(&r.radiance, scene.exposure),
+        &r.radiance,
+        scene.exposure,
     )?;
     let mut csv = String::from("x,y,z,B_r,B_g,B_b\n");
     for (p, b) in scene.mesh.positions.iter().zip(&r.vertex_b) {
@@ -843,14 +844,8 @@ fn truth(args: &TruthArgs) -> Result<()> {
     let (mean, stderr) = t.object_mean();
     let noise: Vec<_> = [1, 2, 4].iter().map(|&k| t.noise_at(k)).collect();
     let out = &args.out;
-    output::write_exr(&out.join("truth.exr"), t.width, t.height, &t.radiance)?;
+    output::write_radiance(out, "truth", t.width, t.height, &t.radiance, scene.exposure)?;
     output::write_exr(&out.join("noise.exr"), t.width, t.height, &t.noise)?;
-    output::write_png(
-        &out.join("truth.png"),
-        t.width,
-        t.height,
-        &output::tonemap(&t.radiance, scene.exposure),
-    )?;
     let info = serde_json::json!({
         "spp": t.spp, "seconds": t.seconds, "events": t.events, "paths": t.paths,
         "events_per_second": t.events_per_second(), "truncated_paths": t.truncated_paths,
@@ -923,6 +918,20 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     )?;
     let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
     let truth = chart_truth(&scene, args, &cache_dir)?;
+    if let Some(t) = &truth {
+        output::write_exr(
+            &args.out.join("truth.exr"),
+            scene.width,
+            scene.height,
+            &t.radiance,
+        )?;
+        output::write_exr(
+            &args.out.join("noise.exr"),
+            scene.width,
+            scene.height,
+            &t.noise,
+        )?;
+    }
     let gpu = Gpu::new(&GpuOptions {
         validate: cli.validate,
         device: cli.device.clone(),
@@ -943,6 +952,12 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     // the median over all its frames. Interleaving spreads slow drifts of a shared machine over
     // all points instead of charging them to whichever points ran during them (identical
     // settings timed 30 % apart when each point ran its frames in one block).
+    let baselines = crate::chart::Baselines {
+        reference: &reference.radiance,
+        truth: truth
+            .as_ref()
+            .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
+    };
     let sweep = crate::chart::sweep(&auto.settings, args.quick);
     let rounds = if args.frames >= 6 { 3 } else { 1 };
     let per_round = args.frames.div_ceil(rounds);
@@ -980,10 +995,7 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
                         &pre,
                         choice.settings.node_spacing_mm,
                         &out.radiance,
-                        &reference.radiance,
-                        truth
-                            .as_ref()
-                            .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
+                        &baselines,
                         label == "auto",
                     ));
                 }
@@ -1049,7 +1061,12 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         );
     }
     println!(
-        "wrote chart.csv, chart.svg, chart.png, reference.exr to {}",
+        "wrote chart.csv, chart.svg, chart.png, reference.exr{} to {}",
+        if truth.is_some() {
+            ", truth.exr, noise.exr"
+        } else {
+            ""
+        },
         args.out.display()
     );
     Ok(())

@@ -491,6 +491,16 @@ fn truth_writes_image_noise_and_figures_and_compare_removes_its_noise() {
         // the first's noise.
         assert!(measured / noise > 1.0 && measured / noise < 2.0, "{b1}");
     }
+    translucent::output::write_exr(&dir.join("small.exr"), 2, 2, &[0.0; 16]).unwrap();
+    let mut c = bin();
+    c.arg("compare")
+        .arg(dir.join("b/truth.exr"))
+        .arg(dir.join("a/truth.exr"))
+        .arg("--noise")
+        .arg(dir.join("small.exr"))
+        .arg("--out")
+        .arg(dir.join("cmp2"));
+    fails_with(c, "is 2x2, the images are 32x32");
     let mut c = bin();
     c.args(["truth", "--spp", "2", "--eta", "1.3", "--out"])
         .arg(dir.join("c"))

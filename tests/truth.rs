@@ -45,6 +45,16 @@ fn slab(material: &str, light_from: [f64; 3], view_from: [f64; 3], size: [f64; 3
     )
 }
 
+/// A small ketchup slab, quick to trace.
+fn ketchup_slab() -> translucent::scene::Scene {
+    common::scene(&slab(
+        "preset = \"ketchup\"\neta = 1.0",
+        [0.3, 1.0, 0.0],
+        [0.0, 1.0, 0.2],
+        [100.0, 30.0, 100.0],
+    ))
+}
+
 /// Single scattering alone on a half-space: L = albedo p(theta) E mu_i / (mu_i + mu_o), exactly
 /// (Jensen et al. 2001, the first-order term at eta = 1), for the isotropic phase function and
 /// for Henyey-Greenstein g = 0.6 (forward scattering, sigma_s = sigma_s' / (1 - g)).
@@ -191,8 +201,8 @@ fn without_absorption_all_light_leaves() {
             let r = radius_b * rng.uniform().sqrt();
             let psi = 2.0 * PI * rng.uniform();
             let o = centre + (a * psi.cos() + b * psi.sin()) * r - d * (2.0 * radius_b);
-            let mut hits = Vec::new();
-            [0, 1, 2].map(|c| tracer.radiance(o, d, c, &mut rng, &mut hits).radiance)
+            let mut scratch = truth::Scratch::default();
+            [0, 1, 2].map(|c| tracer.radiance(o, d, c, &mut rng, &mut scratch).radiance)
         })
         .collect();
     let measure = 4.0 * PI * PI * radius_b * radius_b;
@@ -258,12 +268,7 @@ fn semi_infinite_skim_milk() {
 /// seed gives another image.
 #[test]
 fn deterministic_per_seed() {
-    let scene = common::scene(&slab(
-        "preset = \"ketchup\"\neta = 1.0",
-        [0.3, 1.0, 0.0],
-        [0.0, 1.0, 0.2],
-        [100.0, 30.0, 100.0],
-    ));
+    let scene = ketchup_slab();
     let s = TruthSettings {
         spp: 4,
         ..Default::default()
@@ -315,8 +320,196 @@ fn refuses_what_it_cannot_trace() {
             },
             "--spp",
         ),
+        (
+            TruthSettings {
+                time_s: Some(-1.0),
+                ..Default::default()
+            },
+            "--time",
+        ),
     ] {
         let e = truth::compute(&scene, &s, &quiet).unwrap_err();
         assert!(e.to_string().contains(needle), "{e}");
+    }
+    let dir = common::temp_dir("truth-texture");
+    image::RgbaImage::from_pixel(4, 4, image::Rgba([200, 100, 50, 255]))
+        .save(dir.join("t.png"))
+        .unwrap();
+    let text = slab(
+        "preset = \"skimmilk\"\neta = 1.0",
+        [0.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [100.0, 30.0, 100.0],
+    )
+    .replace(
+        "segments = 4",
+        &format!("segments = 4\ntexture = {:?}", dir.join("t.png")),
+    );
+    let scene = common::scene(&text);
+    let e = truth::compute(&scene, &TruthSettings::default(), &quiet).unwrap_err();
+    assert!(e.to_string().contains("texture"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A time budget stops the tracing after at least one sample per half.
+#[test]
+fn time_budget() {
+    let scene = ketchup_slab();
+    let s = TruthSettings {
+        spp: u32::MAX,
+        time_s: Some(0.3),
+        ..Default::default()
+    };
+    let t = truth::compute(&scene, &s, &quiet).unwrap();
+    assert!(t.spp >= 2 && t.spp.is_multiple_of(2), "{}", t.spp);
+    // Without the budget u32::MAX samples would never end; the margin covers rounds that
+    // wait behind the other tests' work in rayon's shared pool.
+    assert!(t.seconds < 20.0, "{} s for a 0.3 s budget", t.seconds);
+    assert!(t.spp < u32::MAX / 2);
+}
+
+/// The chart's cached truth: traced once, then loaded; a corrupt file is traced again.
+#[test]
+fn cached_truth_is_reused_and_a_corrupt_one_retraced() {
+    let scene = ketchup_slab();
+    let dir = common::temp_dir("truth-cache");
+    let s = TruthSettings {
+        spp: 2,
+        ..Default::default()
+    };
+    let a = truth::cached(&scene, &s, &dir, &quiet).unwrap();
+    assert!(!a.loaded);
+    let b = truth::cached(&scene, &s, &dir, &quiet).unwrap();
+    assert!(b.loaded);
+    assert_eq!(a.radiance, b.radiance);
+    assert_eq!(a.noise, b.noise);
+    // Another sample count is another entry.
+    let c = truth::cached(&scene, &TruthSettings { spp: 4, ..s }, &dir, &quiet).unwrap();
+    assert!(!c.loaded);
+    let file = dir.join(format!("truth-{:016x}.exr", truth::key(&scene, &s)));
+    std::fs::write(&file, b"not an exr").unwrap();
+    let d = truth::cached(&scene, &s, &dir, &quiet).unwrap();
+    assert!(!d.loaded);
+    assert_eq!(a.radiance, d.radiance, "traced again, the same image");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Two boxes that share a face are one medium: the same image as the single box of their
+/// union (a parity count of crossings would leave the medium at the shared face).
+#[test]
+fn touching_parts_are_one_medium() {
+    let text = |size: &str| {
+        format!(
+            r#"
+            [mesh]
+            builtin = "box"
+            size = {size}
+            segments = 4
+            [camera]
+            position = [0.0, 30.0, 60.0]
+            target = [0.0, 0.0, 0.0]
+            [[lights]]
+            kind = "directional"
+            direction = [-0.6, -1.0, -0.3]
+            [material]
+            sigma_s_prime = [1.0, 2.0, 0.5]
+            sigma_a = [0.05, 0.2, 0.01]
+            eta = 1.0
+            [output]
+            width = 16
+            height = 16
+            "#
+        )
+    };
+    let whole = common::scene(&text("[20.0, 10.0, 10.0]"));
+    let mut halves = common::scene(&text("[10.0, 10.0, 10.0]"));
+    halves
+        .mesh
+        .transform(glam::Mat4::from_translation(glam::Vec3::new(
+            -5.0, 0.0, 0.0,
+        )));
+    let mut right = translucent::scene::mesh::Mesh::cuboid(glam::Vec3::splat(10.0), 4);
+    right.transform(glam::Mat4::from_translation(glam::Vec3::new(5.0, 0.0, 0.0)));
+    let m = &mut halves.mesh;
+    let base = m.positions.len() as u32;
+    m.positions.extend(&right.positions);
+    m.normals.extend(&right.normals);
+    m.uvs.extend(&right.uvs);
+    m.indices.extend(right.indices.iter().map(|i| i + base));
+    let s = TruthSettings {
+        spp: 400,
+        ..Default::default()
+    };
+    let a = truth::compute(&whole, &s, &quiet).unwrap();
+    let b = truth::compute(&halves, &TruthSettings { seed: 2, ..s }, &quiet).unwrap();
+    assert_eq!(a.pixels, b.pixels);
+    let ((ma, sa), (mb, sb)) = (a.object_mean(), b.object_mean());
+    for c in 0..3 {
+        let se = sa[c].hypot(sb[c]);
+        assert!(
+            (ma[c] - mb[c]).abs() < 4.0 * se,
+            "channel {c}: one box {} vs two touching {} (standard error {se})",
+            ma[c],
+            mb[c]
+        );
+    }
+}
+
+/// Point and spot lights: a point light far away (intensity D^2, so the irradiance is 1) gives
+/// the directional light's image, and a spot whose cone holds the whole object gives the point
+/// light's (same seed, so the same paths: only next-event estimation differs).
+#[test]
+fn point_and_spot_lights_agree_with_their_limits() {
+    let base = slab(
+        "sigma_s_prime = [1.0, 2.0, 0.5]\nsigma_a = [0.05, 0.2, 0.01]\neta = 1.0",
+        [0.3, 1.0, 0.0],
+        [0.0, 1.0, 0.2],
+        [100.0, 30.0, 100.0],
+    );
+    let light = |text: &str| {
+        let i = base.find("[[lights]]").unwrap();
+        let j = base.find("[material]").unwrap();
+        common::scene(&format!("{}{text}\n{}", &base[..i], &base[j..]))
+    };
+    let dir = DVec3::new(0.3, 1.0, 0.0).normalize();
+    let far = 1.0e5;
+    let p = dir * far + DVec3::new(0.0, 15.0, 0.0);
+    let directional = light("[[lights]]\nkind = \"directional\"\ndirection = [-0.3, -1.0, 0.0]");
+    let point = light(&format!(
+        "[[lights]]\nkind = \"point\"\nposition = [{}, {}, {}]\nintensity = {}",
+        p.x,
+        p.y,
+        p.z,
+        far * far
+    ));
+    let spot = light(&format!(
+        "[[lights]]\nkind = \"spot\"\nposition = [{}, {}, {}]\ndirection = [{}, {}, {}]\ncone_deg = 5.0\nintensity = {}",
+        p.x,
+        p.y,
+        p.z,
+        -dir.x,
+        -dir.y,
+        -dir.z,
+        far * far
+    ));
+    let s = TruthSettings {
+        spp: 200,
+        ..Default::default()
+    };
+    let [a, b, c] = [&directional, &point, &spot]
+        .map(|scene| truth::compute(scene, &s, &quiet).unwrap().object_mean().0);
+    for k in 0..3 {
+        assert!(
+            (b[k] / a[k] - 1.0).abs() < 1e-3,
+            "point {} vs directional {}",
+            b[k],
+            a[k]
+        );
+        assert!(
+            (c[k] / b[k] - 1.0).abs() < 1e-6,
+            "spot {} vs point {}",
+            c[k],
+            b[k]
+        );
     }
 }

@@ -28,6 +28,20 @@ pub struct Bvh {
     nodes: Vec<Node>,
     order: Vec<u32>,
     tris: Vec<[DVec3; 3]>,
+    /// +1 when the triangles wind counter-clockwise seen from outside (positive signed
+    /// volume), -1 when the whole mesh winds the other way: the sign that makes
+    /// (b - a) x (c - a) point out of the enclosed volume.
+    orientation: f64,
+}
+
+/// Where a ray crosses the surface and which way.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Crossing {
+    /// Distance along the ray.
+    pub t: f64,
+    /// +1 entering the enclosed volume, -1 leaving it, 0 both at once: a ray along a tangent,
+    /// or through a face that two touching parts share (leaving one, entering the other).
+    pub net: i32,
 }
 
 const LEAF: usize = 4;
@@ -39,10 +53,12 @@ impl Bvh {
             .chunks(3)
             .map(|t| [t[0], t[1], t[2]].map(|i| positions[i as usize].as_dvec3()))
             .collect();
+        let volume: f64 = tris.iter().map(|[a, b, c]| a.dot(b.cross(*c))).sum();
         let mut bvh = Bvh {
             nodes: Vec::with_capacity(2 * tris.len() / LEAF + 1),
             order: (0..tris.len() as u32).collect(),
             tris,
+            orientation: if volume < 0.0 { -1.0 } else { 1.0 },
         };
         bvh.nodes.push(Node {
             lo: DVec3::ZERO,
@@ -161,15 +177,23 @@ impl Bvh {
         mut leaf: impl FnMut(&[u32], f64) -> Option<f64>,
     ) {
         // Median splits halve the triangles per level: 64 entries cover any mesh that fits in
-        // memory (the stack holds at most one pending sibling per level).
-        let mut stack = [0u32; 64];
+        // memory (the stack holds at most one pending sibling per level). Each entry carries
+        // the distance at which the ray enters its box, tested when it was pushed.
+        let mut stack = [(0u32, 0.0f64); 64];
+        let root = self.nodes[0];
+        match Self::slab(root.lo, root.hi, ray, limit) {
+            Some(t) => stack[0] = (0, t),
+            None => return,
+        }
         let mut top = 1usize;
         while top > 0 {
             top -= 1;
-            let node = self.nodes[stack[top] as usize];
-            if Self::slab(node.lo, node.hi, ray, limit).is_none() {
+            let (index, enter) = stack[top];
+            // The limit may have shrunk since the box was pushed.
+            if enter > limit {
                 continue;
             }
+            let node = self.nodes[index as usize];
             if node.count > 0 {
                 match leaf(
                     &self.order[node.start as usize..(node.start + node.count) as usize],
@@ -180,21 +204,19 @@ impl Bvh {
                 }
             } else {
                 let (l, r) = (node.start, node.start + 1);
-                let near = |i: u32| {
+                let enter = |i: u32| {
                     let n = self.nodes[i as usize];
-                    Self::slab(n.lo, n.hi, ray, limit)
+                    Self::slab(n.lo, n.hi, ray, limit).map(|t| (i, t))
                 };
-                let (a, b) = (near(l), near(r));
+                let (a, b) = (enter(l), enter(r));
                 // Push the farther child first so that the nearer one is visited next.
                 let order = match (a, b) {
-                    (Some(ta), Some(tb)) if ta <= tb => [Some(r), Some(l)],
-                    (Some(_), Some(_)) => [Some(l), Some(r)],
-                    (Some(_), None) => [None, Some(l)],
-                    (None, Some(_)) => [None, Some(r)],
-                    (None, None) => [None, None],
+                    (Some(x), Some(y)) if x.1 <= y.1 => [Some(y), Some(x)],
+                    (Some(x), Some(y)) => [Some(x), Some(y)],
+                    (x, y) => [x, y],
                 };
-                for i in order.into_iter().flatten() {
-                    stack[top] = i;
+                for e in order.into_iter().flatten() {
+                    stack[top] = e;
                     top += 1;
                 }
             }
@@ -224,24 +246,107 @@ impl Bvh {
         best
     }
 
-    /// Every surface crossing of the ray `o + t d` with `t` in (0, `t_max`), appended to `out`
-    /// in increasing order (`out` is cleared first). Crossings closer together than `merge`
-    /// count once: a ray through a shared edge or vertex hits every triangle there.
-    pub fn hits(&self, o: DVec3, d: DVec3, t_max: f64, merge: f64, out: &mut Vec<f64>) {
+    /// +1 if the ray along `d` enters the enclosed volume through triangle `t`, -1 if it leaves.
+    fn direction(&self, t: u32, d: DVec3) -> i32 {
+        let [a, b, c] = self.tris[t as usize];
+        if (b - a).cross(c - a).dot(d) * self.orientation < 0.0 {
+            1
+        } else {
+            -1
+        }
+    }
+
+    /// Combines the hits of one crossing (all within `merge` of each other): the triangles
+    /// around a shared edge or vertex count once, a face two touching parts share counts as
+    /// leaving one and entering the other (net 0).
+    fn net(entering: bool, leaving: bool) -> i32 {
+        entering as i32 - leaving as i32
+    }
+
+    /// The nearest crossing of the ray `o + t d` with `t` in (0, `t_max`): every hit within
+    /// `merge` of the nearest one is part of it (see [`Crossing::net`]).
+    pub fn nearest_crossing(&self, o: DVec3, d: DVec3, t_max: f64, merge: f64) -> Option<Crossing> {
+        let ray = Ray::new(o, d);
+        // Hits near the nearest so far, with their direction; a crossing rarely has more
+        // than a vertex's fan of triangles, and a fuller list only drops duplicates.
+        let mut near = [(0.0f64, 0i32); 16];
+        let mut count = 0usize;
+        let mut best = f64::INFINITY;
+        self.traverse(&ray, t_max, |tris, limit| {
+            for &t in tris {
+                if let Some((dist, _, _)) = self.triangle(t, o, d) {
+                    if dist >= t_max || dist > best + merge {
+                        continue;
+                    }
+                    if dist < best {
+                        best = dist;
+                        let mut kept = 0;
+                        for i in 0..count {
+                            if near[i].0 <= best + merge {
+                                near[kept] = near[i];
+                                kept += 1;
+                            }
+                        }
+                        count = kept;
+                    }
+                    if count < near.len() {
+                        near[count] = (dist, self.direction(t, d));
+                        count += 1;
+                    }
+                }
+            }
+            Some(limit.min(best + merge))
+        });
+        (count > 0).then(|| {
+            let dirs = &near[..count];
+            Crossing {
+                t: best,
+                net: Self::net(dirs.iter().any(|h| h.1 > 0), dirs.iter().any(|h| h.1 < 0)),
+            }
+        })
+    }
+
+    /// Every crossing of the ray `o + t d` with `t` in (0, `t_max`), in increasing order, into
+    /// `out` (cleared first); hits within `merge` of each other form one crossing (see
+    /// [`Crossing::net`]) and crossings with net 0 are left out. `scratch` holds the raw hits.
+    pub fn crossings_along(
+        &self,
+        o: DVec3,
+        d: DVec3,
+        t_max: f64,
+        merge: f64,
+        scratch: &mut Vec<(f64, i32)>,
+        out: &mut Vec<Crossing>,
+    ) {
+        scratch.clear();
         out.clear();
         let ray = Ray::new(o, d);
         self.traverse(&ray, t_max, |tris, limit| {
             for &t in tris {
                 if let Some((dist, _, _)) = self.triangle(t, o, d) {
                     if dist < limit {
-                        out.push(dist);
+                        scratch.push((dist, self.direction(t, d)));
                     }
                 }
             }
             Some(limit)
         });
-        out.sort_unstable_by(f64::total_cmp);
-        out.dedup_by(|later, earlier| *later - *earlier < merge);
+        scratch.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let mut i = 0;
+        while i < scratch.len() {
+            let (start, mut last) = (scratch[i].0, scratch[i].0);
+            let (mut entering, mut leaving) = (false, false);
+            while i < scratch.len() && scratch[i].0 - last < merge {
+                last = scratch[i].0;
+                entering |= scratch[i].1 > 0;
+                leaving |= scratch[i].1 < 0;
+                i += 1;
+            }
+            let net = Self::net(entering, leaving);
+            if net != 0 {
+                out.push(Crossing { t: start, net });
+            }
+        }
     }
 
     /// Number of surface crossings of the ray `o + t d`, t > 0.
@@ -330,37 +435,61 @@ mod tests {
         assert!(bvh.contains(DVec3::new(1.0, 2.0, 3.0)));
         assert!(!bvh.contains(DVec3::new(1.0, 2.0, 30.0)));
         assert!(!bvh.occluded(DVec3::new(0.0, 0.0, 100.0), DVec3::NEG_Z, 80.0));
-        // Every crossing, in order; the ray along a face diagonal crosses shared edges once.
-        let mut hits = Vec::new();
-        bvh.hits(
-            DVec3::new(1.0, 2.0, 100.0),
-            DVec3::NEG_Z,
-            f64::INFINITY,
-            1e-9,
-            &mut hits,
-        );
-        assert_eq!(hits.len(), 2);
-        assert!((hits[0] - 85.0).abs() < 1e-9 && (hits[1] - 115.0).abs() < 1e-9);
-        bvh.hits(
-            DVec3::new(0.0, 0.0, 100.0),
-            DVec3::NEG_Z,
-            90.0,
-            1e-9,
-            &mut hits,
-        );
+        // Every crossing, in order, with its direction; the triangles around a shared vertex
+        // count once.
+        let (mut scratch, mut c) = (Vec::new(), Vec::new());
+        let o = DVec3::new(1.0, 2.0, 100.0);
+        bvh.crossings_along(o, DVec3::NEG_Z, f64::INFINITY, 1e-9, &mut scratch, &mut c);
+        assert_eq!(c.len(), 2);
+        assert!((c[0].t - 85.0).abs() < 1e-9 && c[0].net == 1, "{c:?}");
+        assert!((c[1].t - 115.0).abs() < 1e-9 && c[1].net == -1, "{c:?}");
+        let o = DVec3::new(0.0, 0.0, 100.0);
+        bvh.crossings_along(o, DVec3::NEG_Z, 90.0, 1e-9, &mut scratch, &mut c);
         assert_eq!(
-            hits.len(),
+            c.len(),
             1,
             "a vertex shared by several triangles is one crossing"
         );
-        bvh.hits(
-            DVec3::new(1.0, 2.0, 0.0),
-            DVec3::X,
-            f64::INFINITY,
-            1e-9,
-            &mut hits,
+        let n = bvh.nearest_crossing(o, DVec3::NEG_Z, 90.0, 1e-9).unwrap();
+        assert!((n.t - 85.0).abs() < 1e-9 && n.net == 1);
+        let n = bvh
+            .nearest_crossing(DVec3::new(1.0, 2.0, 0.0), DVec3::X, 9.0, 1e-9)
+            .unwrap();
+        assert!((n.t - 4.0).abs() < 1e-9 && n.net == -1, "{n:?}");
+        assert!(bvh
+            .nearest_crossing(DVec3::new(1.0, 2.0, 0.0), DVec3::X, 3.0, 1e-9)
+            .is_none());
+        // Two boxes sharing a face: crossing it leaves one and enters the other.
+        let mut two = Mesh::cuboid(glam::Vec3::splat(10.0), 4);
+        let mut other = Mesh::cuboid(glam::Vec3::splat(10.0), 4);
+        other.transform(glam::Mat4::from_translation(glam::Vec3::new(
+            10.0, 0.0, 0.0,
+        )));
+        let base = two.positions.len() as u32;
+        two.positions.extend(&other.positions);
+        two.indices.extend(other.indices.iter().map(|i| i + base));
+        let b2 = Bvh::new(&two.positions, &two.indices);
+        let o = DVec3::new(-20.0, 1.0, 1.0);
+        b2.crossings_along(o, DVec3::X, f64::INFINITY, 1e-9, &mut scratch, &mut c);
+        assert_eq!(
+            c.iter().map(|c| c.net).collect::<Vec<_>>(),
+            vec![1, -1],
+            "{c:?}"
         );
-        assert!(hits.len() == 1 && (hits[0] - 4.0).abs() < 1e-9, "{hits:?}");
+        let n = b2
+            .nearest_crossing(DVec3::new(2.0, 1.0, 1.0), DVec3::X, 10.0, 1e-9)
+            .unwrap();
+        assert!((n.t - 3.0).abs() < 1e-9 && n.net == 0, "{n:?}");
+        // A mesh wound the other way round is oriented by its signed volume.
+        let mut flipped = Mesh::cuboid(glam::Vec3::splat(10.0), 4);
+        for t in flipped.indices.chunks_mut(3) {
+            t.swap(1, 2);
+        }
+        let bf = Bvh::new(&flipped.positions, &flipped.indices);
+        let n = bf
+            .nearest_crossing(DVec3::new(-20.0, 1.0, 1.0), DVec3::X, 100.0, 1e-9)
+            .unwrap();
+        assert_eq!(n.net, 1);
         // Brute force agrees on random rays.
         for i in 0..200 {
             let a = i as f64 * 0.37;

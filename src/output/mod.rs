@@ -54,6 +54,25 @@ pub fn write_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<(
     })
 }
 
+/// Writes a radiance image as `DIR/NAME.exr` (linear) and `DIR/NAME.png` (tone-mapped with
+/// `exposure`).
+pub fn write_radiance(
+    dir: &Path,
+    name: &str,
+    width: u32,
+    height: u32,
+    radiance: &[f32],
+    exposure: f32,
+) -> Result<()> {
+    write_exr(&dir.join(format!("{name}.exr")), width, height, radiance)?;
+    write_png(
+        &dir.join(format!("{name}.png")),
+        width,
+        height,
+        &tonemap(radiance, exposure),
+    )
+}
+
 /// Reads an RGBA EXR written by [`write_exr`] (for tests and comparisons).
 pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     use exr::prelude::*;

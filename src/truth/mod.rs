@@ -11,6 +11,10 @@
 //! - A camera ray through each pixel centre (the same rays as `reference`) enters the medium.
 //!   Free-flight distances are sampled exactly (pdf sigma_t e^(-sigma_t s)); a flight that
 //!   reaches the boundary leaves the object and continues in air, and may enter it again.
+//!   Where the path is follows from the surface's orientation, not from the parity of the
+//!   crossings: each crossing enters (+1) or leaves (-1) the enclosed volume, and the path is
+//!   in the medium while the count is positive. Parts that touch (a face two boxes share) or
+//!   overlap are then one medium, and a ray through a shared edge crosses once.
 //! - At every collision, next-event estimation adds the light of every lamp scattered towards
 //!   the camera: albedo x phase x the lamp's radiance x the transmittance e^(-sigma_t l), where
 //!   l is the length of the shadow ray inside the medium, over every segment (concave parts,
@@ -32,7 +36,7 @@
 
 pub mod rng;
 
-use crate::geometry::bvh::Bvh;
+use crate::geometry::bvh::{Bvh, Crossing};
 use crate::reference::{camera_ray, metrics};
 use crate::scene::Scene;
 use glam::DVec3;
@@ -160,6 +164,13 @@ impl Medium {
     }
 }
 
+/// Buffers a path reuses for its shadow rays.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    raw: Vec<(f64, i32)>,
+    crossings: Vec<Crossing>,
+}
+
 /// One path's result.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PathResult {
@@ -217,31 +228,31 @@ impl<'a> Tracer<'a> {
         self.bvh.intersect(o, d, f64::INFINITY).is_some()
     }
 
-    /// Length of the segment from `x` (inside the medium) along `w` up to `dist` that lies
-    /// inside the medium: the crossings alternate exit, entry, exit...
-    fn inside_length(&self, x: DVec3, w: DVec3, dist: f64, hits: &mut Vec<f64>) -> f64 {
-        self.bvh.hits(x, w, dist, self.eps, hits);
-        let mut length = 0.0;
-        let mut from = 0.0;
-        for (i, &t) in hits.iter().enumerate() {
-            if i % 2 == 0 {
-                length += t - from;
-            } else {
-                from = t;
+    /// Length of the segment from `x` along `w` up to `dist` that lies inside the medium, `x`
+    /// lying inside `depth` parts (at least 1).
+    fn inside_length(&self, x: DVec3, w: DVec3, dist: f64, depth: i32, s: &mut Scratch) -> f64 {
+        self.bvh
+            .crossings_along(x, w, dist, self.eps, &mut s.raw, &mut s.crossings);
+        let (mut length, mut from, mut depth) = (0.0, 0.0, depth);
+        for c in &s.crossings {
+            if depth > 0 {
+                length += c.t - from;
             }
+            depth += c.net;
+            from = c.t;
         }
-        if hits.len() % 2 == 1 || hits.is_empty() {
-            length
-        } else {
-            // Still inside at the light (a point light inside the object): up to it.
-            length + (dist - from).max(0.0)
+        // Still inside at a light at finite distance (a light inside the object): up to it.
+        // At infinity the medium has ended: a count left above 0 is rounding.
+        if depth > 0 && dist.is_finite() {
+            length += dist - from;
         }
+        length
     }
 
     /// Light of every lamp arriving at `x` and scattered into the direction opposite to the
     /// path's propagation direction `d` (towards the camera), per unit sigma_s: phase x
     /// radiance x transmittance.
-    fn next_event(&self, x: DVec3, d: DVec3, c: usize, hits: &mut Vec<f64>) -> f64 {
+    fn next_event(&self, x: DVec3, d: DVec3, c: usize, depth: i32, s: &mut Scratch) -> f64 {
         let mut sum = 0.0;
         for l in &self.scene.lights {
             let le = l.radiance[c] as f64;
@@ -252,7 +263,7 @@ impl<'a> Tracer<'a> {
             if scale <= 0.0 {
                 continue;
             }
-            let tau = self.medium.sigma_t[c] * self.inside_length(x, wi, dist, hits);
+            let tau = self.medium.sigma_t[c] * self.inside_length(x, wi, dist, depth, s);
             sum += le * scale * self.medium.phase(d.dot(wi)) * (-tau).exp();
         }
         sum
@@ -265,40 +276,48 @@ impl<'a> Tracer<'a> {
         d: DVec3,
         c: usize,
         rng: &mut Rng,
-        hits: &mut Vec<f64>,
+        scratch: &mut Scratch,
     ) -> PathResult {
         let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
         let mut r = PathResult::default();
         let (mut o, mut d) = (o, d);
         let mut order = 0u32;
+        // How many parts of the object the path is inside: 0 in air.
+        let mut depth = 0i32;
         loop {
-            // In air: find the next entry.
-            match self.bvh.intersect(o, d, f64::INFINITY) {
-                None => return r,
-                Some(h) => o += d * (h.t + self.eps),
+            if depth <= 0 {
+                // In air: fly to the next crossing.
+                depth = 0;
+                match self.bvh.nearest_crossing(o, d, f64::INFINITY, self.eps) {
+                    None => return r,
+                    Some(h) => {
+                        o += d * (h.t + self.eps);
+                        depth += h.net;
+                    }
+                }
+                continue;
             }
-            // In the medium until the flight leaves it.
-            loop {
-                let s = -(1.0 - rng.uniform()).ln() / sigma_t;
-                if let Some(h) = self.bvh.intersect(o, d, s) {
-                    o += d * (h.t + self.eps);
-                    break;
-                }
-                o += d * s;
-                order += 1;
-                r.events += 1;
-                if order >= self.min_order {
-                    r.radiance += albedo * self.next_event(o, d, c, hits);
-                }
-                if order >= self.max_order || rng.uniform() >= albedo {
-                    return r;
-                }
-                if r.events >= MAX_EVENTS {
-                    r.truncated = true;
-                    return r;
-                }
-                d = self.medium.sample_phase(d, rng);
+            // In the medium: a free flight, unless a crossing comes first.
+            let s = -(1.0 - rng.uniform()).ln() / sigma_t;
+            if let Some(h) = self.bvh.nearest_crossing(o, d, s, self.eps) {
+                o += d * (h.t + self.eps);
+                depth += h.net;
+                continue;
             }
+            o += d * s;
+            order += 1;
+            r.events += 1;
+            if order >= self.min_order {
+                r.radiance += albedo * self.next_event(o, d, c, depth, scratch);
+            }
+            if order >= self.max_order || rng.uniform() >= albedo {
+                return r;
+            }
+            if r.events >= MAX_EVENTS {
+                r.truncated = true;
+                return r;
+            }
+            d = self.medium.sample_phase(d, rng);
         }
     }
 }
@@ -414,13 +433,13 @@ pub fn compute(
         let (e, p, t) = sums
             .par_iter_mut()
             .zip(&covered)
-            .map_init(Vec::new, |hits, (sum, &i)| {
+            .map_init(Scratch::default, |scratch, (sum, &i)| {
                 let (o, d) = camera_ray(scene, i % w, i / w);
                 let (mut e, mut p, mut t) = (0u64, 0u64, 0u64);
                 for (half, s) in sum.iter_mut().enumerate() {
                     let mut rng = Rng::new(&[settings.seed, i as u64, half as u64, k]);
                     for (c, v) in s.iter_mut().enumerate() {
-                        let r = tracer.radiance(o, d, c, &mut rng, hits);
+                        let r = tracer.radiance(o, d, c, &mut rng, scratch);
                         *v += r.radiance;
                         e += r.events;
                         p += 1;
