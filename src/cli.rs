@@ -319,8 +319,9 @@ pub struct PrecomputeArgs {
     pub pre: PreprocessArgs,
 }
 
-/// Arguments of `render`.
-#[derive(Debug, Args, Default)]
+/// Arguments of `render` (no `Default`: the bare command takes clap's defaults, see
+/// `bare_render_args`).
+#[derive(Debug, Args)]
 pub struct RenderArgs {
     /// The scene and what replaces parts of it.
     #[command(flatten)]
@@ -1268,6 +1269,16 @@ fn devices() -> Result<()> {
     Ok(())
 }
 
+/// The bare command's arguments: `render` with clap's defaults, so that both print the same
+/// settings and give the same image (a struct literal would take Rust's `Default` instead, a
+/// pruning target of 0 among them).
+fn bare_render_args() -> Result<RenderArgs> {
+    use clap::{Args as _, FromArgMatches as _};
+    let matches =
+        RenderArgs::augment_args(clap::Command::new("render")).try_get_matches_from(["render"])?;
+    Ok(RenderArgs::from_arg_matches(&matches)?)
+}
+
 /// Runs the command line; returns the process exit code.
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -1278,14 +1289,7 @@ pub fn main() -> ExitCode {
         .with_writer(std::io::stderr)
         .try_init();
     let result = match &cli.command {
-        None => render(
-            &cli,
-            &RenderArgs {
-                out: "out".into(),
-                frames: 10,
-                ..Default::default()
-            },
-        ),
+        None => bare_render_args().and_then(|args| render(&cli, &args)),
         Some(Command::Render(args)) => render(&cli, args),
         Some(Command::Precompute(args)) => precompute(args),
         Some(Command::Bench(args)) => bench(&cli, args),

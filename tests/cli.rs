@@ -509,3 +509,40 @@ fn truth_writes_image_noise_and_figures_and_compare_removes_its_noise() {
     assert!(!dir.join("c").exists(), "a refused run creates nothing");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The bare command is `render` with clap's defaults: the same settings printed (the pruning
+/// tolerance among them: it once read 0 %) and the same image.
+#[test]
+fn the_bare_command_renders_like_render() {
+    let (a, b) = (temp_dir("bare"), temp_dir("bare-render"));
+    let run = |dir: &Path, args: &[&str]| {
+        let o = bin()
+            .current_dir(dir)
+            .env("XDG_CACHE_HOME", dir.join("cache"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        // The scene and the derived settings: everything before the timings.
+        let settings: Vec<String> = text
+            .lines()
+            .take_while(|l| !l.starts_with("device:"))
+            .map(str::to_owned)
+            .collect();
+        (
+            settings,
+            translucent::output::read_exr(&dir.join("out/render.exr")).unwrap(),
+        )
+    };
+    let (bare, bare_image) = run(&a, &[]);
+    let (render, render_image) = run(&b, &["render"]);
+    assert!(
+        bare.iter().any(|l| l.contains("pruning tolerance 1.00 %")),
+        "{bare:#?}"
+    );
+    assert_eq!(bare, render);
+    assert_eq!(bare_image, render_image);
+    let _ = std::fs::remove_dir_all(&a);
+    let _ = std::fs::remove_dir_all(&b);
+}
