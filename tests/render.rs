@@ -205,12 +205,7 @@ fn shadow_case(light: &str) {
     // Add a small square plate 20 mm above the slab's top, facing up.
     let mut plate = translucent::scene::mesh::Mesh::cuboid(Vec3::new(30.0, 2.0, 30.0), 2);
     plate.transform(glam::Mat4::from_translation(Vec3::new(0.0, 25.0, 0.0)));
-    let m = &mut scene_with_occluder.mesh;
-    let base = m.positions.len() as u32;
-    m.positions.extend(&plate.positions);
-    m.normals.extend(&plate.normals);
-    m.uvs.extend(&plate.uvs);
-    m.indices.extend(plate.indices.iter().map(|i| i + base));
+    scene_with_occluder.mesh.append(&plate);
 
     let lit = render(scene, 1);
     let shadowed = render(scene_with_occluder.clone(), 1);

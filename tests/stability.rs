@@ -26,12 +26,7 @@ use common::scene;
 /// Appends `part` (moved by `t`) to the scene's mesh.
 fn add(scene: &mut Scene, mut part: Mesh, t: Mat4) {
     part.transform(t);
-    let m = &mut scene.mesh;
-    let base = m.positions.len() as u32;
-    m.positions.extend(&part.positions);
-    m.normals.extend(&part.normals);
-    m.uvs.extend(&part.uvs);
-    m.indices.extend(part.indices.iter().map(|i| i + base));
+    scene.mesh.append(&part);
 }
 
 /// Renders `scene` (optimized and simple blending) and returns the relative RMS per channel

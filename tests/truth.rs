@@ -430,12 +430,7 @@ fn touching_parts_are_one_medium() {
         )));
     let mut right = translucent::scene::mesh::Mesh::cuboid(glam::Vec3::splat(10.0), 4);
     right.transform(glam::Mat4::from_translation(glam::Vec3::new(5.0, 0.0, 0.0)));
-    let m = &mut halves.mesh;
-    let base = m.positions.len() as u32;
-    m.positions.extend(&right.positions);
-    m.normals.extend(&right.normals);
-    m.uvs.extend(&right.uvs);
-    m.indices.extend(right.indices.iter().map(|i| i + base));
+    halves.mesh.append(&right);
     let s = TruthSettings {
         spp: 400,
         ..Default::default()

@@ -465,9 +465,7 @@ mod tests {
         other.transform(glam::Mat4::from_translation(glam::Vec3::new(
             10.0, 0.0, 0.0,
         )));
-        let base = two.positions.len() as u32;
-        two.positions.extend(&other.positions);
-        two.indices.extend(other.indices.iter().map(|i| i + base));
+        two.append(&other);
         let b2 = Bvh::new(&two.positions, &two.indices);
         let o = DVec3::new(-20.0, 1.0, 1.0);
         b2.crossings_along(o, DVec3::X, f64::INFINITY, 1e-9, &mut scratch, &mut c);

@@ -227,6 +227,15 @@ impl Mesh {
         (c, r)
     }
 
+    /// Appends `other`'s vertices and triangles (a second part of the same object).
+    pub fn append(&mut self, other: &Mesh) {
+        let base = self.positions.len() as u32;
+        self.positions.extend(&other.positions);
+        self.normals.extend(&other.normals);
+        self.uvs.extend(&other.uvs);
+        self.indices.extend(other.indices.iter().map(|i| i + base));
+    }
+
     /// Applies an affine transform to positions and its inverse transpose to normals.
     pub fn transform(&mut self, m: glam::Mat4) {
         let nm = glam::Mat3::from_mat4(m).inverse().transpose();
