@@ -190,11 +190,7 @@ pub fn point(
         prune: pre.settings.prune_tolerance,
         nodes: pre.nodes.positions.len(),
         texels: pre.atlas.texels.len(),
-        nonzeros: match mode {
-            Blend::Optimized => pre.ops.optimized.nnz(),
-            Blend::Local => 0,
-            _ => pre.ops.global.nnz(),
-        },
+        nonzeros: pre.ops.global_nonzeros(mode),
         gpu_ms: f64::NAN,
         gpu_spread: 0.0,
         rel_rms: err.rel_rms,

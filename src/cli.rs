@@ -3,6 +3,7 @@
 use crate::gpu::{list_devices, Gpu, GpuOptions};
 use crate::graph::timing::TimingReport;
 use crate::output;
+use crate::passes::compute::GlobalLayout;
 use crate::preprocess::operators::Blend;
 use crate::preprocess::{self, cache, settings::SettingsOverrides, CacheOutcome};
 use crate::renderer::{Options, Renderer};
@@ -82,8 +83,8 @@ pub struct ViewArgs {
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Starting blending mode.
-    #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
-    pub mode: ModeArg,
+    #[arg(long, value_enum, default_value_t = Blend::Optimized)]
+    pub mode: Blend,
     /// A script of viewer actions, as a file or inline text, e.g.
     /// "frames 3; light 40 0; screenshot lit; quit" (see `src/viewer/script.rs`).
     #[arg(long)]
@@ -209,23 +210,14 @@ pub struct BenchArgs {
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Blending mode.
-    #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
-    pub mode: ModeArg,
+    #[arg(long, value_enum, default_value_t = Blend::Optimized)]
+    pub mode: Blend,
     /// How the global pass reads its matrix: texel buffers or storage buffers.
-    #[arg(long, value_enum, default_value_t = LayoutArg::Texel)]
-    pub global_layout: LayoutArg,
+    #[arg(long, value_enum, default_value_t = GlobalLayout::Texel)]
+    pub global_layout: GlobalLayout,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
-}
-
-/// `--global-layout` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum LayoutArg {
-    /// Uniform texel buffers.
-    Texel,
-    /// Storage buffers.
-    Storage,
 }
 
 /// The scene to use and the command-line values that replace parts of it.
@@ -333,8 +325,8 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 10)]
     pub frames: usize,
     /// Blending of local and global responses: local, global, simple or optimized.
-    #[arg(long, value_enum, default_value_t = ModeArg::Optimized)]
-    pub mode: ModeArg,
+    #[arg(long, value_enum, default_value_t = Blend::Optimized)]
+    pub mode: Blend,
     /// Move the lights a full turn around the object over the frames (no preprocessing).
     #[arg(long)]
     pub orbit_light: bool,
@@ -344,31 +336,6 @@ pub struct RenderArgs {
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
-}
-
-/// `--mode` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
-pub enum ModeArg {
-    /// Local kernels only.
-    Local,
-    /// Global response only.
-    Global,
-    /// Simple blending (F without its diagonal plus the direct term).
-    Simple,
-    /// Optimized blending (fitted near field plus the direct term).
-    #[default]
-    Optimized,
-}
-
-impl From<ModeArg> for Blend {
-    fn from(m: ModeArg) -> Blend {
-        match m {
-            ModeArg::Local => Blend::Local,
-            ModeArg::Global => Blend::Global,
-            ModeArg::Simple => Blend::Simple,
-            ModeArg::Optimized => Blend::Optimized,
-        }
-    }
 }
 
 fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
@@ -383,7 +350,7 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
     let resolved = scene.resolved.to_toml();
-    let mode: Blend = args.mode.into();
+    let mode = args.mode;
     let mut renderer = Renderer::new(
         &gpu,
         scene,
@@ -548,22 +515,15 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     let scene = args.input.load()?;
     output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
-    let mode: Blend = args.mode.into();
-    let nonzeros = match mode {
-        Blend::Optimized => pre.ops.optimized.nnz(),
-        Blend::Local => 0,
-        _ => pre.ops.global.nnz(),
-    };
+    let mode = args.mode;
+    let nonzeros = pre.ops.global_nonzeros(mode);
     let mut renderer = Renderer::new(
         &gpu,
         scene.clone(),
         &pre,
         Options {
             mode,
-            global_layout: match args.global_layout {
-                LayoutArg::Texel => crate::passes::compute::GlobalLayout::Texel,
-                LayoutArg::Storage => crate::passes::compute::GlobalLayout::Storage,
-            },
+            global_layout: args.global_layout,
             ..Default::default()
         },
     )?;
@@ -1181,7 +1141,7 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
             overrides: args.pre.overrides(),
             target_error: args.pre.target_error,
             cache: args.pre.cache_dir(),
-            mode: args.mode.into(),
+            mode: args.mode,
             out: args.out.clone(),
             script,
             vsync: !args.no_vsync,

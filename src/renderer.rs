@@ -49,7 +49,7 @@ pub struct Captured {
 }
 
 /// How to render.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 pub struct Options {
     /// Blending of local and global responses.
     pub mode: Blend,
@@ -69,16 +69,6 @@ pub struct WindowOutput {
     pub linear: bool,
 }
 
-impl Default for Options {
-    fn default() -> Options {
-        Options {
-            mode: Blend::Optimized,
-            capture: false,
-            global_layout: compute::GlobalLayout::Texel,
-            window: None,
-        }
-    }
-}
 
 /// A scene on the GPU with its compiled frame graph.
 pub struct Renderer {

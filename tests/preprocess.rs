@@ -340,3 +340,38 @@ fn cache_round_trips_and_rejects_corrupt_or_stale_files() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// What the global pass multiplies per frame, counted once for the upload, `bench` and `chart`:
+/// nothing for local only, F for global, F without its diagonal for simple, the fitted matrix
+/// for optimized; the upload packs those entries two to a fetch.
+#[test]
+fn global_entries_follow_the_blending_mode() {
+    let p = slab(
+        &Material::preset("skin1").unwrap(),
+        [30.0, 10.0, 30.0],
+        6,
+        1.0,
+        5.0,
+    );
+    let ops = &p.ops;
+    let rows = ops.global.rows();
+    let diagonal = (0..rows)
+        .filter(|&q| ops.global.row(q).any(|(i, _)| i as usize == q))
+        .count();
+    assert!(diagonal > 0);
+    assert_eq!(ops.global_nonzeros(Blend::Local), 0);
+    assert_eq!(ops.global_nonzeros(Blend::Global), ops.global.nnz());
+    assert_eq!(
+        ops.global_nonzeros(Blend::Simple),
+        ops.global.nnz() - diagonal
+    );
+    assert_eq!(ops.global_nonzeros(Blend::Optimized), ops.optimized.nnz());
+    for mode in Blend::ALL {
+        let pairs = translucent::passes::data::global_entry_pairs(ops, mode) as usize;
+        let n = ops.global_nonzeros(mode);
+        assert!(
+            2 * pairs >= n && 2 * pairs <= n + rows,
+            "{mode:?}: {pairs} pairs for {n}"
+        );
+    }
+}

@@ -171,8 +171,8 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
         });
 }
 
-/// How the global pass reads its bulk data.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How the global pass reads its bulk data (also the `--global-layout` values).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum GlobalLayout {
     /// Uniform texel buffers (`samplerBuffer`): one 16-byte fetch per entry.
     #[default]

@@ -41,23 +41,9 @@ fn check_nodes(nodes: u64) -> Result<(), crate::gpu::GpuError> {
     Ok(())
 }
 
-/// The global matrix `mode` uploads, and whether its diagonal is left out (simple blending:
-/// the local response carries the near field).
-fn global_matrix(
-    ops: &crate::preprocess::operators::Operators,
-    mode: Blend,
-) -> Option<(&crate::preprocess::operators::Csr, bool)> {
-    match mode {
-        Blend::Local => None,
-        Blend::Optimized => Some((&ops.optimized, false)),
-        Blend::Simple => Some((&ops.global, true)),
-        Blend::Global => Some((&ops.global, false)),
-    }
-}
-
 /// RGBA32UI entries (pairs of matrix entries) the global matrix of `mode` takes.
 pub fn global_entry_pairs(ops: &crate::preprocess::operators::Operators, mode: Blend) -> u64 {
-    let Some((m, skip_diagonal)) = global_matrix(ops, mode) else {
+    let Some((m, skip_diagonal)) = ops.global_matrix(mode) else {
         return 0;
     };
     (0..m.rows())
@@ -549,7 +535,7 @@ impl SubsurfaceData {
         let mut entries: Vec<[u32; 4]> = Vec::new();
         let h = |x: f32| crate::gpu::half::to_f16(x) as u32;
         let mut row: Vec<(u32, [f32; 3])> = Vec::new();
-        let matrix = global_matrix(ops, mode);
+        let matrix = ops.global_matrix(mode);
         for q in 0..pre.nodes.positions.len() {
             if let Some((matrix, skip_diagonal)) = matrix {
                 let inv = node_tex[q].map(|x| 1.0 / x);

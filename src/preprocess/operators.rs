@@ -52,8 +52,10 @@ use serde::{Deserialize, Serialize};
 /// Pairs closer than this many node spacings get the integrated (not lumped) F entry.
 pub const NEAR_SPACINGS: f64 = 2.5;
 
-/// How local and global responses are combined.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// How local and global responses are combined (also the `--mode` values).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Blend {
     /// Local kernels only.
@@ -62,7 +64,8 @@ pub enum Blend {
     Global,
     /// F^0 plus the direct term.
     Simple,
-    /// Fitted near field plus the direct term.
+    /// Fitted near field plus the direct term (the default).
+    #[default]
     Optimized,
 }
 
@@ -307,6 +310,31 @@ fn cholesky_solve(m: &mut [f64], b: &mut [f64], n: usize) -> bool {
 }
 
 impl Operators {
+    /// The global matrix blending `mode` uses, and whether its diagonal is left out (simple
+    /// blending: the local response and the direct term carry the near field); none for
+    /// local only.
+    pub fn global_matrix(&self, mode: Blend) -> Option<(&Csr, bool)> {
+        match mode {
+            Blend::Local => None,
+            Blend::Optimized => Some((&self.optimized, false)),
+            Blend::Simple => Some((&self.global, true)),
+            Blend::Global => Some((&self.global, false)),
+        }
+    }
+
+    /// Entries of the global matrix that blending `mode` multiplies per frame.
+    pub fn global_nonzeros(&self, mode: Blend) -> usize {
+        self.global_matrix(mode).map_or(0, |(m, skip_diagonal)| {
+            (0..m.rows())
+                .map(|q| {
+                    m.row(q)
+                        .filter(|(p, _)| !(skip_diagonal && *p as usize == q))
+                        .count()
+                })
+                .sum()
+        })
+    }
+
     /// Builds all operators. `prune_tolerance` bounds the fraction of each row of F dropped.
     pub fn build(
         atlas: &Atlas,
