@@ -4,8 +4,16 @@
 //! brute-force reference. Writes `chart.csv`, `chart.svg` and `chart.png` (error against GPU
 //! frame time, one series per blending mode, the Pareto front, the automatic setting marked).
 
-use crate::preprocess::{operators::Blend, settings::SettingsOverrides, Preprocessed};
+use crate::gpu::Gpu;
+use crate::preprocess::{
+    self,
+    operators::Blend,
+    settings::{Choice, SettingsOverrides},
+    Preprocessed,
+};
 use crate::reference::metrics;
+use crate::renderer::{Options, Renderer};
+use crate::scene::Scene;
 use anyhow::Result;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -118,6 +126,113 @@ pub fn sweep(
         ));
     }
     out
+}
+
+/// What a sweep renders and times.
+pub struct Sweep<'a> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// The automatic setting (warms the device up).
+    pub auto: &'a Choice,
+    /// The settings to time, labelled ([`sweep`]).
+    pub settings: &'a [(String, SettingsOverrides)],
+    /// Target error of the settings rule.
+    pub target_error: f64,
+    /// Preprocessing cache.
+    pub cache_dir: &'a Path,
+    /// Timed frames per point.
+    pub frames: usize,
+}
+
+/// Renders and times every setting of the sweep in every blending mode and compares each with
+/// the baselines. The protocol: the device is warmed up first (JIT caches, first touch of
+/// memory: without it the first point, the automatic one, timed 15 to 25 % slower than points
+/// of the same cost measured later); then every point is timed in each of three rounds (one
+/// round below 6 frames), a few frames at a time after one untimed frame, and its time is the
+/// median over all its frames with the interquartile spread ([`median_and_spread`]).
+/// Interleaving spreads slow drifts of a shared machine over all points instead of charging
+/// them to whichever points ran during them (identical settings timed 30 % apart when each
+/// point ran its frames in one block).
+pub fn measure(
+    gpu: &std::sync::Arc<Gpu>,
+    sweep: &Sweep<'_>,
+    against: &Baselines<'_>,
+) -> Result<Vec<Point>> {
+    let scene = sweep.scene;
+    let quiet = |_: &str, _: u64, _: u64| {};
+    {
+        let (pre, _) = preprocess::prepare(scene, sweep.auto, Some(sweep.cache_dir), &quiet)?;
+        let mut r = Renderer::new(gpu, scene.clone(), &pre, Options::default())?;
+        for _ in 0..5 {
+            r.frame(&scene.lights)?;
+        }
+    }
+    let rounds = if sweep.frames >= 6 { 3 } else { 1 };
+    let per_round = sweep.frames.div_ceil(rounds);
+    let mut points = Vec::new();
+    let mut times: Vec<Vec<f64>> = Vec::new();
+    for round in 0..rounds {
+        let mut i = 0;
+        for (label, o) in sweep.settings {
+            let choice = preprocess::choose(scene, o, sweep.target_error)?;
+            let (pre, _) = preprocess::prepare(scene, &choice, Some(sweep.cache_dir), &quiet)?;
+            for mode in Blend::ALL {
+                let mut r = Renderer::new(
+                    gpu,
+                    scene.clone(),
+                    &pre,
+                    Options {
+                        mode,
+                        ..Default::default()
+                    },
+                )?;
+                if round == 0 {
+                    times.push(Vec::new());
+                }
+                for f in 0..per_round + 1 {
+                    let t = r.frame(&scene.lights)?;
+                    if f >= 1 {
+                        times[i].push(t.gpu_ms);
+                    }
+                }
+                if round == 0 {
+                    let out = r.output(Vec::new())?;
+                    points.push(point(
+                        label,
+                        mode,
+                        &pre,
+                        choice.settings.node_spacing_mm,
+                        &out.radiance,
+                        against,
+                        label == "auto",
+                    ));
+                }
+                i += 1;
+            }
+        }
+    }
+    for (p, t) in points.iter_mut().zip(&times) {
+        (p.gpu_ms, p.gpu_spread) = median_and_spread(t);
+    }
+    Ok(points)
+}
+
+/// The median of `times` and their spread: the interquartile range over the median (0 for a
+/// zero median or no times).
+pub fn median_and_spread(times: &[f64]) -> (f64, f64) {
+    if times.is_empty() {
+        return (f64::NAN, 0.0);
+    }
+    let median = crate::graph::timing::Stats::of(times).median_ms;
+    let mut sorted = times.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let q = |f: f64| sorted[((sorted.len() - 1) as f64 * f).round() as usize];
+    let spread = if median <= 0.0 {
+        0.0
+    } else {
+        (q(0.75) - q(0.25)) / median
+    };
+    (median, spread)
 }
 
 /// Relative error differences below this are ties (the errors are deterministic, but points a
@@ -436,6 +551,16 @@ mod tests {
             pareto: false,
             pareto_model: false,
         }
+    }
+
+    #[test]
+    fn median_and_interquartile_spread() {
+        let (m, s) = median_and_spread(&[10.0, 12.0, 8.0, 11.0, 9.0]);
+        assert_eq!(m, 10.0);
+        // Quartiles at ranks 1 and 3 of 0..4: 9 and 11.
+        assert!((s - 0.2).abs() < 1e-12, "{s}");
+        assert_eq!(median_and_spread(&[0.0, 0.0]), (0.0, 0.0));
+        assert!(median_and_spread(&[]).0.is_nan());
     }
 
     #[test]

@@ -898,21 +898,6 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         device: cli.device.clone(),
         ..Default::default()
     })?;
-    let quiet = |_: &str, _: u64, _: u64| {};
-    // Warm the device up before the first timed point (JIT caches, first-touch of memory):
-    // without it the first point of the sweep, the automatic one, timed 15 to 25 % slower
-    // than points of the same cost measured later.
-    {
-        let (pre, _) = preprocess::prepare(&scene, &auto, Some(&cache_dir), &quiet)?;
-        let mut r = Renderer::new(&gpu, scene.clone(), &pre, Options::default())?;
-        for _ in 0..5 {
-            r.frame(&scene.lights)?;
-        }
-    }
-    // Timing rounds: every point is timed in each round, a few frames at a time, and its time is
-    // the median over all its frames. Interleaving spreads slow drifts of a shared machine over
-    // all points instead of charging them to whichever points ran during them (identical
-    // settings timed 30 % apart when each point ran its frames in one block).
     let baselines = crate::chart::Baselines {
         reference: &reference.radiance,
         truth: truth
@@ -920,60 +905,19 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
     };
     let sweep = crate::chart::sweep(&auto.settings, args.quick);
-    let rounds = if args.frames >= 6 { 3 } else { 1 };
-    let per_round = args.frames.div_ceil(rounds);
-    let mut points = Vec::new();
-    let mut times: Vec<Vec<f64>> = Vec::new();
-    for round in 0..rounds {
-        let mut i = 0;
-        for (label, o) in &sweep {
-            let choice = preprocess::choose(&scene, o, args.target_error)?;
-            let (pre, _) = preprocess::prepare(&scene, &choice, Some(&cache_dir), &quiet)?;
-            for mode in Blend::ALL {
-                let mut r = Renderer::new(
-                    &gpu,
-                    scene.clone(),
-                    &pre,
-                    Options {
-                        mode,
-                        ..Default::default()
-                    },
-                )?;
-                if round == 0 {
-                    times.push(Vec::new());
-                }
-                for f in 0..per_round + 1 {
-                    let t = r.frame(&scene.lights)?;
-                    if f >= 1 {
-                        times[i].push(t.gpu_ms);
-                    }
-                }
-                if round == 0 {
-                    let out = r.output(Vec::new())?;
-                    points.push(crate::chart::point(
-                        label,
-                        mode,
-                        &pre,
-                        choice.settings.node_spacing_mm,
-                        &out.radiance,
-                        &baselines,
-                        label == "auto",
-                    ));
-                }
-                i += 1;
-            }
-        }
-    }
-    for (p, t) in points.iter_mut().zip(&times) {
-        p.gpu_ms = crate::graph::timing::Stats::of(t).median_ms;
-        let mut sorted = t.clone();
-        sorted.sort_by(f64::total_cmp);
-        let q = |f: f64| sorted[((sorted.len() - 1) as f64 * f).round() as usize];
-        p.gpu_spread = if p.gpu_ms <= 0.0 {
-            0.0
-        } else {
-            (q(0.75) - q(0.25)) / p.gpu_ms
-        };
+    let mut points = crate::chart::measure(
+        &gpu,
+        &crate::chart::Sweep {
+            scene: &scene,
+            auto: &auto,
+            settings: &sweep,
+            target_error: args.target_error,
+            cache_dir: &cache_dir,
+            frames: args.frames,
+        },
+        &baselines,
+    )?;
+    for p in &points {
         println!(
             "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS vs model  {:>7.3} % vs truth",
             p.setting,

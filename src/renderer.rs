@@ -69,7 +69,6 @@ pub struct WindowOutput {
     pub linear: bool,
 }
 
-
 /// A scene on the GPU with its compiled frame graph.
 pub struct Renderer {
     gpu: Arc<Gpu>,
