@@ -79,7 +79,7 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
     let nodes = pre.nodes.positions.len() as u64;
     let lights = scene.lights.len() as u64;
     let mesh = a.vertex_mesh.len() as u64 * 80 + a.indices.len() as u64 * 4;
-    let shadow_map = crate::passes::frame::shadow_map_size(scene, a.texel_mm).0 as u64;
+    let shadow_map = crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0 as u64;
     let shadow = shadow_map.pow(2) * 4 * lights;
     let atlas_px = a.width as u64 * a.height as u64;
     let pixels = scene.width as u64 * scene.height as u64;

@@ -183,8 +183,12 @@ impl Renderer {
         let hdr_rb = g.import_buffer(hdr_readback.clone(), Some(Access::HostRead));
         let display_rb = g.import_buffer(display_readback.clone(), Some(Access::HostRead));
 
-        let layers: u32 = scene.lights.iter().map(passes::frame::layers_of).sum();
-        let (s, _) = passes::frame::shadow_map_size(&scene, data.texel_mm);
+        let layers: u32 = scene
+            .lights
+            .iter()
+            .map(crate::scene::shadow::layers_of)
+            .sum();
+        let (s, _) = crate::scene::shadow::shadow_map_size(&scene, data.texel_mm);
         let shadow_maps = g.image(
             "shadow maps",
             ImageDesc::layered(passes::shadow::FORMAT, s, s, layers),

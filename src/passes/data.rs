@@ -284,11 +284,11 @@ impl Requirements {
         let nodes = pre.nodes.positions.len().max(1) as u64;
         let atlas_px = a.width as u64 * a.height as u64;
         let pixels = scene.width as u64 * scene.height as u64;
-        let shadow_map = crate::passes::frame::shadow_map_size(scene, a.texel_mm).0;
+        let shadow_map = crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0;
         let layers: u64 = scene
             .lights
             .iter()
-            .map(|l| crate::passes::frame::layers_of(l) as u64)
+            .map(|l| crate::scene::shadow::layers_of(l) as u64)
             .sum();
         let pairs = global_entry_pairs(o, mode);
         let seam_taps = if mode.seam_taps() {

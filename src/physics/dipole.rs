@@ -5,7 +5,6 @@
 //! reflectance); the diffuse Fresnel fit F_dr is from Egan and Hilgeman (1973) as quoted there.
 //! All lengths in mm, coefficients in 1/mm.
 
-use super::material::Material;
 use std::f64::consts::PI;
 
 /// Dipole quantities of one colour channel, precomputed from the material.
@@ -46,12 +45,11 @@ pub fn fresnel_transmittance(eta: f64, cos_i: f64) -> f64 {
 }
 
 impl Dipole {
-    /// The dipole of channel `c` (0 = R, 1 = G, 2 = B) of a validated material.
-    pub fn new(material: &Material, c: usize) -> Dipole {
-        let sigma_s = material.sigma_s_prime[c];
-        let sigma_a = material.sigma_a[c];
+    /// The dipole of one channel with reduced scattering `sigma_s` and absorption `sigma_a`
+    /// (1/mm, validated: finite, non-negative, positive sum) under relative index `eta`.
+    pub fn new(sigma_s: f64, sigma_a: f64, eta: f64) -> Dipole {
         let sigma_t = sigma_s + sigma_a;
-        let f_dr = fresnel_diffuse_reflectance(material.eta);
+        let f_dr = fresnel_diffuse_reflectance(eta);
         let a = (1.0 + f_dr) / (1.0 - f_dr);
         let z_r = 1.0 / sigma_t;
         Dipole {
@@ -161,7 +159,7 @@ mod tests {
 
     #[test]
     fn skim_milk_red_matches_published_spot_values() {
-        let d = Dipole::new(&Material::preset("skimmilk").unwrap(), 0);
+        let d = Material::preset("skimmilk").unwrap().dipoles()[0];
         for (r, want) in [
             (0.0, 0.04082),
             (1.0, 0.02314),
@@ -203,7 +201,7 @@ mod tests {
         for (name, table) in crate::physics::material::PRESET_TOTALS {
             let m = Material::preset(name).unwrap();
             for (c, published) in table.iter().enumerate() {
-                let d = Dipole::new(&m, c);
+                let d = m.dipoles()[c];
                 let numeric = integrate_profile(&d);
                 let closed = d.total_reflectance();
                 assert!(
@@ -224,7 +222,7 @@ mod tests {
         for name in ["skimmilk", "ketchup", "marble", "cream"] {
             let m = Material::preset(name).unwrap();
             for c in 0..3 {
-                let d = Dipole::new(&m, c);
+                let d = m.dipoles()[c];
                 assert!(close(d.cumulative(1e9), d.total_reflectance(), 1e-9));
                 assert_eq!(d.cumulative(0.0), 0.0);
                 for rho in [0.1, 1.0, 3.0, 10.0] {
@@ -246,7 +244,7 @@ mod tests {
         }
         // The scale note of METHOD.md: skim milk red gets 40 % of R_total from within 3 mm and
         // 22 % from beyond 10 mm.
-        let d = Dipole::new(&Material::preset("skimmilk").unwrap(), 0);
+        let d = Material::preset("skimmilk").unwrap().dipoles()[0];
         let total = d.total_reflectance();
         assert!((d.cumulative(3.0) / total - 0.40).abs() < 0.01);
         assert!((1.0 - d.cumulative(10.0) / total - 0.22).abs() < 0.01);
@@ -254,7 +252,7 @@ mod tests {
 
     #[test]
     fn laplacian_matches_finite_differences() {
-        let d = Dipole::new(&Material::preset("skin1").unwrap(), 1);
+        let d = Material::preset("skin1").unwrap().dipoles()[1];
         for r in [0.3, 1.0, 2.5, 7.0, 20.0] {
             let h = 1e-3 * r;
             let (f, lap) = d.rd_and_laplacian(r);
@@ -289,7 +287,7 @@ mod tests {
     #[test]
     fn no_absorption_stays_finite() {
         let m = Material::custom([1.0; 3], [0.0; 3], 1.3).unwrap();
-        let d = Dipole::new(&m, 0);
+        let d = m.dipoles()[0];
         assert!(d.rd(0.0).is_finite() && d.rd(100.0).is_finite());
         assert!(close(d.total_reflectance(), 1.0, 1e-12));
         assert!(d.diffusion_length().is_infinite());

@@ -145,11 +145,7 @@ impl Material {
 
     /// The dipole of each channel.
     pub fn dipoles(&self) -> [Dipole; 3] {
-        [
-            Dipole::new(self, 0),
-            Dipole::new(self, 1),
-            Dipole::new(self, 2),
-        ]
+        [0, 1, 2].map(|c| Dipole::new(self.sigma_s_prime[c], self.sigma_a[c], self.eta))
     }
 
     /// Total diffuse reflectance per channel.

@@ -86,7 +86,7 @@ pub fn choose(
         overrides,
     );
     // Not a preprocessing setting, but chosen from the texel like them: said here with them.
-    let (_, why) = crate::passes::frame::shadow_map_size(scene, choice.settings.texel_mm);
+    let (_, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
     choice.reasons.push(why);
     Ok(choice)
 }

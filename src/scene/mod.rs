@@ -2,6 +2,7 @@
 
 pub mod desc;
 pub mod mesh;
+pub mod shadow;
 
 use crate::physics::Material;
 use anyhow::{bail, Context, Result};
@@ -125,7 +126,7 @@ pub struct Scene {
     /// Radiance -> display multiplier.
     pub exposure: f32,
     /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
-    /// texel (`passes::frame::shadow_map_size`).
+    /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
     /// The description with every default made explicit (what `render` prints).
     pub resolved: SceneDesc,
@@ -419,7 +420,7 @@ impl Scene {
             bail!("[output] size {width}x{height} exceeds 16384 pixels per side");
         }
         // The default shadow map follows the atlas texel, known after the settings are chosen
-        // (`passes::frame::shadow_map_size`).
+        // (`shadow::shadow_map_size`).
         let shadow_map = od.shadow_map;
         if let Some(s) = shadow_map {
             if !(16..=16384).contains(&s) {
