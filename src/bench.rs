@@ -6,6 +6,7 @@
 //! the device's bandwidth; the ratio is then reported against the host figure and says so.
 
 use crate::graph::timing::{Stats, TimingReport};
+use crate::passes::PassName;
 use crate::preprocess::operators::Blend;
 use crate::preprocess::Preprocessed;
 use crate::scene::Scene;
@@ -60,7 +61,8 @@ pub struct Traffic {
 }
 
 /// The data each pass must read and write, from the sizes of the scene's data:
-/// - shadow: the atlas mesh (vertices and indices) per light; writes the depth maps;
+/// - shadow: the atlas mesh (vertices and indices) per shadow-map layer (six for a point
+///   light); writes the depth maps;
 /// - illum: the mesh and the shadow maps; writes the illumination map;
 /// - dilate: its list (covered texels whose centre a triangle may miss) and the map at those
 ///   texels; writes nothing it must;
@@ -72,27 +74,32 @@ pub struct Traffic {
 /// - composite: mesh, node radiosity, one local-response texel per covered pixel; writes the
 ///   radiance, display and depth of every pixel;
 /// - readback: both images, written to host memory.
-pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Traffic {
+pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Traffic {
     let a = &pre.atlas;
     let o = &pre.ops;
     let texels = a.texels.len() as u64;
     let nodes = pre.nodes.positions.len() as u64;
-    let lights = scene.lights.len() as u64;
+    // Shadow-map layers: one per light, six for a point light's cube.
+    let layers: u64 = scene
+        .lights
+        .iter()
+        .map(|l| crate::scene::shadow::layers_of(l) as u64)
+        .sum();
     let mesh = a.vertex_mesh.len() as u64 * 80 + a.indices.len() as u64 * 4;
     let shadow_map = crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0 as u64;
-    let shadow = shadow_map.pow(2) * 4 * lights;
+    let shadow = shadow_map.pow(2) * 4 * layers;
     let atlas_px = a.width as u64 * a.height as u64;
     let pixels = scene.width as u64 * scene.height as u64;
     let kk = (o.kernel_size * o.kernel_size) as u64;
     let global_pairs = crate::passes::data::global_entry_pairs(o, mode);
     let (read, written) = match pass {
-        "shadow" => (mesh * lights, shadow),
-        "illum" => (mesh + shadow, atlas_px * 16),
-        "dilate" => {
+        PassName::Shadow => (mesh * layers, shadow),
+        PassName::Illum => (mesh + shadow, atlas_px * 16),
+        PassName::Dilate => {
             let listed = a.centres_surely_covered().iter().filter(|s| !**s).count() as u64;
             (listed * (4 + 16), 0)
         }
-        "local" => {
+        PassName::Local => {
             let taps = if mode.seam_taps() {
                 o.seams.nnz() as u64
             } else {
@@ -103,14 +110,15 @@ pub fn traffic(pass: &str, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Tr
                 texels * 16,
             )
         }
-        "gather" => (
+        PassName::Gather => (
             4 * (nodes + 1) + o.gather.cols.len() as u64 * (8 + 16),
             nodes * 16,
         ),
-        "global" => (4 * (nodes + 1) + global_pairs * (16 + 2 * 16), nodes * 16),
-        "composite" => (mesh + nodes * 16 + pixels * 16, pixels * 24),
-        "readback" | "capture" => (pixels * 20, pixels * 20),
-        _ => (0, 0),
+        PassName::Global => (4 * (nodes + 1) + global_pairs * (16 + 2 * 16), nodes * 16),
+        PassName::Composite => (mesh + nodes * 16 + pixels * 16, pixels * 24),
+        PassName::Readback | PassName::Capture => (pixels * 20, pixels * 20),
+        // The viewer's pass: no bench renders a window.
+        PassName::Overlay => (0, 0),
     };
     Traffic { read, written }
 }
@@ -203,7 +211,13 @@ impl BenchReport {
             .passes
             .iter()
             .map(|p| {
-                let t = traffic(&p.name, scene, pre, mode);
+                let t = PassName::parse(&p.name).map_or(
+                    Traffic {
+                        read: 0,
+                        written: 0,
+                    },
+                    |pass| traffic(pass, scene, pre, mode),
+                );
                 let bound_ms = t.read as f64 / (bandwidth.read_gbps * 1e9) * 1e3;
                 PassBench {
                     name: p.name.clone(),

@@ -9,7 +9,7 @@
 
 use crate::gpu::{Buffer, Gpu, Image};
 use crate::graph::{timing::FrameTiming, Access, FrameGraph, ImageDesc, RenderGraph, Stage};
-use crate::passes::{self, compute, data::SubsurfaceData, frame::FrameUniforms};
+use crate::passes::{self, compute, data::SubsurfaceData, frame::FrameUniforms, PassName};
 use crate::preprocess::{operators::Blend, Preprocessed};
 use crate::scene::{Light, Scene};
 use anyhow::{Context, Result};
@@ -84,10 +84,6 @@ pub struct Renderer {
     window: Option<(Arc<Image>, passes::overlay::Text)>,
     readback_requested: bool,
 }
-
-/// The passes whose results depend only on the lights (and the precomputed data): a frame
-/// whose lights did not move can reuse them.
-pub const LIGHT_PASSES: [&str; 6] = ["shadow", "illum", "dilate", "local", "gather", "global"];
 
 fn host_buffer(gpu: &Arc<Gpu>, name: &str, bytes: u64) -> Result<Arc<Buffer>> {
     Ok(Arc::new(Buffer::new(
@@ -331,7 +327,7 @@ impl Renderer {
         };
         passes::readback::add(
             &mut g,
-            "readback",
+            PassName::Readback.as_str(),
             vec![(hdr, hdr_rb), (display, display_rb)],
         );
         let capture = if options.capture {
@@ -349,7 +345,7 @@ impl Renderer {
                 .collect();
             passes::readback::add(
                 &mut g,
-                "capture",
+                PassName::Capture.as_str(),
                 vec![
                     (map, ids[0]),
                     (local, ids[1]),
@@ -404,7 +400,7 @@ impl Renderer {
         self.run(lights, false)
     }
 
-    /// Renders one frame, skipping the passes of [`LIGHT_PASSES`] when `lights` are those of
+    /// Renders one frame, skipping the passes of [`PassName::LIGHT`] when `lights` are those of
     /// the previous frame: their results (the local response, an imported image, and the node
     /// radiosity, a buffer nothing else writes) still hold. For interactive use (a camera that
     /// moves under a still light); not with `capture`, which reads their transient inputs.
@@ -418,10 +414,10 @@ impl Renderer {
         self.last_lights = Some(lights.to_vec());
         let mut skip: Vec<&str> = Vec::new();
         if skip_light_passes {
-            skip.extend(LIGHT_PASSES);
+            skip.extend(PassName::LIGHT.map(PassName::as_str));
         }
         if self.window.is_some() && !std::mem::take(&mut self.readback_requested) {
-            skip.push("readback");
+            skip.push(PassName::Readback.as_str());
         }
         self.graph.run_frame_skipping(&skip)
     }

@@ -261,6 +261,16 @@ fn bench_writes_per_pass_bounds() {
     let passes = b["passes"].as_array().unwrap();
     assert_eq!(passes.len(), 8);
     for p in passes {
+        // Every timed pass is a named pass with its traffic (an unknown name would read 0).
+        let name = p["name"].as_str().unwrap();
+        assert!(
+            translucent::passes::PassName::parse(name).is_some(),
+            "{name}"
+        );
+        assert!(
+            p["bytes_read"].as_u64().unwrap() > 0,
+            "{name} reads nothing"
+        );
         for key in [
             "name",
             "min_ms",

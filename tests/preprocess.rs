@@ -375,3 +375,33 @@ fn global_entries_follow_the_blending_mode() {
         );
     }
 }
+
+/// `bench`'s traffic counts a shadow-map layer per directional or spot light and six per point
+/// light (it counted one per light).
+#[test]
+fn shadow_traffic_counts_every_layer() {
+    use translucent::bench::traffic;
+    use translucent::passes::PassName;
+    use translucent::scene::shadow::shadow_map_size;
+    let scene = |light: &str| {
+        Scene::from_desc(
+            translucent::scene::desc::SceneDesc::parse(&format!(
+                "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n[[lights]]\n{light}\n[material]\npreset = \"ketchup\"\n[output]\nwidth = 32\nheight = 32\n"
+            ))
+            .unwrap(),
+            std::path::Path::new(""),
+            &Overrides::default(),
+        )
+        .unwrap()
+    };
+    let directional = scene("kind = \"directional\"\ndirection = [0.0, -1.0, 0.0]");
+    let point = scene("kind = \"point\"\nposition = [0.0, 40.0, 0.0]");
+    let choice =
+        translucent::preprocess::choose(&directional, &SettingsOverrides::default(), 0.02).unwrap();
+    let pre = Preprocessed::build(&directional.mesh, &directional.material, &choice, &quiet);
+    for (s, layers) in [(&directional, 1), (&point, 6)] {
+        let size = shadow_map_size(s, pre.atlas.texel_mm).0 as u64;
+        let t = traffic(PassName::Shadow, s, &pre, Blend::Optimized);
+        assert_eq!(t.written, size * size * 4 * layers);
+    }
+}

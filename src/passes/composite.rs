@@ -4,6 +4,7 @@
 //! compute pass of its own over every pixel; here it costs the covered fragments only.)
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
+use super::PassName;
 use super::{draw_mesh, DrawTarget, MeshDraw};
 use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler, TexelView};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
@@ -50,7 +51,7 @@ pub struct CompositeTargets {
 /// Declares `composite`, writing `hdr`, `display = srgb(exposure * hdr)` and `depth`.
 pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exposure: f32) {
     graph
-        .pass("composite")
+        .pass(PassName::Composite.as_str())
         .access(i.frame, Access::Uniform(Stage::Vertex))
         .access(i.vertices, Access::VertexBuffer)
         .access(i.indices, Access::IndexBuffer)
@@ -70,7 +71,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
             )?;
             let pipeline = Pipeline::graphics(
                 gpu,
-                "composite",
+                PassName::Composite.as_str(),
                 &GraphicsDesc {
                     vertex: shaders::COMPOSITE_VERT,
                     fragment: Some(shaders::COMPOSITE_FRAG),

@@ -1,6 +1,7 @@
 //! The compute passes of the subsurface pipeline: `dilate`, `local`, `gather`, `global`.
 //! Each dispatches one invocation per covered texel or per node, 64 to a workgroup.
 
+use super::PassName;
 use crate::gpu::{shaders, Binding, Pipeline, TexelView};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use ash::vk;
@@ -39,7 +40,7 @@ pub fn dilate(
     map: ResourceId,
 ) {
     graph
-        .pass("dilate")
+        .pass(PassName::Dilate.as_str())
         .access(texels, Access::TexelRead(Stage::Compute))
         .access(charts, Access::Sampled(Stage::Compute))
         .access(map, Access::StorageReadWrite(Stage::Compute))
@@ -48,7 +49,7 @@ pub fn dilate(
             let sampler = crate::gpu::Sampler::nearest(gpu)?;
             let pipeline = Pipeline::compute(
                 gpu,
-                "dilate",
+                PassName::Dilate.as_str(),
                 shaders::DILATE_COMP,
                 &[
                     Binding::TexelBuffer(texel_view.raw),
@@ -86,7 +87,7 @@ pub struct LocalInputs {
 /// stored in the window's centre tap.
 pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
     graph
-        .pass("local")
+        .pass(PassName::Local.as_str())
         .access(i.texels, Access::TexelRead(Stage::Compute))
         .access(i.kernels, Access::TexelRead(Stage::Compute))
         .access(i.seam_rows, Access::TexelRead(Stage::Compute))
@@ -106,7 +107,7 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
             )?;
             let pipeline = Pipeline::compute(
                 gpu,
-                "local",
+                PassName::Local.as_str(),
                 shaders::LOCAL_COMP,
                 &[
                     Binding::TexelBuffer(texel_view.raw),
@@ -143,7 +144,7 @@ pub struct SparseInputs {
 /// `gather`: E_p from the illumination map, into the node buffer `out`.
 pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: ResourceId) {
     graph
-        .pass("gather")
+        .pass(PassName::Gather.as_str())
         .access(m.rows, Access::TexelRead(Stage::Compute))
         .access(m.entries, Access::TexelRead(Stage::Compute))
         .access(map, Access::StorageRead(Stage::Compute))
@@ -154,7 +155,7 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
             let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
             let pipeline = Pipeline::compute(
                 gpu,
-                "gather",
+                PassName::Gather.as_str(),
                 shaders::GATHER_COMP,
                 &[
                     Binding::TexelBuffer(rows.raw),
@@ -184,7 +185,7 @@ pub enum GlobalLayout {
 /// `global` with storage-buffer reads (see [`GlobalLayout::Storage`]).
 fn global_storage(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, out: ResourceId) {
     graph
-        .pass("global")
+        .pass(PassName::Global.as_str())
         .access(m.rows, Access::StorageRead(Stage::Compute))
         .access(m.entries, Access::StorageRead(Stage::Compute))
         .access(input, Access::StorageRead(Stage::Compute))
@@ -222,7 +223,7 @@ pub fn global(
         return global_storage(graph, m, input, out);
     }
     graph
-        .pass("global")
+        .pass(PassName::Global.as_str())
         .access(m.rows, Access::TexelRead(Stage::Compute))
         .access(m.entries, Access::TexelRead(Stage::Compute))
         .access(input, Access::TexelRead(Stage::Compute))
@@ -234,7 +235,7 @@ pub fn global(
             let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
             let pipeline = Pipeline::compute(
                 gpu,
-                "global",
+                PassName::Global.as_str(),
                 shaders::GLOBAL_COMP,
                 &[
                     Binding::TexelBuffer(rows.raw),

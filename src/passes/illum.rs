@@ -2,6 +2,7 @@
 //! the irradiance entering the surface there, with shadows from the shadow maps.
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
+use super::PassName;
 use super::{draw_mesh, DrawTarget, MeshDraw};
 use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
@@ -27,7 +28,7 @@ pub struct IllumInputs {
 /// Declares `illum`, writing `map`.
 pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
     graph
-        .pass("illum")
+        .pass(PassName::Illum.as_str())
         .access(inputs.frame, Access::Uniform(Stage::Fragment))
         .access(inputs.vertices, Access::VertexBuffer)
         .access(inputs.indices, Access::IndexBuffer)
@@ -37,7 +38,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
             let sampler = Sampler::shadow(gpu)?;
             let pipeline = Pipeline::graphics(
                 gpu,
-                "illum",
+                PassName::Illum.as_str(),
                 &GraphicsDesc {
                     vertex: shaders::ILLUM_VERT,
                     fragment: Some(shaders::ILLUM_FRAG),

@@ -15,6 +15,81 @@ use crate::gpu::{Gpu, Pipeline};
 use crate::graph::RecordContext;
 use ash::vk;
 
+/// The passes of the frame graph. A pass's name is its debug label, its timing scope and its
+/// key in `timings.json` and `bench.json`; the renderer, `bench` and the viewer name passes
+/// through this type only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PassName {
+    /// Shadow maps.
+    Shadow,
+    /// Illumination map.
+    Illum,
+    /// Partly covered texels of the illumination map.
+    Dilate,
+    /// Local response.
+    Local,
+    /// Node irradiance.
+    Gather,
+    /// Global response.
+    Global,
+    /// Final image.
+    Composite,
+    /// Images to the host.
+    Readback,
+    /// Intermediate results to the host (`capture`).
+    Capture,
+    /// The viewer's overlay.
+    Overlay,
+}
+
+impl PassName {
+    /// Every pass.
+    pub const ALL: [PassName; 10] = [
+        PassName::Shadow,
+        PassName::Illum,
+        PassName::Dilate,
+        PassName::Local,
+        PassName::Gather,
+        PassName::Global,
+        PassName::Composite,
+        PassName::Readback,
+        PassName::Capture,
+        PassName::Overlay,
+    ];
+
+    /// The passes whose results depend on the lights alone: a frame under the same lights as
+    /// the previous one skips them.
+    pub const LIGHT: [PassName; 6] = [
+        PassName::Shadow,
+        PassName::Illum,
+        PassName::Dilate,
+        PassName::Local,
+        PassName::Gather,
+        PassName::Global,
+    ];
+
+    /// The name in the graph, the timings and the reports.
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            PassName::Shadow => "shadow",
+            PassName::Illum => "illum",
+            PassName::Dilate => "dilate",
+            PassName::Local => "local",
+            PassName::Gather => "gather",
+            PassName::Global => "global",
+            PassName::Composite => "composite",
+            PassName::Readback => "readback",
+            PassName::Capture => "capture",
+            PassName::Overlay => "overlay",
+        }
+    }
+
+    /// The pass called `name`, if any.
+    pub fn parse(name: &str) -> Option<PassName> {
+        PassName::ALL.into_iter().find(|p| p.as_str() == name)
+    }
+}
+
 /// Sets a full-extent viewport and scissor.
 pub fn set_viewport(gpu: &Gpu, cmd: vk::CommandBuffer, extent: vk::Extent2D) {
     let viewport = vk::Viewport {
@@ -118,5 +193,19 @@ pub fn draw_mesh(
         d.cmd_bind_index_buffer(rec.cmd, mesh.indices, 0, vk::IndexType::UINT32);
         d.cmd_draw_indexed(rec.cmd, mesh.count, 1, 0, 0, 0);
         d.cmd_end_rendering(rec.cmd);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pass_names_round_trip() {
+        for p in PassName::ALL {
+            assert_eq!(PassName::parse(p.as_str()), Some(p));
+        }
+        assert_eq!(PassName::parse("tonemap"), None);
+        assert!(PassName::LIGHT.iter().all(|p| PassName::ALL.contains(p)));
     }
 }

@@ -2,6 +2,7 @@
 //! the viewer blits to its swapchain. The text lives in a host-visible buffer that the viewer
 //! rewrites between frames (the frame before has finished by then: frames are synchronous).
 
+use super::PassName;
 use crate::gpu::{shaders, Binding, Buffer, Gpu, Pipeline};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use anyhow::Result;
@@ -111,7 +112,7 @@ pub fn add(
     linear_out: bool,
 ) {
     graph
-        .pass("overlay")
+        .pass(PassName::Overlay.as_str())
         .access(display, Access::StorageRead(Stage::Compute))
         .access(text, Access::StorageRead(Stage::Compute))
         .access(window, Access::StorageWrite(Stage::Compute))
@@ -119,7 +120,7 @@ pub fn add(
             let out = res.image(window);
             let pipeline = Pipeline::compute(
                 gpu,
-                "overlay",
+                PassName::Overlay.as_str(),
                 if linear_out {
                     shaders::OVERLAY_LINEAR_COMP
                 } else {

@@ -2,6 +2,7 @@
 //! of the shadow-map array.
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
+use super::PassName;
 use super::{draw_mesh, DrawTarget, MeshDraw};
 use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
@@ -27,7 +28,7 @@ pub struct ShadowInputs {
 /// Declares the `shadow` pass writing every layer of `maps`.
 pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
     graph
-        .pass("shadow")
+        .pass(PassName::Shadow.as_str())
         .access(inputs.frame, Access::Uniform(Stage::Vertex))
         .access(inputs.vertices, Access::VertexBuffer)
         .access(inputs.indices, Access::IndexBuffer)
@@ -35,7 +36,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
         .setup(move |gpu, res| {
             let pipeline = Pipeline::graphics(
                 gpu,
-                "shadow",
+                PassName::Shadow.as_str(),
                 &GraphicsDesc {
                     vertex: shaders::SHADOW_VERT,
                     fragment: None,
