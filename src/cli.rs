@@ -1139,14 +1139,7 @@ fn borders(args: &BordersArgs) -> Result<()> {
 }
 
 fn check_validation(gpu: &Gpu) -> Result<()> {
-    let n = gpu.validation.count();
-    if n > 0 {
-        bail!(
-            "the validation layer reported {n} message(s); first: {}",
-            gpu.validation.messages()[0]
-        );
-    }
-    Ok(())
+    Ok(gpu.validation.check()?)
 }
 
 fn devices() -> Result<()> {

@@ -14,7 +14,7 @@ use crate::preprocess::{operators::Blend, Preprocessed};
 use crate::scene::{Light, Scene};
 use anyhow::{Context, Result};
 use ash::vk;
-use glam::{Quat, Vec3};
+use glam::Quat;
 use gpu_allocator::MemoryLocation;
 use std::sync::Arc;
 
@@ -386,11 +386,7 @@ impl Renderer {
         self.scene
             .lights
             .iter()
-            .map(|l| Light {
-                position: center + q * (l.position - center),
-                direction: (q * l.direction).normalize_or(Vec3::ZERO),
-                ..*l
-            })
+            .map(|l| l.rotated(q, center))
             .collect()
     }
 

@@ -66,6 +66,18 @@ impl ValidationLog {
         self.messages.lock().map(|m| m.clone()).unwrap_or_default()
     }
 
+    /// An error naming how many messages the layer sent and the first, if it sent any (a run
+    /// with `--validate` fails on any message).
+    pub fn check(&self) -> Result<(), GpuError> {
+        match self.count() {
+            0 => Ok(()),
+            n => Err(GpuError::Validation {
+                count: n,
+                first: self.messages().into_iter().next().unwrap_or_default(),
+            }),
+        }
+    }
+
     fn push(&self, text: String) {
         self.count.fetch_add(1, Ordering::SeqCst);
         if let Ok(mut m) = self.messages.lock() {
@@ -778,6 +790,16 @@ mod tests {
             device_local_bytes: 1 << 31,
             unsupported: unsupported.map(Into::into),
         }
+    }
+
+    #[test]
+    fn validation_log_fails_on_any_message() {
+        let log = ValidationLog::default();
+        assert!(log.check().is_ok());
+        log.push("first problem".into());
+        log.push("second".into());
+        let e = log.check().unwrap_err().to_string();
+        assert!(e.contains("2 message(s)") && e.contains("first problem"), "{e}");
     }
 
     #[test]

@@ -37,6 +37,14 @@ pub enum GpuError {
         /// What is missing.
         feature: String,
     },
+    /// The validation layer reported problems.
+    #[error("the validation layer reported {count} message(s); first: {first}")]
+    Validation {
+        /// How many.
+        count: usize,
+        /// The first message.
+        first: String,
+    },
     /// Validation was requested but the Khronos layer is not installed.
     #[error("validation requested but VK_LAYER_KHRONOS_validation is not installed; on Debian: apt-get install vulkan-validationlayers")]
     NoValidationLayer,

@@ -54,6 +54,16 @@ pub struct Light {
 }
 
 impl Light {
+    /// The light turned by `q` about `center` (its position and direction; a directional
+    /// light's direction only matters).
+    pub fn rotated(&self, q: glam::Quat, center: Vec3) -> Light {
+        Light {
+            position: center + q * (self.position - center),
+            direction: (q * self.direction).normalize_or(Vec3::ZERO),
+            ..*self
+        }
+    }
+
     /// Where light arrives from at `x`: the unit direction towards the light, the distance to it
     /// (infinite for a directional light) and the factor on `radiance` there (1 for a
     /// directional light; 1 / r^2 for point and spot lights, `radiance` being their intensity at
@@ -528,6 +538,25 @@ mod tests {
         .unwrap();
         assert_eq!(again.camera, s.camera);
         assert_eq!(again.lights, s.lights);
+    }
+
+    #[test]
+    fn a_light_turns_about_the_centre() {
+        let l = Light {
+            kind: LightKind::Point,
+            position: Vec3::new(11.0, 2.0, 3.0),
+            direction: Vec3::X,
+            radiance: Vec3::ONE,
+            cos_cone: -1.0,
+        };
+        let q = glam::Quat::from_axis_angle(Vec3::Y, std::f32::consts::FRAC_PI_2);
+        let r = l.rotated(q, Vec3::new(1.0, 2.0, 3.0));
+        assert!(
+            r.position.distance(Vec3::new(1.0, 2.0, -7.0)) < 1e-5,
+            "{r:?}"
+        );
+        assert!(r.direction.distance(Vec3::NEG_Z) < 1e-6);
+        assert_eq!((r.kind, r.radiance), (l.kind, l.radiance));
     }
 
     #[test]

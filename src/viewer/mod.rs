@@ -169,11 +169,7 @@ impl Rig {
         let q = self.rotation(v.light_yaw, v.light_pitch);
         self.lights
             .iter()
-            .map(|l| Light {
-                position: self.center + q * (l.position - self.center),
-                direction: (q * l.direction).normalize_or(Vec3::ZERO),
-                ..*l
-            })
+            .map(|l| l.rotated(q, self.center))
             .collect()
     }
 }
@@ -943,13 +939,7 @@ pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
         return Err(e);
     }
     if let Some(log) = &app.validation {
-        let n = log.count();
-        if n > 0 {
-            bail!(
-                "the validation layer reported {n} message(s); first: {}",
-                log.messages()[0]
-            );
-        }
+        log.check()?;
     }
     println!("view: closed after {frames} frames");
     Ok(())
