@@ -799,7 +799,10 @@ mod tests {
         log.push("first problem".into());
         log.push("second".into());
         let e = log.check().unwrap_err().to_string();
-        assert!(e.contains("2 message(s)") && e.contains("first problem"), "{e}");
+        assert!(
+            e.contains("2 message(s)") && e.contains("first problem"),
+            "{e}"
+        );
     }
 
     #[test]

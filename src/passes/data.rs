@@ -19,6 +19,7 @@
 //! So B^T = B / T_p at texel and node scale, and T restores the detail per fragment.
 
 use crate::gpu::{Buffer, Gpu, GpuResult, Image};
+use crate::preprocess::layout::{kernel_pairs, KERNEL_PAIR_BYTES};
 use crate::preprocess::{operators::Blend, Preprocessed};
 use crate::scene::Scene;
 use ash::vk;
@@ -55,11 +56,6 @@ pub fn global_entry_pairs(ops: &crate::preprocess::operators::Operators, mode: B
             n.div_ceil(2) as u64
         })
         .sum()
-}
-
-/// RGBA32UI kernel entries per covered texel: two f16 rgb taps each, k*k taps.
-pub fn kernel_pairs(kernel_size: u32) -> u32 {
-    (kernel_size * kernel_size).div_ceil(2)
 }
 
 /// One vertex of the atlas mesh (80 bytes).
@@ -312,7 +308,7 @@ impl Requirements {
             ("chart ids".into(), atlas_px * 4),
             (
                 "kernels".into(),
-                texels * kernel_pairs(o.kernel_size) as u64 * 16,
+                texels * kernel_pairs(o.kernel_size) as u64 * KERNEL_PAIR_BYTES,
             ),
             ("seam taps".into(), (texels + 1) * 4 + seam_taps * 16),
             (

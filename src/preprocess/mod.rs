@@ -5,6 +5,7 @@
 pub mod apply;
 pub mod atlas;
 pub mod cache;
+pub mod layout;
 pub mod nodes;
 pub mod operators;
 pub mod settings;
@@ -118,10 +119,12 @@ pub fn estimate(mesh: &Mesh, s: &Settings) -> Estimate {
     let by_spacing = (area / (0.866 * s.node_spacing_mm * s.node_spacing_mm)).ceil() as u64;
     let nodes = (mesh.positions.len() as u64).min(by_spacing.max(4));
     let kk = (s.kernel_size * s.kernel_size) as u64;
-    let kernel_elements = texels * (kk + 1);
+    let kernel_elements = texels * layout::kernel_pairs(s.kernel_size) as u64;
     // Charts with their gutters cover about a quarter of the atlas (measured on the bunny).
     let atlas = 4 * texels;
-    let device_bytes_min = kernel_elements * 16 + 3 * atlas * 16;
+    // Kernels, and over the atlas the illumination map and local response (RGBA32F) and the
+    // chart ids (R32UI).
+    let device_bytes_min = kernel_elements * layout::KERNEL_PAIR_BYTES + atlas * (2 * 16 + 4);
     let threads = rayon::current_num_threads().max(1) as f64;
     Estimate {
         texels,
