@@ -81,6 +81,8 @@ pub struct Pipeline {
     set_layout: vk::DescriptorSetLayout,
     pool: vk::DescriptorPool,
     set: vk::DescriptorSet,
+    /// Bytes of the push-constant block (the size of the type the pipeline was made with).
+    push_size: usize,
 }
 
 impl Pipeline {
@@ -98,6 +100,7 @@ impl Pipeline {
             layout: vk::PipelineLayout::null(),
             bind_point,
             set_layout: vk::DescriptorSetLayout::null(),
+            push_size: push_bytes as usize,
             pool: vk::DescriptorPool::null(),
             set: vk::DescriptorSet::null(),
         };
@@ -204,20 +207,20 @@ impl Pipeline {
         Ok(p)
     }
 
-    /// A compute pipeline; binding `i` of set 0 is `bindings[i]`.
-    pub fn compute(
+    /// A compute pipeline; binding `i` of set 0 is `bindings[i]`; its push constants are a `P`
+    /// (the GLSL block's layout, pushed with [`Pipeline::push`]).
+    pub fn compute<P: bytemuck::Pod>(
         gpu: &Arc<Gpu>,
         name: &str,
         spv: &[u8],
         bindings: &[Binding],
-        push_bytes: u32,
     ) -> GpuResult<Pipeline> {
         let mut p = Self::layout_and_set(
             gpu,
             name,
             bindings,
             vk::ShaderStageFlags::COMPUTE,
-            push_bytes,
+            std::mem::size_of::<P>() as u32,
             vk::PipelineBindPoint::COMPUTE,
         )?;
         let module = shader_module(gpu, spv)?;
@@ -238,20 +241,20 @@ impl Pipeline {
         Ok(p)
     }
 
-    /// A graphics pipeline for dynamic rendering; binding `i` of set 0 is `bindings[i]`.
-    pub fn graphics(
+    /// A graphics pipeline for dynamic rendering; binding `i` of set 0 is `bindings[i]`; its
+    /// push constants are a `P`.
+    pub fn graphics<P: bytemuck::Pod>(
         gpu: &Arc<Gpu>,
         name: &str,
         desc: &GraphicsDesc<'_>,
         bindings: &[Binding],
-        push_bytes: u32,
     ) -> GpuResult<Pipeline> {
         let mut p = Self::layout_and_set(
             gpu,
             name,
             bindings,
             vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT,
-            push_bytes,
+            std::mem::size_of::<P>() as u32,
             vk::PipelineBindPoint::GRAPHICS,
         )?;
         let vertex = shader_module(gpu, desc.vertex)?;
@@ -375,15 +378,17 @@ impl Pipeline {
         }
     }
 
-    /// Pushes 32-bit words as constants.
-    pub fn push_words(&self, cmd: vk::CommandBuffer, words: &[u32]) {
-        if !words.is_empty() {
-            self.push_bytes(cmd, bytemuck::cast_slice(words));
-        }
-    }
-
-    /// Pushes constants visible to every stage of this pipeline.
+    /// Pushes the constants, visible to every stage of this pipeline: a value of the type the
+    /// pipeline was made with (a value of another size is a bug in the pass, refused here
+    /// rather than handed to the driver).
     pub fn push<T: bytemuck::Pod>(&self, cmd: vk::CommandBuffer, value: &T) {
+        assert_eq!(
+            std::mem::size_of::<T>(),
+            self.push_size,
+            "push constants of {} bytes for a {}-byte block",
+            std::mem::size_of::<T>(),
+            self.push_size
+        );
         self.push_bytes(cmd, bytemuck::bytes_of(value));
     }
 

@@ -69,7 +69,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                 vk::Format::R32G32B32A32_SFLOAT,
                 16,
             )?;
-            let pipeline = Pipeline::graphics(
+            let pipeline = Pipeline::graphics::<f32>(
                 gpu,
                 PassName::Composite.as_str(),
                 &GraphicsDesc {
@@ -89,7 +89,6 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     Binding::StorageImage(res.image(i.local).view),
                     Binding::Sampled(res.image(i.texture).view, sampler.raw),
                 ],
-                4,
             )?;
             let hdr = res.image(t.hdr).clone();
             let display = res.image(t.display).clone();

@@ -10,9 +10,24 @@ use std::sync::Arc;
 /// Invocations per workgroup of the 1D compute shaders.
 const GROUP: u32 = 64;
 
-fn dispatch(rec: &crate::graph::RecordContext<'_>, pipeline: &Pipeline, push: &[u32], count: u32) {
+/// The push constants of `local` (`Push` in glsl/local.comp).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct LocalPush {
+    /// Covered texels.
+    count: u32,
+    /// Kernel edge.
+    k: u32,
+}
+
+fn dispatch<P: bytemuck::Pod>(
+    rec: &crate::graph::RecordContext<'_>,
+    pipeline: &Pipeline,
+    push: &P,
+    count: u32,
+) {
     pipeline.bind(rec.cmd);
-    pipeline.push_words(rec.cmd, push);
+    pipeline.push(rec.cmd, push);
     unsafe {
         rec.gpu
             .device
@@ -47,7 +62,7 @@ pub fn dilate(
         .setup(move |gpu, res| {
             let texel_view = view(gpu, res, texels, vk::Format::R32_UINT, 4)?;
             let sampler = crate::gpu::Sampler::nearest(gpu)?;
-            let pipeline = Pipeline::compute(
+            let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Dilate.as_str(),
                 shaders::DILATE_COMP,
@@ -56,11 +71,10 @@ pub fn dilate(
                     Binding::Sampled(res.image(charts).view, sampler.raw),
                     Binding::StorageImage(res.image(map).view),
                 ],
-                4,
             )?;
             Ok(Box::new(move |rec| {
                 let _ = (&texel_view, &sampler);
-                dispatch(rec, &pipeline, &[texel_count], texel_count);
+                dispatch(rec, &pipeline, &texel_count, texel_count);
             }))
         });
 }
@@ -105,7 +119,7 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
                 vk::Format::R32G32B32A32_SFLOAT,
                 16,
             )?;
-            let pipeline = Pipeline::compute(
+            let pipeline = Pipeline::compute::<LocalPush>(
                 gpu,
                 PassName::Local.as_str(),
                 shaders::LOCAL_COMP,
@@ -117,16 +131,14 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
                     Binding::TexelBuffer(seam_row_view.raw),
                     Binding::TexelBuffer(seam_view.raw),
                 ],
-                8,
             )?;
             Ok(Box::new(move |rec| {
                 let _ = (&texel_view, &kernel_view, &seam_row_view, &seam_view);
-                dispatch(
-                    rec,
-                    &pipeline,
-                    &[i.texel_count, i.kernel_size],
-                    i.texel_count,
-                );
+                let push = LocalPush {
+                    count: i.texel_count,
+                    k: i.kernel_size,
+                };
+                dispatch(rec, &pipeline, &push, i.texel_count);
             }))
         });
 }
@@ -153,7 +165,7 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
             let rows = view(gpu, res, m.rows, vk::Format::R32_UINT, 4)?;
             let entries = view(gpu, res, m.entries, vk::Format::R32G32_SFLOAT, 8)?;
             let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
-            let pipeline = Pipeline::compute(
+            let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Gather.as_str(),
                 shaders::GATHER_COMP,
@@ -163,11 +175,10 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
                     Binding::StorageImage(res.image(map).view),
                     Binding::StorageTexelBuffer(out_view.raw),
                 ],
-                4,
             )?;
             Ok(Box::new(move |rec| {
                 let _ = (&rows, &entries, &out_view);
-                dispatch(rec, &pipeline, &[m.row_count], m.row_count);
+                dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
         });
 }
@@ -192,7 +203,7 @@ fn global_storage(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, o
         .access(out, Access::TexelWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
-            let pipeline = Pipeline::compute(
+            let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 "global (storage buffers)",
                 shaders::GLOBAL_SSBO_COMP,
@@ -202,11 +213,10 @@ fn global_storage(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, o
                     Binding::Storage(res.buffer(input).raw),
                     Binding::StorageTexelBuffer(out_view.raw),
                 ],
-                4,
             )?;
             Ok(Box::new(move |rec| {
                 let _ = &out_view;
-                dispatch(rec, &pipeline, &[m.row_count], m.row_count);
+                dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
         });
 }
@@ -233,7 +243,7 @@ pub fn global(
             let entries = view(gpu, res, m.entries, vk::Format::R32G32B32A32_UINT, 16)?;
             let in_view = view(gpu, res, input, vk::Format::R32G32B32A32_SFLOAT, 16)?;
             let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
-            let pipeline = Pipeline::compute(
+            let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Global.as_str(),
                 shaders::GLOBAL_COMP,
@@ -243,11 +253,10 @@ pub fn global(
                     Binding::TexelBuffer(in_view.raw),
                     Binding::StorageTexelBuffer(out_view.raw),
                 ],
-                4,
             )?;
             Ok(Box::new(move |rec| {
                 let _ = (&rows, &entries, &in_view, &out_view);
-                dispatch(rec, &pipeline, &[m.row_count], m.row_count);
+                dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
         });
 }

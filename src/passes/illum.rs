@@ -36,7 +36,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
         .access(map, Access::ColorAttachment)
         .setup(move |gpu, res| {
             let sampler = Sampler::shadow(gpu)?;
-            let pipeline = Pipeline::graphics(
+            let pipeline = Pipeline::graphics::<[f32; 2]>(
                 gpu,
                 PassName::Illum.as_str(),
                 &GraphicsDesc {
@@ -59,7 +59,6 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                     Binding::Uniform(res.buffer(inputs.frame).raw),
                     Binding::Sampled(res.image(inputs.shadow_maps).view, sampler.raw),
                 ],
-                8,
             )?;
             let map = res.image(map).clone();
             let mesh = MeshDraw {

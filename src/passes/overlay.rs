@@ -102,6 +102,18 @@ pub fn scale(width: u32) -> u32 {
     (width / 960 + 1).min(4)
 }
 
+/// The push constants of `overlay` (`Push` in glsl/overlay.glsl).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct OverlayPush {
+    /// Text grid columns.
+    cols: u32,
+    /// Text grid rows.
+    rows: u32,
+    /// Screen pixels per font pixel.
+    scale: u32,
+}
+
 /// Declares the `overlay` pass: `window = display with text`, linear when `linear_out`.
 pub fn add(
     graph: &mut RenderGraph,
@@ -118,7 +130,7 @@ pub fn add(
         .access(window, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let out = res.image(window);
-            let pipeline = Pipeline::compute(
+            let pipeline = Pipeline::compute::<OverlayPush>(
                 gpu,
                 PassName::Overlay.as_str(),
                 if linear_out {
@@ -131,13 +143,16 @@ pub fn add(
                     Binding::StorageImage(out.view),
                     Binding::Storage(res.buffer(text).raw),
                 ],
-                12,
             )?;
             let extent = out.info.extent;
-            let push = [grid.0, grid.1, scale(extent.width)];
+            let push = OverlayPush {
+                cols: grid.0,
+                rows: grid.1,
+                scale: scale(extent.width),
+            };
             Ok(Box::new(move |rec| {
                 pipeline.bind(rec.cmd);
-                pipeline.push_words(rec.cmd, &push);
+                pipeline.push(rec.cmd, &push);
                 unsafe {
                     rec.gpu.device.cmd_dispatch(
                         rec.cmd,

@@ -34,7 +34,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
         .access(inputs.indices, Access::IndexBuffer)
         .access(maps, Access::DepthAttachment)
         .setup(move |gpu, res| {
-            let pipeline = Pipeline::graphics(
+            let pipeline = Pipeline::graphics::<u32>(
                 gpu,
                 PassName::Shadow.as_str(),
                 &GraphicsDesc {
@@ -49,7 +49,6 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                     depth_bias: Some((1.0, 1.5)),
                 },
                 &[Binding::Uniform(res.buffer(inputs.frame).raw)],
-                4,
             )?;
             let maps = res.image(maps).clone();
             let mesh = MeshDraw {
