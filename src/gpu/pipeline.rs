@@ -83,6 +83,9 @@ pub struct Pipeline {
     set: vk::DescriptorSet,
     /// Bytes of the push-constant block (the size of the type the pipeline was made with).
     push_size: usize,
+    /// What the descriptor set refers to and the pipeline keeps alive (texel views,
+    /// samplers); dropped after the set.
+    owned: Vec<Box<dyn std::any::Any>>,
 }
 
 impl Pipeline {
@@ -101,6 +104,7 @@ impl Pipeline {
             bind_point,
             set_layout: vk::DescriptorSetLayout::null(),
             push_size: push_bytes as usize,
+            owned: Vec::new(),
             pool: vk::DescriptorPool::null(),
             set: vk::DescriptorSet::null(),
         };
@@ -376,6 +380,13 @@ impl Pipeline {
                 );
             }
         }
+    }
+
+    /// Hands the pipeline what its descriptor set refers to (a view, a sampler, a tuple of
+    /// them), so that it lives exactly as long as the pipeline.
+    pub fn owning(mut self, owned: impl std::any::Any) -> Pipeline {
+        self.owned.push(Box::new(owned));
+        self
     }
 
     /// Pushes the constants, visible to every stage of this pipeline: a value of the type the

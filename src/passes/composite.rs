@@ -89,7 +89,8 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     Binding::StorageImage(res.image(i.local).view),
                     Binding::Sampled(res.image(i.texture).view, sampler.raw),
                 ],
-            )?;
+            )?
+            .owning((sampler, nodes));
             let hdr = res.image(t.hdr).clone();
             let display = res.image(t.display).clone();
             let depth = res.image(t.depth).clone();
@@ -99,7 +100,6 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                 count: i.index_count,
             };
             Ok(Box::new(move |rec| {
-                let _ = (&sampler, &nodes);
                 let target = DrawTarget {
                     color: &[hdr.view, display.view],
                     depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),

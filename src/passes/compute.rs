@@ -71,9 +71,9 @@ pub fn dilate(
                     Binding::Sampled(res.image(charts).view, sampler.raw),
                     Binding::StorageImage(res.image(map).view),
                 ],
-            )?;
+            )?
+            .owning((texel_view, sampler));
             Ok(Box::new(move |rec| {
-                let _ = (&texel_view, &sampler);
                 dispatch(rec, &pipeline, &texel_count, texel_count);
             }))
         });
@@ -131,9 +131,9 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
                     Binding::TexelBuffer(seam_row_view.raw),
                     Binding::TexelBuffer(seam_view.raw),
                 ],
-            )?;
+            )?
+            .owning((texel_view, kernel_view, seam_row_view, seam_view));
             Ok(Box::new(move |rec| {
-                let _ = (&texel_view, &kernel_view, &seam_row_view, &seam_view);
                 let push = LocalPush {
                     count: i.texel_count,
                     k: i.kernel_size,
@@ -175,9 +175,9 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
                     Binding::StorageImage(res.image(map).view),
                     Binding::StorageTexelBuffer(out_view.raw),
                 ],
-            )?;
+            )?
+            .owning((rows, entries, out_view));
             Ok(Box::new(move |rec| {
-                let _ = (&rows, &entries, &out_view);
                 dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
         });
@@ -213,9 +213,9 @@ fn global_storage(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, o
                     Binding::Storage(res.buffer(input).raw),
                     Binding::StorageTexelBuffer(out_view.raw),
                 ],
-            )?;
+            )?
+            .owning(out_view);
             Ok(Box::new(move |rec| {
-                let _ = &out_view;
                 dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
         });
@@ -253,9 +253,9 @@ pub fn global(
                     Binding::TexelBuffer(in_view.raw),
                     Binding::StorageTexelBuffer(out_view.raw),
                 ],
-            )?;
+            )?
+            .owning((rows, entries, in_view, out_view));
             Ok(Box::new(move |rec| {
-                let _ = (&rows, &entries, &in_view, &out_view);
                 dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
         });

@@ -59,7 +59,8 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                     Binding::Uniform(res.buffer(inputs.frame).raw),
                     Binding::Sampled(res.image(inputs.shadow_maps).view, sampler.raw),
                 ],
-            )?;
+            )?
+            .owning(sampler);
             let map = res.image(map).clone();
             let mesh = MeshDraw {
                 vertices: res.buffer(inputs.vertices).raw,
@@ -68,7 +69,6 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
             };
             let size = [map.info.extent.width as f32, map.info.extent.height as f32];
             Ok(Box::new(move |rec| {
-                let _ = &sampler;
                 let target = DrawTarget {
                     color: &[map.view],
                     depth: None,
