@@ -35,6 +35,14 @@ pub struct RenderOutput {
     pub frames: Vec<FrameTiming>,
 }
 
+/// The host buffers the `capture` pass copies the intermediate results into.
+struct CaptureBuffers {
+    irradiance: Arc<Buffer>,
+    local: Arc<Buffer>,
+    node_irradiance: Arc<Buffer>,
+    node_radiosity: Arc<Buffer>,
+}
+
 /// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
 #[derive(Debug, Clone, Default)]
 pub struct Captured {
@@ -77,7 +85,7 @@ pub struct Renderer {
     uniforms: Arc<Buffer>,
     hdr_readback: Arc<Buffer>,
     display_readback: Arc<Buffer>,
-    capture: Option<[Arc<Buffer>; 4]>,
+    capture: Option<CaptureBuffers>,
     /// Edge of the shadow maps, texels.
     shadow_map_size: u32,
     last_lights: Option<Vec<Light>>,
@@ -333,27 +341,22 @@ impl Renderer {
         let capture = if options.capture {
             let atlas_bytes = aw as u64 * ah as u64 * 16;
             let node_bytes = data.node_count.max(1) as u64 * 16;
-            let bufs = [
-                host_buffer(gpu, "capture irradiance", atlas_bytes)?,
-                host_buffer(gpu, "capture local", atlas_bytes)?,
-                host_buffer(gpu, "capture node irradiance", node_bytes)?,
-                host_buffer(gpu, "capture node radiosity", node_bytes)?,
+            let b = CaptureBuffers {
+                irradiance: host_buffer(gpu, "capture irradiance", atlas_bytes)?,
+                local: host_buffer(gpu, "capture local", atlas_bytes)?,
+                node_irradiance: host_buffer(gpu, "capture node irradiance", node_bytes)?,
+                node_radiosity: host_buffer(gpu, "capture node radiosity", node_bytes)?,
+            };
+            let mut to_host =
+                |buffer: &Arc<Buffer>| g.import_buffer(buffer.clone(), Some(Access::HostRead));
+            let pairs = vec![
+                (map, to_host(&b.irradiance)),
+                (local, to_host(&b.local)),
+                (node_irradiance, to_host(&b.node_irradiance)),
+                (node_radiosity, to_host(&b.node_radiosity)),
             ];
-            let ids: Vec<_> = bufs
-                .iter()
-                .map(|b| g.import_buffer(b.clone(), Some(Access::HostRead)))
-                .collect();
-            passes::readback::add(
-                &mut g,
-                PassName::Capture.as_str(),
-                vec![
-                    (map, ids[0]),
-                    (local, ids[1]),
-                    (node_irradiance, ids[2]),
-                    (node_radiosity, ids[3]),
-                ],
-            );
-            Some(bufs)
+            passes::readback::add(&mut g, PassName::Capture.as_str(), pairs);
+            Some(b)
         } else {
             None
         };
@@ -517,10 +520,10 @@ impl Renderer {
             return Ok(None);
         };
         Ok(Some(Captured {
-            irradiance: read_back(&b[0], atlas_texels)?,
-            local: read_back(&b[1], atlas_texels)?,
-            node_irradiance: read_back(&b[2], nodes)?,
-            node_radiosity: read_back(&b[3], nodes)?,
+            irradiance: read_back(&b.irradiance, atlas_texels)?,
+            local: read_back(&b.local, atlas_texels)?,
+            node_irradiance: read_back(&b.node_irradiance, nodes)?,
+            node_radiosity: read_back(&b.node_radiosity, nodes)?,
         }))
     }
 
