@@ -775,7 +775,7 @@ fn truth(args: &TruthArgs) -> Result<()> {
         max_order: args.max_order.unwrap_or(u32::MAX),
     };
     // Refuse before creating anything.
-    truth::Tracer::new(&scene, &settings)?;
+    truth::validate(&scene, &settings)?;
     output::create_dir(&args.out)?;
     let medium = truth::Medium::new(&scene.material, args.g);
     println!(
@@ -989,16 +989,14 @@ fn chart_truth(
         println!("truth: left out (--truth-spp 0)");
         return Ok(None);
     }
-    if (scene.material.eta - 1.0).abs() > 1e-9 || scene.texture.is_some() {
-        println!(
-            "truth: none for this scene (it needs eta = 1 and no texture; --eta 1 gives one): error against the exact model only"
-        );
-        return Ok(None);
-    }
     let settings = TruthSettings {
         spp: args.truth_spp,
         ..Default::default()
     };
+    if let Err(e) = truth::validate(scene, &settings) {
+        println!("truth: none for this scene, error against the exact model only: {e}");
+        return Ok(None);
+    }
     let start = std::time::Instant::now();
     let bar = ProgressBar::new(1000).with_style(
         ProgressStyle::with_template("truth {bar:40} {percent:>3}% ETA {eta}")

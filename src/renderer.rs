@@ -399,7 +399,7 @@ impl Renderer {
         self.run(lights, false)
     }
 
-    /// Renders one frame, skipping the passes of [`PassName::LIGHT`] when `lights` are those of
+    /// Renders one frame, skipping the passes for which [`PassName::is_light`] holds when `lights` are those of
     /// the previous frame: their results (the local response, an imported image, and the node
     /// radiosity, a buffer nothing else writes) still hold. For interactive use (a camera that
     /// moves under a still light); not with `capture`, which reads their transient inputs.
@@ -413,7 +413,12 @@ impl Renderer {
         self.last_lights = Some(lights.to_vec());
         let mut skip: Vec<&str> = Vec::new();
         if skip_light_passes {
-            skip.extend(PassName::LIGHT.map(PassName::as_str));
+            skip.extend(
+                PassName::ALL
+                    .into_iter()
+                    .filter(|p| p.is_light())
+                    .map(PassName::as_str),
+            );
         }
         if self.window.is_some() && !std::mem::take(&mut self.readback_requested) {
             skip.push(PassName::Readback.as_str());

@@ -194,24 +194,9 @@ pub struct Tracer<'a> {
 }
 
 impl<'a> Tracer<'a> {
-    /// Checks that the scene can be traced and builds the ray-casting structure.
+    /// Checks that the scene can be traced ([`validate`]) and builds the ray-casting structure.
     pub fn new(scene: &'a Scene, settings: &TruthSettings) -> Result<Tracer<'a>, TruthError> {
-        let eta = scene.material.eta;
-        if (eta - 1.0).abs() > 1e-9 {
-            return Err(TruthError::Eta(eta));
-        }
-        if !(settings.g.is_finite() && settings.g.abs() < 1.0) {
-            return Err(TruthError::BadG(settings.g));
-        }
-        if settings.min_order < 1 || settings.min_order > settings.max_order {
-            return Err(TruthError::BadOrders(
-                settings.min_order,
-                settings.max_order,
-            ));
-        }
-        if scene.texture.is_some() {
-            return Err(TruthError::Texture);
-        }
+        validate(scene, settings)?;
         let (_, radius) = scene.bounds();
         Ok(Tracer {
             scene,
@@ -320,6 +305,28 @@ impl<'a> Tracer<'a> {
             d = self.medium.sample_phase(d, rng);
         }
     }
+}
+
+/// Whether `scene` can be traced with `settings`, without building anything: an index-matched
+/// boundary, no texture, a phase parameter in (-1, 1), an order window starting at 1 or later.
+pub fn validate(scene: &Scene, settings: &TruthSettings) -> Result<(), TruthError> {
+    let eta = scene.material.eta;
+    if (eta - 1.0).abs() > 1e-9 {
+        return Err(TruthError::Eta(eta));
+    }
+    if !(settings.g.is_finite() && settings.g.abs() < 1.0) {
+        return Err(TruthError::BadG(settings.g));
+    }
+    if settings.min_order < 1 || settings.min_order > settings.max_order {
+        return Err(TruthError::BadOrders(
+            settings.min_order,
+            settings.max_order,
+        ));
+    }
+    if scene.texture.is_some() {
+        return Err(TruthError::Texture);
+    }
+    Ok(())
 }
 
 /// Noise and error figures of one image at one binning.
