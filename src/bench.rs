@@ -75,48 +75,49 @@ pub struct Traffic {
 ///   radiance, display and depth of every pixel;
 /// - readback: both images, written to host memory.
 pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -> Traffic {
-    let a = &pre.atlas;
-    let o = &pre.ops;
-    let texels = a.texels.len() as u64;
-    let nodes = pre.nodes.positions.len() as u64;
-    // Shadow-map layers: one per light, six for a point light's cube.
-    let layers: u64 = scene
-        .lights
-        .iter()
-        .map(|l| crate::scene::shadow::layers_of(l) as u64)
-        .sum();
-    let mesh = a.vertex_mesh.len() as u64 * 80 + a.indices.len() as u64 * 4;
-    let shadow_map = crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0 as u64;
-    let shadow = shadow_map.pow(2) * 4 * layers;
-    let atlas_px = a.width as u64 * a.height as u64;
-    let pixels = scene.width as u64 * scene.height as u64;
-    let kk = (o.kernel_size * o.kernel_size) as u64;
-    let global_pairs = crate::passes::data::global_entry_pairs(o, mode);
+    use crate::layout::Item as I;
+    let c = crate::passes::data::counts(scene, pre, mode);
+    let b = |item: I| c.bytes(item);
+    let mesh = b(I::AtlasVertices) + b(I::AtlasIndices);
+    let kk = (c.kernel_size * c.kernel_size) as u64;
+    // One element of `item` per `n` of them.
+    let per = |item: I, n: u64| n * item.bytes();
     let (read, written) = match pass {
-        PassName::Shadow => (mesh * layers, shadow),
-        PassName::Illum => (mesh + shadow, atlas_px * 16),
-        PassName::Dilate => {
-            let listed = a.centres_surely_covered().iter().filter(|s| !**s).count() as u64;
-            (listed * (4 + 16), 0)
-        }
-        PassName::Local => {
-            let taps = if mode.seam_taps() {
-                o.seams.nnz() as u64
-            } else {
-                0
-            };
-            (
-                texels * (4 + kk.div_ceil(2) * 16 + kk * 16 + 8) + taps * (16 + 16),
-                texels * 16,
-            )
-        }
-        PassName::Gather => (
-            4 * (nodes + 1) + o.gather.cols.len() as u64 * (8 + 16),
-            nodes * 16,
+        PassName::Shadow => (mesh * c.shadow_layers, b(I::ShadowMaps)),
+        PassName::Illum => (mesh + b(I::ShadowMaps), b(I::IlluminationMap)),
+        PassName::Dilate => (
+            b(I::DilateTexels) + per(I::IlluminationMap, c.dilate_texels),
+            0,
         ),
-        PassName::Global => (4 * (nodes + 1) + global_pairs * (16 + 2 * 16), nodes * 16),
-        PassName::Composite => (mesh + nodes * 16 + pixels * 16, pixels * 24),
-        PassName::Readback | PassName::Capture => (pixels * 20, pixels * 20),
+        PassName::Local => (
+            b(I::CoveredTexels)
+                + b(I::Kernels)
+                + per(I::IlluminationMap, c.texels * kk)
+                + per(I::SeamRows, 2 * c.texels)
+                + per(I::SeamEntries, c.seam_taps)
+                + per(I::IlluminationMap, c.seam_taps),
+            per(I::LocalResponse, c.texels),
+        ),
+        PassName::Gather => (
+            b(I::GatherRows)
+                + per(I::GatherEntries, c.gather_entries)
+                + per(I::IlluminationMap, c.gather_entries),
+            b(I::NodeIrradiance),
+        ),
+        PassName::Global => (
+            b(I::GlobalRows)
+                + per(I::GlobalEntries, c.global_pairs)
+                + per(I::NodeIrradiance, 2 * c.global_pairs),
+            b(I::NodeRadiosity),
+        ),
+        PassName::Composite => (
+            mesh + b(I::NodeRadiosity) + per(I::LocalResponse, c.pixels),
+            b(I::Radiance) + b(I::Depth) + b(I::Display),
+        ),
+        PassName::Readback | PassName::Capture => {
+            let both = b(I::RadianceReadback) + b(I::DisplayReadback);
+            (both, both)
+        }
         // The viewer's pass: no bench renders a window.
         PassName::Overlay => (0, 0),
     };

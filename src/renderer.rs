@@ -9,6 +9,7 @@
 
 use crate::gpu::{Buffer, Gpu, Image};
 use crate::graph::{timing::FrameTiming, Access, FrameGraph, ImageDesc, RenderGraph, Stage};
+use crate::layout::Item;
 use crate::passes::{self, compute, data::SubsurfaceData, frame::FrameUniforms, PassName};
 use crate::preprocess::{operators::Blend, Preprocessed};
 use crate::scene::{Light, Scene};
@@ -158,13 +159,14 @@ impl Renderer {
             MemoryLocation::CpuToGpu,
         )?);
         let pixels = w as u64 * h as u64;
-        let hdr_readback = host_buffer(gpu, "radiance readback", pixels * 16)?;
-        let display_readback = host_buffer(gpu, "display readback", pixels * 4)?;
+        let readback = |item: Item| host_buffer(gpu, item.name(), pixels * item.bytes());
+        let hdr_readback = readback(Item::RadianceReadback)?;
+        let display_readback = readback(Item::DisplayReadback)?;
         let (aw, ah) = data.atlas_size;
         let local_image = Arc::new(Image::zeroed_storage(
             gpu,
-            "local response",
-            vk::Format::R32G32B32A32_SFLOAT,
+            Item::LocalResponse.name(),
+            Item::LocalResponse.format(),
             aw,
             ah,
         )?);
@@ -194,25 +196,28 @@ impl Renderer {
             .sum();
         let (s, _) = crate::scene::shadow::shadow_map_size(&scene, data.texel_mm);
         let shadow_maps = g.image(
-            "shadow maps",
+            Item::ShadowMaps.name(),
             ImageDesc::layered(passes::shadow::FORMAT, s, s, layers),
         );
         let map = g.image(
-            "illumination map",
+            Item::IlluminationMap.name(),
             ImageDesc::new(passes::illum::FORMAT, aw, ah),
         );
-        let node_irradiance = g.buffer("node irradiance", data.node_count.max(1) as u64 * 16);
-        let node_radiosity = g.buffer("node radiosity", data.node_count.max(1) as u64 * 16);
+        let node_buffer = |g: &mut RenderGraph, item: Item| {
+            g.buffer(item.name(), data.node_count.max(1) as u64 * item.bytes())
+        };
+        let node_irradiance = node_buffer(&mut g, Item::NodeIrradiance);
+        let node_radiosity = node_buffer(&mut g, Item::NodeRadiosity);
         let hdr = g.image(
-            "radiance",
+            Item::Radiance.name(),
             ImageDesc::new(passes::composite::HDR_FORMAT, w, h),
         );
         let depth = g.image(
-            "camera depth",
+            Item::Depth.name(),
             ImageDesc::new(passes::composite::DEPTH_FORMAT, w, h),
         );
         let display = g.image(
-            "display",
+            Item::Display.name(),
             ImageDesc::new(passes::composite::DISPLAY_FORMAT, w, h),
         );
 

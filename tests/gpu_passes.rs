@@ -593,3 +593,61 @@ fn every_covered_texel_is_rasterised_or_dilated() {
         assert!(dilated > 0 && listed >= dilated && listed < a.texels.len());
     }
 }
+
+/// Binding is checked against the pass's declarations and the shader's: a pass that binds a
+/// resource it did not declare gets an error naming pass, resource and slot, and a set whose
+/// slots disagree with the shader gets one naming the slot; neither reaches the driver.
+#[test]
+fn bindings_are_checked_against_the_declarations_and_the_shader() {
+    use std::sync::Arc;
+    use translucent::gpu::{shaders, Buffer, Pipeline};
+    use translucent::graph::{Access, RenderGraph, Stage};
+    use translucent::layout::Item;
+
+    let gpu = common::gpu();
+    let build = |declare_kernels: bool, kernel_slot: u32| {
+        let mut g = RenderGraph::new();
+        let usage = ash::vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+        let buffer =
+            |name: &str| Arc::new(Buffer::with_data(&gpu, name, &[0u8; 64], usage).unwrap());
+        let rows = g.import_buffer(buffer("global rows"), None);
+        let kernels = g.import_buffer(buffer("kernels"), None);
+        let input = g.import_buffer(buffer("node irradiance"), None);
+        let out = g.buffer("node radiosity", 64);
+        let mut pass = g
+            .pass("global")
+            .access(rows, Access::TexelRead(Stage::Compute))
+            .access(input, Access::TexelRead(Stage::Compute))
+            .access(out, Access::TexelWrite(Stage::Compute));
+        if declare_kernels {
+            pass = pass.access(kernels, Access::TexelRead(Stage::Compute));
+        }
+        pass.setup(move |gpu, res| {
+            let set = res
+                .bind()
+                .texel(0, rows, Item::GlobalRows.format())
+                .texel(kernel_slot, kernels, Item::GlobalEntries.format())
+                .texel(2, input, Item::NodeIrradiance.format())
+                .storage_texel(3, out, Item::NodeRadiosity.format())
+                .finish()?;
+            let pipeline = Pipeline::compute::<u32>(gpu, "global", shaders::GLOBAL_COMP, set)?;
+            Ok(Box::new(move |rec| pipeline.bind(rec.cmd)))
+        });
+        g.build(&gpu).map(|_| ()).map_err(|e| format!("{e:#}"))
+    };
+    let undeclared = build(false, 1).unwrap_err();
+    assert!(
+        undeclared.contains("pass 'global'")
+            && undeclared.contains("'kernels'")
+            && undeclared.contains("slot 1")
+            && undeclared.contains("does not declare"),
+        "{undeclared}"
+    );
+    let wrong_slot = build(true, 4).unwrap_err();
+    assert!(
+        wrong_slot.contains("pipeline 'global'") && wrong_slot.contains("binding 1"),
+        "{wrong_slot}"
+    );
+    assert_eq!(build(true, 1), Ok(()));
+    common::assert_no_validation_messages(&gpu);
+}

@@ -45,6 +45,14 @@ pub enum GpuError {
         /// The first message.
         first: String,
     },
+    /// What a pipeline binds or pushes disagrees with what its shaders declare.
+    #[error("pipeline '{pipeline}' does not match its shaders: {problem}")]
+    Interface {
+        /// The pipeline.
+        pipeline: String,
+        /// The disagreement, naming the slot.
+        problem: String,
+    },
     /// Validation was requested but the Khronos layer is not installed.
     #[error("validation requested but VK_LAYER_KHRONOS_validation is not installed; on Debian: apt-get install vulkan-validationlayers")]
     NoValidationLayer,

@@ -5,7 +5,8 @@
 //! updates and no allocation.
 
 use super::device::Gpu;
-use super::error::{GpuResult, VkCall};
+use super::error::{GpuError, GpuResult, VkCall};
+use super::spirv;
 use ash::vk;
 use std::sync::Arc;
 
@@ -37,6 +38,63 @@ impl Binding {
             Binding::StorageTexelBuffer(_) => vk::DescriptorType::STORAGE_TEXEL_BUFFER,
         }
     }
+}
+
+/// What a pipeline's descriptor set holds: each [`Binding`] at its slot, and what the set
+/// refers to and must outlive it (texel views, samplers), owned by the pipeline made from it.
+#[derive(Default)]
+pub struct BindingSet {
+    entries: Vec<(u32, Binding)>,
+    owned: Vec<Box<dyn std::any::Any>>,
+}
+
+impl BindingSet {
+    /// An empty set.
+    pub fn new() -> BindingSet {
+        BindingSet::default()
+    }
+
+    /// Binds `binding` at `slot` (the GLSL `binding = slot` of set 0).
+    pub fn add(&mut self, slot: u32, binding: Binding) {
+        self.entries.push((slot, binding));
+    }
+
+    /// Hands the set something its descriptors refer to; it lives as long as the pipeline.
+    pub fn keep(&mut self, owned: impl std::any::Any) {
+        self.owned.push(Box::new(owned));
+    }
+
+    /// The slots bound, with their descriptor types, and `push_bytes`, as a shader interface.
+    fn interface(&self, push_bytes: u32) -> spirv::Interface {
+        spirv::Interface {
+            bindings: self
+                .entries
+                .iter()
+                .map(|(s, b)| (*s, b.descriptor_type()))
+                .collect(),
+            push_bytes,
+        }
+    }
+}
+
+/// Checks `set` and the push-constant size against what the shaders declare.
+fn check_interface(
+    name: &str,
+    modules: &[&[u8]],
+    set: &BindingSet,
+    push_bytes: u32,
+) -> GpuResult<()> {
+    let problem = |problem: String| GpuError::Interface {
+        pipeline: name.to_string(),
+        problem,
+    };
+    let mut slots: Vec<u32> = set.entries.iter().map(|e| e.0).collect();
+    slots.sort_unstable();
+    if let Some(w) = slots.windows(2).find(|w| w[0] == w[1]) {
+        return Err(problem(format!("binding {} is bound twice", w[0])));
+    }
+    let declared = spirv::reflect_stages(modules).map_err(problem)?;
+    spirv::check(&declared, &set.interface(push_bytes)).map_err(problem)
 }
 
 fn shader_module(gpu: &Gpu, spv: &[u8]) -> GpuResult<vk::ShaderModule> {
@@ -92,7 +150,7 @@ impl Pipeline {
     fn layout_and_set(
         gpu: &Arc<Gpu>,
         name: &str,
-        bindings: &[Binding],
+        set: BindingSet,
         stages: vk::ShaderStageFlags,
         push_bytes: u32,
         bind_point: vk::PipelineBindPoint,
@@ -104,16 +162,16 @@ impl Pipeline {
             bind_point,
             set_layout: vk::DescriptorSetLayout::null(),
             push_size: push_bytes as usize,
-            owned: Vec::new(),
+            owned: set.owned,
             pool: vk::DescriptorPool::null(),
             set: vk::DescriptorSet::null(),
         };
+        let bindings = set.entries;
         let layout_bindings: Vec<_> = bindings
             .iter()
-            .enumerate()
-            .map(|(i, b)| {
+            .map(|(slot, b)| {
                 vk::DescriptorSetLayoutBinding::default()
-                    .binding(i as u32)
+                    .binding(*slot)
                     .descriptor_type(b.descriptor_type())
                     .descriptor_count(1)
                     .stage_flags(stages)
@@ -139,7 +197,7 @@ impl Pipeline {
         }
         let sizes: Vec<_> = bindings
             .iter()
-            .map(|b| vk::DescriptorPoolSize {
+            .map(|(_, b)| vk::DescriptorPoolSize {
                 ty: b.descriptor_type(),
                 descriptor_count: 1,
             })
@@ -156,7 +214,7 @@ impl Pipeline {
             .vk("vkAllocateDescriptorSets")?[0];
         let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
             .iter()
-            .map(|b| match b {
+            .map(|(_, b)| match b {
                 Binding::Uniform(buf) | Binding::Storage(buf) => [vk::DescriptorBufferInfo {
                     buffer: *buf,
                     offset: 0,
@@ -167,7 +225,7 @@ impl Pipeline {
             .collect();
         let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = bindings
             .iter()
-            .map(|b| match b {
+            .map(|(_, b)| match b {
                 Binding::Sampled(view, sampler) => [vk::DescriptorImageInfo {
                     sampler: *sampler,
                     image_view: *view,
@@ -183,7 +241,7 @@ impl Pipeline {
             .collect();
         let texel_views: Vec<[vk::BufferView; 1]> = bindings
             .iter()
-            .map(|b| match b {
+            .map(|(_, b)| match b {
                 Binding::TexelBuffer(v) | Binding::StorageTexelBuffer(v) => [*v],
                 _ => [vk::BufferView::null()],
             })
@@ -191,10 +249,10 @@ impl Pipeline {
         let writes: Vec<_> = bindings
             .iter()
             .enumerate()
-            .map(|(i, b)| {
+            .map(|(i, (slot, b))| {
                 let w = vk::WriteDescriptorSet::default()
                     .dst_set(p.set)
-                    .dst_binding(i as u32)
+                    .dst_binding(*slot)
                     .descriptor_type(b.descriptor_type());
                 match b {
                     Binding::Uniform(_) | Binding::Storage(_) => w.buffer_info(&buffer_infos[i]),
@@ -211,20 +269,23 @@ impl Pipeline {
         Ok(p)
     }
 
-    /// A compute pipeline; binding `i` of set 0 is `bindings[i]`; its push constants are a `P`
-    /// (the GLSL block's layout, pushed with [`Pipeline::push`]).
+    /// A compute pipeline with the descriptor set `bindings`; its push constants are a `P`
+    /// (the GLSL block's layout, pushed with [`Pipeline::push`]). Both are checked against the
+    /// shader's own declarations first ([`GpuError::Interface`] names the slot).
     pub fn compute<P: bytemuck::Pod>(
         gpu: &Arc<Gpu>,
         name: &str,
         spv: &[u8],
-        bindings: &[Binding],
+        bindings: BindingSet,
     ) -> GpuResult<Pipeline> {
+        let push_bytes = std::mem::size_of::<P>() as u32;
+        check_interface(name, &[spv], &bindings, push_bytes)?;
         let mut p = Self::layout_and_set(
             gpu,
             name,
             bindings,
             vk::ShaderStageFlags::COMPUTE,
-            std::mem::size_of::<P>() as u32,
+            push_bytes,
             vk::PipelineBindPoint::COMPUTE,
         )?;
         let module = shader_module(gpu, spv)?;
@@ -245,14 +306,16 @@ impl Pipeline {
         Ok(p)
     }
 
-    /// A graphics pipeline for dynamic rendering; binding `i` of set 0 is `bindings[i]`; its
-    /// push constants are a `P`.
+    /// A graphics pipeline for dynamic rendering with the descriptor set `bindings`; its push
+    /// constants are a `P`; both checked against the shaders like [`Pipeline::compute`].
     pub fn graphics<P: bytemuck::Pod>(
         gpu: &Arc<Gpu>,
         name: &str,
         desc: &GraphicsDesc<'_>,
-        bindings: &[Binding],
+        bindings: BindingSet,
     ) -> GpuResult<Pipeline> {
+        let modules: Vec<&[u8]> = std::iter::once(desc.vertex).chain(desc.fragment).collect();
+        check_interface(name, &modules, &bindings, std::mem::size_of::<P>() as u32)?;
         let mut p = Self::layout_and_set(
             gpu,
             name,
@@ -382,13 +445,6 @@ impl Pipeline {
         }
     }
 
-    /// Hands the pipeline what its descriptor set refers to (a view, a sampler, a tuple of
-    /// them), so that it lives exactly as long as the pipeline.
-    pub fn owning(mut self, owned: impl std::any::Any) -> Pipeline {
-        self.owned.push(Box::new(owned));
-        self
-    }
-
     /// Pushes the constants, visible to every stage of this pipeline: a value of the type the
     /// pipeline was made with (a value of another size is a bug in the pass, refused here
     /// rather than handed to the driver).
@@ -434,5 +490,7 @@ impl Drop for Pipeline {
                 d.destroy_descriptor_set_layout(self.set_layout, None);
             }
         }
+        // The texel views and samplers the set referred to go after the set.
+        self.owned.clear();
     }
 }

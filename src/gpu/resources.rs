@@ -371,6 +371,41 @@ impl Image {
         }
     }
 
+    /// A single-layer 2D image of `format`, `(width, height)` and `usage`.
+    fn single(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        format: vk::Format,
+        (width, height): (u32, u32),
+        usage: vk::ImageUsageFlags,
+    ) -> GpuResult<Image> {
+        let info = ImageInfo {
+            format,
+            extent: vk::Extent2D { width, height },
+            layers: 1,
+            usage,
+        };
+        Image::new(gpu, name, info, false)
+    }
+
+    /// Records the image's first transition, from `UNDEFINED` (contents discarded) to
+    /// `layout` for a transfer write at `stage`, into `cmd` (recording).
+    fn first_transfer(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        stage: vk::PipelineStageFlags2,
+        layout: vk::ImageLayout,
+    ) {
+        self.transition(
+            gpu,
+            cmd,
+            (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
+            (stage, vk::AccessFlags2::TRANSFER_WRITE),
+            (vk::ImageLayout::UNDEFINED, layout),
+        );
+    }
+
     /// Creates a sampled RGBA8 image from tightly packed pixels, left in
     /// `SHADER_READ_ONLY_OPTIMAL`, ready for fragment and compute shaders.
     pub fn from_rgba8(
@@ -394,31 +429,15 @@ impl Image {
         pixels: &[u8],
     ) -> GpuResult<Image> {
         assert_eq!(pixels.len() % (width * height).max(1) as usize, 0);
-        let image = Image::new(
-            gpu,
-            name,
-            ImageInfo {
-                format,
-                extent: vk::Extent2D { width, height },
-                layers: 1,
-                usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
-            },
-            false,
-        )?;
+        let usage = vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST;
+        let image = Image::single(gpu, name, format, (width, height), usage)?;
         let staging = Buffer::staging(gpu, &format!("{name} (staging)"), pixels)?;
         gpu.one_shot(|cmd| unsafe {
-            image.transition(
+            image.first_transfer(
                 gpu,
                 cmd,
-                (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
-                (
-                    vk::PipelineStageFlags2::COPY,
-                    vk::AccessFlags2::TRANSFER_WRITE,
-                ),
-                (
-                    vk::ImageLayout::UNDEFINED,
-                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                ),
+                vk::PipelineStageFlags2::COPY,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
             );
             let region = [whole_image_copy(vk::Extent2D { width, height })];
             gpu.device.cmd_copy_buffer_to_image(
@@ -460,30 +479,17 @@ impl Image {
         width: u32,
         height: u32,
     ) -> GpuResult<Image> {
-        let image = Image::new(
-            gpu,
-            name,
-            ImageInfo {
-                format,
-                extent: vk::Extent2D { width, height },
-                layers: 1,
-                usage: vk::ImageUsageFlags::STORAGE
-                    | vk::ImageUsageFlags::TRANSFER_DST
-                    | vk::ImageUsageFlags::TRANSFER_SRC,
-            },
-            false,
-        )?;
+        let usage = vk::ImageUsageFlags::STORAGE
+            | vk::ImageUsageFlags::TRANSFER_DST
+            | vk::ImageUsageFlags::TRANSFER_SRC;
+        let image = Image::single(gpu, name, format, (width, height), usage)?;
         let range = image.range();
         gpu.one_shot(|cmd| unsafe {
-            image.transition(
+            image.first_transfer(
                 gpu,
                 cmd,
-                (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
-                (
-                    vk::PipelineStageFlags2::CLEAR,
-                    vk::AccessFlags2::TRANSFER_WRITE,
-                ),
-                (vk::ImageLayout::UNDEFINED, vk::ImageLayout::GENERAL),
+                vk::PipelineStageFlags2::CLEAR,
+                vk::ImageLayout::GENERAL,
             );
             gpu.device.cmd_clear_color_image(
                 cmd,
@@ -513,7 +519,32 @@ pub struct TexelView {
     pub buffer: Arc<Buffer>,
 }
 
+/// Bytes per element of the texel-buffer formats the passes use (`None` for others).
+pub fn texel_format_bytes(format: vk::Format) -> Option<u64> {
+    use vk::Format as F;
+    Some(match format {
+        F::R32_UINT | F::R32_SFLOAT => 4,
+        F::R32G32_UINT | F::R32G32_SFLOAT | F::R16G16B16A16_SFLOAT => 8,
+        F::R32G32B32A32_UINT | F::R32G32B32A32_SFLOAT => 16,
+        _ => return None,
+    })
+}
+
 impl TexelView {
+    /// Views the whole of `buffer` as elements of `format` (a format of
+    /// [`texel_format_bytes`]).
+    pub fn of_format(
+        gpu: &Arc<Gpu>,
+        buffer: &Arc<Buffer>,
+        format: vk::Format,
+    ) -> GpuResult<TexelView> {
+        let bytes = texel_format_bytes(format).ok_or_else(|| GpuError::Interface {
+            pipeline: buffer.name.clone(),
+            problem: format!("a texel view of {format:?}, a format with no element size here"),
+        })?;
+        TexelView::new(gpu, buffer, format, bytes)
+    }
+
     /// Views the whole of `buffer` as elements of `format` (`bytes_per_element` each).
     pub fn new(
         gpu: &Arc<Gpu>,

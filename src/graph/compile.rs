@@ -127,6 +127,26 @@ pub enum GraphError {
         /// The resource.
         resource: String,
     },
+    /// A pass binds a resource it did not declare, or declared with an unfitting access.
+    #[error(
+        "pass '{pass}' binds resource '{resource}' at slot {slot} as {kind:?}, but {}",
+        match declared {
+            None => "does not declare it (add an .access(...) for it)".to_string(),
+            Some(a) => format!("declares it {a:?}, which does not admit that binding"),
+        }
+    )]
+    Binding {
+        /// The pass.
+        pass: String,
+        /// The resource.
+        resource: String,
+        /// The shader slot (`binding = N`).
+        slot: u32,
+        /// What the pass binds it as.
+        kind: super::BindKind,
+        /// What the pass declared, if anything.
+        declared: Option<Access>,
+    },
     /// The passes' dependencies form a cycle.
     #[error("passes depend on each other in a cycle: {0:?}")]
     Cycle(Vec<String>),

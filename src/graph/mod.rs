@@ -14,10 +14,12 @@
 //! see [`record_barriers`]), its commands, end timestamp.
 
 pub mod access;
+pub mod bind;
 pub mod compile;
 pub mod timing;
 
 pub use access::{Access, Stage};
+pub use bind::{BindKind, Bindings, PassResources};
 pub use compile::{
     Barrier, GraphError, PassDecl, ResourceDecl, ResourceId, ResourceKind, Schedule,
 };
@@ -126,7 +128,7 @@ pub struct RecordContext<'a> {
 pub type RecordFn = Box<dyn FnMut(&RecordContext<'_>)>;
 
 /// Creates a pass's pipelines once the graph's resources exist; returns its record closure.
-pub type SetupFn = Box<dyn FnOnce(&Arc<Gpu>, &Resources) -> anyhow::Result<RecordFn>>;
+pub type SetupFn = Box<dyn FnOnce(&Arc<Gpu>, &PassResources<'_>) -> anyhow::Result<RecordFn>>;
 
 struct PassEntry {
     decl: PassDecl,
@@ -156,7 +158,7 @@ impl PassBuilder<'_> {
     /// Gives the pass its setup closure, which returns the per-frame record closure.
     pub fn setup(
         self,
-        setup: impl FnOnce(&Arc<Gpu>, &Resources) -> anyhow::Result<RecordFn> + 'static,
+        setup: impl FnOnce(&Arc<Gpu>, &PassResources<'_>) -> anyhow::Result<RecordFn> + 'static,
     ) {
         self.graph.passes.push(PassEntry {
             decl: self.decl,
@@ -296,7 +298,12 @@ impl RenderGraph {
         let mut records: Vec<Option<RecordFn>> = Vec::with_capacity(self.passes.len());
         for p in &mut self.passes {
             let setup = p.setup.take().expect("setup runs once");
-            let record = setup(gpu, &resources)
+            let pass = PassResources {
+                gpu,
+                decl: &p.decl,
+                resources: &resources,
+            };
+            let record = setup(gpu, &pass)
                 .map_err(|e| e.context(format!("setting up pass '{}'", p.decl.name)))?;
             records.push(Some(record));
         }

@@ -6,16 +6,17 @@
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::PassName;
 use super::{draw_mesh, DrawTarget, MeshDraw};
-use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler, TexelView};
+use crate::gpu::{shaders, GraphicsDesc, Pipeline, Sampler};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
+use crate::layout::Item;
 use ash::vk;
 
 /// Format of the HDR radiance image.
-pub const HDR_FORMAT: vk::Format = vk::Format::R32G32B32A32_SFLOAT;
+pub const HDR_FORMAT: vk::Format = Item::Radiance.format();
 /// Format of the display image (sRGB-encoded values in a UNORM image).
-pub const DISPLAY_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
+pub const DISPLAY_FORMAT: vk::Format = Item::Display.format();
 /// Format of the camera depth buffer.
-pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+pub const DEPTH_FORMAT: vk::Format = Item::Depth.format();
 
 /// Resources the composite reads.
 pub struct CompositeInputs {
@@ -62,13 +63,13 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
         .access(t.display, Access::ColorAttachment)
         .access(t.depth, Access::DepthAttachment)
         .setup(move |gpu, res| {
-            let sampler = Sampler::linear(gpu, true)?;
-            let nodes = TexelView::new(
-                gpu,
-                res.buffer(i.node_radiosity),
-                vk::Format::R32G32B32A32_SFLOAT,
-                16,
-            )?;
+            let set = res
+                .bind()
+                .uniform(0, i.frame)
+                .texel(1, i.node_radiosity, Item::NodeRadiosity.format())
+                .storage_image(2, i.local)
+                .sampled(3, i.texture, Sampler::linear(gpu, true)?)
+                .finish()?;
             let pipeline = Pipeline::graphics::<f32>(
                 gpu,
                 PassName::Composite.as_str(),
@@ -83,14 +84,8 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     depth_bias: None,
                     fragment_constants: &[i.textured as u32],
                 },
-                &[
-                    Binding::Uniform(res.buffer(i.frame).raw),
-                    Binding::TexelBuffer(nodes.raw),
-                    Binding::StorageImage(res.image(i.local).view),
-                    Binding::Sampled(res.image(i.texture).view, sampler.raw),
-                ],
-            )?
-            .owning((sampler, nodes));
+                set,
+            )?;
             let hdr = res.image(t.hdr).clone();
             let display = res.image(t.display).clone();
             let depth = res.image(t.depth).clone();

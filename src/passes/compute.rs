@@ -2,10 +2,9 @@
 //! Each dispatches one invocation per covered texel or per node, 64 to a workgroup.
 
 use super::PassName;
-use crate::gpu::{shaders, Binding, Pipeline, TexelView};
+use crate::gpu::{shaders, Pipeline, Sampler};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
-use ash::vk;
-use std::sync::Arc;
+use crate::layout::Item;
 
 /// Invocations per workgroup of the 1D compute shaders.
 const GROUP: u32 = 64;
@@ -35,16 +34,6 @@ fn dispatch<P: bytemuck::Pod>(
     };
 }
 
-fn view(
-    gpu: &Arc<crate::gpu::Gpu>,
-    res: &crate::graph::Resources,
-    id: ResourceId,
-    format: vk::Format,
-    bytes: u64,
-) -> anyhow::Result<TexelView> {
-    Ok(TexelView::new(gpu, res.buffer(id), format, bytes)?)
-}
-
 /// `dilate`: fills partly covered texels of `map` from rasterised neighbours of their chart;
 /// `texels` lists the covered texels whose centre a triangle may miss.
 pub fn dilate(
@@ -60,19 +49,18 @@ pub fn dilate(
         .access(charts, Access::Sampled(Stage::Compute))
         .access(map, Access::StorageReadWrite(Stage::Compute))
         .setup(move |gpu, res| {
-            let texel_view = view(gpu, res, texels, vk::Format::R32_UINT, 4)?;
-            let sampler = crate::gpu::Sampler::nearest(gpu)?;
+            let set = res
+                .bind()
+                .texel(0, texels, Item::DilateTexels.format())
+                .sampled(1, charts, Sampler::nearest(gpu)?)
+                .storage_image(2, map)
+                .finish()?;
             let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Dilate.as_str(),
                 shaders::DILATE_COMP,
-                &[
-                    Binding::TexelBuffer(texel_view.raw),
-                    Binding::Sampled(res.image(charts).view, sampler.raw),
-                    Binding::StorageImage(res.image(map).view),
-                ],
-            )?
-            .owning((texel_view, sampler));
+                set,
+            )?;
             Ok(Box::new(move |rec| {
                 dispatch(rec, &pipeline, &texel_count, texel_count);
             }))
@@ -109,30 +97,21 @@ pub fn local(graph: &mut RenderGraph, i: LocalInputs, out: ResourceId) {
         .access(i.map, Access::StorageRead(Stage::Compute))
         .access(out, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
-            let texel_view = view(gpu, res, i.texels, vk::Format::R32_UINT, 4)?;
-            let kernel_view = view(gpu, res, i.kernels, vk::Format::R32G32B32A32_UINT, 16)?;
-            let seam_row_view = view(gpu, res, i.seam_rows, vk::Format::R32_UINT, 4)?;
-            let seam_view = view(
-                gpu,
-                res,
-                i.seam_entries,
-                vk::Format::R32G32B32A32_SFLOAT,
-                16,
-            )?;
+            let set = res
+                .bind()
+                .texel(0, i.texels, Item::CoveredTexels.format())
+                .texel(1, i.kernels, Item::Kernels.format())
+                .storage_image(2, i.map)
+                .storage_image(3, out)
+                .texel(4, i.seam_rows, Item::SeamRows.format())
+                .texel(5, i.seam_entries, Item::SeamEntries.format())
+                .finish()?;
             let pipeline = Pipeline::compute::<LocalPush>(
                 gpu,
                 PassName::Local.as_str(),
                 shaders::LOCAL_COMP,
-                &[
-                    Binding::TexelBuffer(texel_view.raw),
-                    Binding::TexelBuffer(kernel_view.raw),
-                    Binding::StorageImage(res.image(i.map).view),
-                    Binding::StorageImage(res.image(out).view),
-                    Binding::TexelBuffer(seam_row_view.raw),
-                    Binding::TexelBuffer(seam_view.raw),
-                ],
-            )?
-            .owning((texel_view, kernel_view, seam_row_view, seam_view));
+                set,
+            )?;
             Ok(Box::new(move |rec| {
                 let push = LocalPush {
                     count: i.texel_count,
@@ -162,21 +141,19 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
         .access(map, Access::StorageRead(Stage::Compute))
         .access(out, Access::TexelWrite(Stage::Compute))
         .setup(move |gpu, res| {
-            let rows = view(gpu, res, m.rows, vk::Format::R32_UINT, 4)?;
-            let entries = view(gpu, res, m.entries, vk::Format::R32G32_SFLOAT, 8)?;
-            let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let set = res
+                .bind()
+                .texel(0, m.rows, Item::GatherRows.format())
+                .texel(1, m.entries, Item::GatherEntries.format())
+                .storage_image(2, map)
+                .storage_texel(3, out, Item::NodeIrradiance.format())
+                .finish()?;
             let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Gather.as_str(),
                 shaders::GATHER_COMP,
-                &[
-                    Binding::TexelBuffer(rows.raw),
-                    Binding::TexelBuffer(entries.raw),
-                    Binding::StorageImage(res.image(map).view),
-                    Binding::StorageTexelBuffer(out_view.raw),
-                ],
-            )?
-            .owning((rows, entries, out_view));
+                set,
+            )?;
             Ok(Box::new(move |rec| {
                 dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
@@ -202,19 +179,19 @@ fn global_storage(graph: &mut RenderGraph, m: SparseInputs, input: ResourceId, o
         .access(input, Access::StorageRead(Stage::Compute))
         .access(out, Access::TexelWrite(Stage::Compute))
         .setup(move |gpu, res| {
-            let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let set = res
+                .bind()
+                .storage_buffer(0, m.rows)
+                .storage_buffer(1, m.entries)
+                .storage_buffer(2, input)
+                .storage_texel(3, out, Item::NodeRadiosity.format())
+                .finish()?;
             let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 "global (storage buffers)",
                 shaders::GLOBAL_SSBO_COMP,
-                &[
-                    Binding::Storage(res.buffer(m.rows).raw),
-                    Binding::Storage(res.buffer(m.entries).raw),
-                    Binding::Storage(res.buffer(input).raw),
-                    Binding::StorageTexelBuffer(out_view.raw),
-                ],
-            )?
-            .owning(out_view);
+                set,
+            )?;
             Ok(Box::new(move |rec| {
                 dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))
@@ -239,22 +216,19 @@ pub fn global(
         .access(input, Access::TexelRead(Stage::Compute))
         .access(out, Access::TexelWrite(Stage::Compute))
         .setup(move |gpu, res| {
-            let rows = view(gpu, res, m.rows, vk::Format::R32_UINT, 4)?;
-            let entries = view(gpu, res, m.entries, vk::Format::R32G32B32A32_UINT, 16)?;
-            let in_view = view(gpu, res, input, vk::Format::R32G32B32A32_SFLOAT, 16)?;
-            let out_view = view(gpu, res, out, vk::Format::R32G32B32A32_SFLOAT, 16)?;
+            let set = res
+                .bind()
+                .texel(0, m.rows, Item::GlobalRows.format())
+                .texel(1, m.entries, Item::GlobalEntries.format())
+                .texel(2, input, Item::NodeIrradiance.format())
+                .storage_texel(3, out, Item::NodeRadiosity.format())
+                .finish()?;
             let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Global.as_str(),
                 shaders::GLOBAL_COMP,
-                &[
-                    Binding::TexelBuffer(rows.raw),
-                    Binding::TexelBuffer(entries.raw),
-                    Binding::TexelBuffer(in_view.raw),
-                    Binding::StorageTexelBuffer(out_view.raw),
-                ],
-            )?
-            .owning((rows, entries, in_view, out_view));
+                set,
+            )?;
             Ok(Box::new(move |rec| {
                 dispatch(rec, &pipeline, &m.row_count, m.row_count);
             }))

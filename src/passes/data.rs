@@ -19,7 +19,7 @@
 //! So B^T = B / T_p at texel and node scale, and T restores the detail per fragment.
 
 use crate::gpu::{Buffer, Gpu, GpuResult, Image};
-use crate::preprocess::layout::{kernel_pairs, KERNEL_PAIR_BYTES};
+use crate::layout::{kernel_pairs, Item};
 use crate::preprocess::{operators::Blend, Preprocessed};
 use crate::scene::Scene;
 use ash::vk;
@@ -75,6 +75,8 @@ pub struct AtlasVertex {
     /// Their weights (location 5).
     pub weights: [f32; 3],
 }
+
+const _: () = assert!(std::mem::size_of::<AtlasVertex>() as u64 == Item::AtlasVertices.bytes());
 
 /// Vertex input binding of [`AtlasVertex`].
 pub const ATLAS_VERTEX_BINDINGS: [vk::VertexInputBindingDescription; 1] =
@@ -239,12 +241,19 @@ pub fn texture_means(scene: &Scene, pre: &Preprocessed) -> (Vec<[f64; 3]>, Vec<[
     (texel, node)
 }
 
+/// Uploads `data` as `item`, whose table entry states its element size (checked here).
 fn upload<T: Pod>(
     gpu: &Arc<Gpu>,
-    name: &str,
+    item: Item,
     data: &[T],
     usage: vk::BufferUsageFlags,
 ) -> GpuResult<Arc<Buffer>> {
+    assert_eq!(
+        std::mem::size_of::<T>() as u64,
+        item.bytes(),
+        "{item:?} is uploaded with another element size than the layout table's"
+    );
+    let name = item.name();
     let raw: &[u8] = bytemuck::cast_slice(data);
     let padded;
     let raw = if raw.is_empty() {
@@ -254,6 +263,41 @@ fn upload<T: Pod>(
         raw
     };
     Ok(Arc::new(Buffer::with_data(gpu, name, raw, usage)?))
+}
+
+/// The element count of every item of device data (`crate::layout`) for rendering `scene`
+/// with `pre` in `mode`.
+pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::Counts {
+    let a = &pre.atlas;
+    let o = &pre.ops;
+    crate::layout::Counts {
+        atlas_vertices: a.vertex_mesh.len() as u64,
+        atlas_indices: a.indices.len() as u64,
+        texels: a.texels.len() as u64,
+        dilate_texels: a.centres_surely_covered().iter().filter(|s| !**s).count() as u64,
+        atlas_texels: a.width as u64 * a.height as u64,
+        kernel_size: o.kernel_size,
+        seam_taps: if mode.seam_taps() {
+            o.seams.nnz() as u64
+        } else {
+            0
+        },
+        nodes: pre.nodes.positions.len().max(1) as u64,
+        gather_entries: o.gather.cols.len() as u64,
+        global_pairs: global_entry_pairs(o, mode),
+        texture_pixels: scene
+            .texture
+            .as_ref()
+            .map(|t| t.width() as u64 * t.height() as u64)
+            .unwrap_or(1),
+        shadow_side: crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0 as u64,
+        shadow_layers: scene
+            .lights
+            .iter()
+            .map(|l| crate::scene::shadow::layers_of(l) as u64)
+            .sum(),
+        pixels: scene.width as u64 * scene.height as u64,
+    }
 }
 
 /// Device memory a renderer needs, per resource, computed before anything is allocated.
@@ -272,78 +316,40 @@ pub struct Requirements {
 }
 
 impl Requirements {
-    /// What rendering `scene` with `pre` in `mode` allocates on the device.
+    /// What rendering `scene` with `pre` in `mode` allocates on the device: every item of
+    /// [`crate::layout::Item`] with its bytes.
     pub fn of(scene: &Scene, pre: &Preprocessed, mode: Blend) -> Requirements {
-        let a = &pre.atlas;
-        let o = &pre.ops;
-        let texels = a.texels.len() as u64;
-        let nodes = pre.nodes.positions.len().max(1) as u64;
-        let atlas_px = a.width as u64 * a.height as u64;
-        let pixels = scene.width as u64 * scene.height as u64;
-        let shadow_map = crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0;
-        let layers: u64 = scene
-            .lights
+        use crate::layout::Item;
+        let c = counts(scene, pre, mode);
+        let items: Vec<(String, u64)> = Item::ALL
             .iter()
-            .map(|l| crate::scene::shadow::layers_of(l) as u64)
-            .sum();
-        let pairs = global_entry_pairs(o, mode);
-        let seam_taps = if mode.seam_taps() {
-            o.seams.nnz() as u64
-        } else {
-            0
-        };
-        let tex = scene
-            .texture
-            .as_ref()
-            .map(|t| t.width() as u64 * t.height() as u64 * 4)
-            .unwrap_or(4);
-        let items: Vec<(String, u64)> = vec![
-            ("atlas vertices".into(), a.vertex_mesh.len() as u64 * 80),
-            ("atlas indices".into(), a.indices.len() as u64 * 4),
-            ("covered texels".into(), texels * 4),
-            (
-                "texels to dilate".into(),
-                a.centres_surely_covered().iter().filter(|s| !**s).count() as u64 * 4,
-            ),
-            ("chart ids".into(), atlas_px * 4),
-            (
-                "kernels".into(),
-                texels * kernel_pairs(o.kernel_size) as u64 * KERNEL_PAIR_BYTES,
-            ),
-            ("seam taps".into(), (texels + 1) * 4 + seam_taps * 16),
-            (
-                "gather".into(),
-                (nodes + 1) * 4 + o.gather.cols.len() as u64 * 8,
-            ),
-            ("global".into(), (nodes + 1) * 4 + pairs * 16),
-            ("texture".into(), tex),
-            ("illumination map".into(), atlas_px * 16),
-            ("local response".into(), atlas_px * 16),
-            ("node irradiance + radiosity".into(), 2 * nodes * 16),
-            (
-                "shadow maps".into(),
-                (shadow_map as u64).pow(2) * 4 * layers,
-            ),
-            ("radiance + depth + display".into(), pixels * 24),
-            ("readbacks".into(), pixels * 20),
-        ];
+            .map(|&i| (i.name().to_string(), c.bytes(i)))
+            .collect();
+        let a = &pre.atlas;
         Requirements {
             total: items.iter().map(|i| i.1).sum(),
             largest_texel_buffer: [
-                texels * kernel_pairs(o.kernel_size) as u64,
-                pairs,
-                o.gather.cols.len() as u64,
-                texels + 1,
-                seam_taps,
+                Item::Kernels,
+                Item::GlobalEntries,
+                Item::GatherEntries,
+                Item::SeamRows,
+                Item::SeamEntries,
+            ]
+            .into_iter()
+            .map(|i| c.elements(i))
+            .max()
+            .unwrap_or(0),
+            largest_image_side: [
+                a.width,
+                a.height,
+                scene.width,
+                scene.height,
+                c.shadow_side as u32,
             ]
             .into_iter()
             .max()
             .unwrap_or(0),
-            largest_image_side: [a.width, a.height, scene.width, scene.height, shadow_map]
-                .into_iter()
-                .max()
-                .unwrap_or(0),
-            nodes,
+            nodes: c.nodes,
             items,
         }
     }
@@ -422,19 +428,19 @@ impl SubsurfaceData {
             .collect();
         let vertices = upload(
             gpu,
-            "atlas vertices",
+            Item::AtlasVertices,
             &vertices,
             vk::BufferUsageFlags::VERTEX_BUFFER,
         )?;
         let indices = upload(
             gpu,
-            "atlas indices",
+            Item::AtlasIndices,
             &atlas.indices,
             vk::BufferUsageFlags::INDEX_BUFFER,
         )?;
 
         let packed: Vec<u32> = atlas.texels.iter().map(|t| t.x | (t.y << 16)).collect();
-        let texels = upload(gpu, "covered texels", &packed, texel_usage)?;
+        let texels = upload(gpu, Item::CoveredTexels, &packed, texel_usage)?;
         let sure = atlas.centres_surely_covered();
         let to_dilate: Vec<u32> = packed
             .iter()
@@ -443,15 +449,15 @@ impl SubsurfaceData {
             .map(|(&p, _)| p)
             .collect();
         let dilate_count = to_dilate.len() as u32;
-        let dilate_texels = upload(gpu, "texels to dilate", &to_dilate, texel_usage)?;
+        let dilate_texels = upload(gpu, Item::DilateTexels, &to_dilate, texel_usage)?;
         let mut chart_ids = vec![0u32; (atlas.width * atlas.height) as usize];
         for t in &atlas.texels {
             chart_ids[(t.y * atlas.width + t.x) as usize] = t.chart + 1;
         }
         let charts = Arc::new(Image::from_pixels(
             gpu,
-            "chart ids",
-            vk::Format::R32_UINT,
+            Item::ChartIds.name(),
+            Item::ChartIds.format(),
             atlas.width,
             atlas.height,
             bytemuck::cast_slice(&chart_ids),
@@ -492,7 +498,7 @@ impl SubsurfaceData {
                 }
             }
         }
-        let kernels = upload(gpu, "kernels", &kernels, texel_usage)?;
+        let kernels = upload(gpu, Item::Kernels, &kernels, texel_usage)?;
         let mut seam_rows = vec![0u32];
         let mut seam_entries: Vec<[f32; 4]> = Vec::new();
         for t in 0..atlas.texels.len() {
@@ -509,10 +515,10 @@ impl SubsurfaceData {
             }
             seam_rows.push(seam_entries.len() as u32);
         }
-        let seam_rows = upload(gpu, "seam rows", &seam_rows, texel_usage)?;
-        let seam_entries = upload(gpu, "seam entries", &seam_entries, texel_usage)?;
+        let seam_rows = upload(gpu, Item::SeamRows, &seam_rows, texel_usage)?;
+        let seam_entries = upload(gpu, Item::SeamEntries, &seam_entries, texel_usage)?;
 
-        let gather_rows = upload(gpu, "gather rows", &ops.gather.row_start, texel_usage)?;
+        let gather_rows = upload(gpu, Item::GatherRows, &ops.gather.row_start, texel_usage)?;
         let gather_entries: Vec<[f32; 2]> = ops
             .gather
             .cols
@@ -520,7 +526,7 @@ impl SubsurfaceData {
             .zip(&ops.gather.vals)
             .map(|(&t, &w)| [f32::from_bits(packed[t as usize]), w])
             .collect();
-        let gather_entries = upload(gpu, "gather entries", &gather_entries, texel_usage)?;
+        let gather_entries = upload(gpu, Item::GatherEntries, &gather_entries, texel_usage)?;
 
         // Two entries per 16-byte fetch, weights in half precision: the pass's cost on
         // lavapipe follows its fetches (3 instead of 4 per two entries), and the matrix, the
@@ -561,14 +567,14 @@ impl SubsurfaceData {
         } else {
             texel_usage
         };
-        let global_rows = upload(gpu, "global rows", &rows, global_usage)?;
-        let global_entries = upload(gpu, "global entries", &entries, global_usage)?;
+        let global_rows = upload(gpu, Item::GlobalRows, &rows, global_usage)?;
+        let global_entries = upload(gpu, Item::GlobalEntries, &entries, global_usage)?;
 
         let texture = match &scene.texture {
             Some(t) => Image::from_pixels(
                 gpu,
-                "albedo texture",
-                vk::Format::R8G8B8A8_SRGB,
+                Item::Texture.name(),
+                Item::Texture.format(),
                 t.width(),
                 t.height(),
                 t.as_raw(),

@@ -4,12 +4,13 @@
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::PassName;
 use super::{draw_mesh, DrawTarget, MeshDraw};
-use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline, Sampler};
+use crate::gpu::{shaders, GraphicsDesc, Pipeline, Sampler};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
+use crate::layout::Item;
 use ash::vk;
 
 /// Format of the illumination map (alpha: 1 rasterised, 0.5 dilated, 0 empty).
-pub const FORMAT: vk::Format = vk::Format::R32G32B32A32_SFLOAT;
+pub const FORMAT: vk::Format = Item::IlluminationMap.format();
 
 /// Resources the pass reads.
 pub struct IllumInputs {
@@ -35,7 +36,11 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
         .access(inputs.shadow_maps, Access::Sampled(Stage::Fragment))
         .access(map, Access::ColorAttachment)
         .setup(move |gpu, res| {
-            let sampler = Sampler::shadow(gpu)?;
+            let set = res
+                .bind()
+                .uniform(0, inputs.frame)
+                .sampled(1, inputs.shadow_maps, Sampler::shadow(gpu)?)
+                .finish()?;
             let pipeline = Pipeline::graphics::<[f32; 2]>(
                 gpu,
                 PassName::Illum.as_str(),
@@ -55,12 +60,8 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                     fragment_constants: &[],
                     depth_bias: None,
                 },
-                &[
-                    Binding::Uniform(res.buffer(inputs.frame).raw),
-                    Binding::Sampled(res.image(inputs.shadow_maps).view, sampler.raw),
-                ],
-            )?
-            .owning(sampler);
+                set,
+            )?;
             let map = res.image(map).clone();
             let mesh = MeshDraw {
                 vertices: res.buffer(inputs.vertices).raw,

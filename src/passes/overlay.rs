@@ -3,7 +3,7 @@
 //! rewrites between frames (the frame before has finished by then: frames are synchronous).
 
 use super::PassName;
-use crate::gpu::{shaders, Binding, Buffer, Gpu, Pipeline};
+use crate::gpu::{shaders, Buffer, Gpu, Pipeline};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use anyhow::Result;
 use ash::vk;
@@ -130,6 +130,12 @@ pub fn add(
         .access(window, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let out = res.image(window);
+            let set = res
+                .bind()
+                .storage_image(0, display)
+                .storage_image(1, window)
+                .storage_buffer(2, text)
+                .finish()?;
             let pipeline = Pipeline::compute::<OverlayPush>(
                 gpu,
                 PassName::Overlay.as_str(),
@@ -138,11 +144,7 @@ pub fn add(
                 } else {
                     shaders::OVERLAY_COMP
                 },
-                &[
-                    Binding::StorageImage(res.image(display).view),
-                    Binding::StorageImage(out.view),
-                    Binding::Storage(res.buffer(text).raw),
-                ],
+                set,
             )?;
             let extent = out.info.extent;
             let push = OverlayPush {

@@ -4,12 +4,13 @@
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::PassName;
 use super::{draw_mesh, DrawTarget, MeshDraw};
-use crate::gpu::{shaders, Binding, GraphicsDesc, Pipeline};
+use crate::gpu::{shaders, GraphicsDesc, Pipeline};
 use crate::graph::{Access, RenderGraph, ResourceId, Stage};
+use crate::layout::Item;
 use ash::vk;
 
 /// Format of the shadow maps.
-pub const FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+pub const FORMAT: vk::Format = Item::ShadowMaps.format();
 
 /// Resources the shadow pass touches.
 pub struct ShadowInputs {
@@ -34,6 +35,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
         .access(inputs.indices, Access::IndexBuffer)
         .access(maps, Access::DepthAttachment)
         .setup(move |gpu, res| {
+            let set = res.bind().uniform(0, inputs.frame).finish()?;
             let pipeline = Pipeline::graphics::<u32>(
                 gpu,
                 PassName::Shadow.as_str(),
@@ -48,7 +50,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                     fragment_constants: &[],
                     depth_bias: Some((1.0, 1.5)),
                 },
-                &[Binding::Uniform(res.buffer(inputs.frame).raw)],
+                set,
             )?;
             let maps = res.image(maps).clone();
             let mesh = MeshDraw {

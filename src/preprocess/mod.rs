@@ -5,7 +5,6 @@
 pub mod apply;
 pub mod atlas;
 pub mod cache;
-pub mod layout;
 pub mod nodes;
 pub mod operators;
 pub mod settings;
@@ -119,19 +118,33 @@ pub fn estimate(mesh: &Mesh, s: &Settings) -> Estimate {
     let by_spacing = (area / (0.866 * s.node_spacing_mm * s.node_spacing_mm)).ceil() as u64;
     let nodes = (mesh.positions.len() as u64).min(by_spacing.max(4));
     let kk = (s.kernel_size * s.kernel_size) as u64;
-    let kernel_elements = texels * layout::kernel_pairs(s.kernel_size) as u64;
-    // Charts with their gutters cover about a quarter of the atlas (measured on the bunny).
-    let atlas = 4 * texels;
-    // Kernels, and over the atlas the illumination map and local response (RGBA32F) and the
-    // chart ids (R32UI).
-    let device_bytes_min = kernel_elements * layout::KERNEL_PAIR_BYTES + atlas * (2 * 16 + 4);
+    use crate::layout::{Counts, Item};
+    let counts = Counts {
+        texels,
+        // Charts with their gutters cover about a quarter of the atlas (measured on the bunny).
+        atlas_texels: 4 * texels,
+        kernel_size: s.kernel_size,
+        nodes,
+        // Nothing pruned: every row full.
+        global_pairs: nodes * nodes.div_ceil(2),
+        ..Counts::default()
+    };
+    let kernel_elements = counts.elements(Item::Kernels);
+    // What does not depend on pruning: kernels, and over the atlas the illumination map, the
+    // local response and the chart ids.
+    let device_bytes_min = counts.sum(&[
+        Item::Kernels,
+        Item::IlluminationMap,
+        Item::LocalResponse,
+        Item::ChartIds,
+    ]);
     let threads = rayon::current_num_threads().max(1) as f64;
     Estimate {
         texels,
         nodes,
         dense_entries: nodes * nodes,
         device_bytes_min,
-        device_bytes_max: device_bytes_min + 2 * nodes * nodes * 16,
+        device_bytes_max: device_bytes_min + counts.bytes(Item::GlobalEntries),
         kernel_elements,
         seconds: (2.5e-7 * (texels * kk) as f64 + 3.0e-7 * (nodes * nodes) as f64) * 2.0 / threads,
     }

@@ -1,0 +1,285 @@
+//! Every buffer and image the renderer keeps on the device, with its element format and size,
+//! stated once. The upload (`passes::data`), the passes' texel views, the memory report
+//! (`Requirements`), the estimate made before preprocessing and the bench's traffic model all
+//! read this table; the element counts come from [`Counts`], filled from a preprocessed scene
+//! or, before preprocessing, from the estimate's guesses.
+
+use ash::vk;
+
+/// One item of device data.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Item {
+    /// Atlas mesh vertices (`passes::data::AtlasVertex`).
+    AtlasVertices,
+    /// Atlas mesh indices.
+    AtlasIndices,
+    /// Covered texels, `x | y << 16`.
+    CoveredTexels,
+    /// Covered texels whose centre a triangle may miss, packed like the covered texels.
+    DilateTexels,
+    /// Chart id + 1 per atlas texel.
+    ChartIds,
+    /// Kernels: two f16 rgb taps per element (halves 0-2 and 3-5), beta in the centre tap.
+    Kernels,
+    /// Seam-tap CSR row starts, one more than covered texels.
+    SeamRows,
+    /// Seam-tap entries: source texel bits as a float, rgb weight.
+    SeamEntries,
+    /// Gather CSR row starts, one more than nodes.
+    GatherRows,
+    /// Gather entries: texel bits as a float, weight.
+    GatherEntries,
+    /// Global CSR row starts (in entry pairs), one more than nodes.
+    GlobalRows,
+    /// Global entry pairs: `p0 | p1 << 16`, then two rgb weights as six f16.
+    GlobalEntries,
+    /// The albedo texture (sRGB; 1x1 white without one).
+    Texture,
+    /// The illumination map over the atlas.
+    IlluminationMap,
+    /// The local response over the atlas.
+    LocalResponse,
+    /// Irradiance per node.
+    NodeIrradiance,
+    /// Radiosity per node.
+    NodeRadiosity,
+    /// Shadow maps, one layer per directional or spot light, six per point light.
+    ShadowMaps,
+    /// Linear radiance per output pixel.
+    Radiance,
+    /// Depth per output pixel.
+    Depth,
+    /// Tone-mapped display image.
+    Display,
+    /// Host-visible copy of the radiance.
+    RadianceReadback,
+    /// Host-visible copy of the display image.
+    DisplayReadback,
+}
+
+impl Item {
+    /// Every item, in the memory report's order.
+    pub const ALL: [Item; 23] = [
+        Item::AtlasVertices,
+        Item::AtlasIndices,
+        Item::CoveredTexels,
+        Item::DilateTexels,
+        Item::ChartIds,
+        Item::Kernels,
+        Item::SeamRows,
+        Item::SeamEntries,
+        Item::GatherRows,
+        Item::GatherEntries,
+        Item::GlobalRows,
+        Item::GlobalEntries,
+        Item::Texture,
+        Item::IlluminationMap,
+        Item::LocalResponse,
+        Item::NodeIrradiance,
+        Item::NodeRadiosity,
+        Item::ShadowMaps,
+        Item::Radiance,
+        Item::Depth,
+        Item::Display,
+        Item::RadianceReadback,
+        Item::DisplayReadback,
+    ];
+
+    /// Its name: the Vulkan object's debug name and the memory report's label.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Item::AtlasVertices => "atlas vertices",
+            Item::AtlasIndices => "atlas indices",
+            Item::CoveredTexels => "covered texels",
+            Item::DilateTexels => "texels to dilate",
+            Item::ChartIds => "chart ids",
+            Item::Kernels => "kernels",
+            Item::SeamRows => "seam rows",
+            Item::SeamEntries => "seam entries",
+            Item::GatherRows => "gather rows",
+            Item::GatherEntries => "gather entries",
+            Item::GlobalRows => "global rows",
+            Item::GlobalEntries => "global entries",
+            Item::Texture => "albedo texture",
+            Item::IlluminationMap => "illumination map",
+            Item::LocalResponse => "local response",
+            Item::NodeIrradiance => "node irradiance",
+            Item::NodeRadiosity => "node radiosity",
+            Item::ShadowMaps => "shadow maps",
+            Item::Radiance => "radiance",
+            Item::Depth => "camera depth",
+            Item::Display => "display",
+            Item::RadianceReadback => "radiance readback",
+            Item::DisplayReadback => "display readback",
+        }
+    }
+
+    /// The element's format as the passes see it (`UNDEFINED` for the vertex structure, whose
+    /// attributes are listed with `AtlasVertex`).
+    pub const fn format(self) -> vk::Format {
+        use vk::Format as F;
+        match self {
+            Item::AtlasVertices => F::UNDEFINED,
+            Item::AtlasIndices
+            | Item::CoveredTexels
+            | Item::DilateTexels
+            | Item::ChartIds
+            | Item::SeamRows
+            | Item::GatherRows
+            | Item::GlobalRows => F::R32_UINT,
+            Item::Kernels | Item::GlobalEntries => F::R32G32B32A32_UINT,
+            Item::SeamEntries
+            | Item::IlluminationMap
+            | Item::LocalResponse
+            | Item::NodeIrradiance
+            | Item::NodeRadiosity
+            | Item::Radiance
+            | Item::RadianceReadback => F::R32G32B32A32_SFLOAT,
+            Item::GatherEntries => F::R32G32_SFLOAT,
+            Item::Texture => F::R8G8B8A8_SRGB,
+            Item::ShadowMaps | Item::Depth => F::D32_SFLOAT,
+            Item::Display | Item::DisplayReadback => F::R8G8B8A8_UNORM,
+        }
+    }
+
+    /// Bytes of one element.
+    pub const fn bytes(self) -> u64 {
+        use vk::Format as F;
+        if let Item::AtlasVertices = self {
+            // passes::data::AtlasVertex, asserted there. (The memory report and the bench's
+            // traffic once counted 80 bytes here by hand; the structure has 64.)
+            return 64;
+        }
+        match self.format() {
+            F::R32G32B32A32_UINT | F::R32G32B32A32_SFLOAT => 16,
+            F::R32G32_SFLOAT => 8,
+            _ => 4,
+        }
+    }
+}
+
+/// Kernel elements per covered texel for a `kernel_size` x `kernel_size` kernel: two taps to
+/// an element.
+pub fn kernel_pairs(kernel_size: u32) -> u32 {
+    (kernel_size * kernel_size).div_ceil(2)
+}
+
+/// How many elements each item has for one scene.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// Atlas mesh vertices.
+    pub atlas_vertices: u64,
+    /// Atlas mesh indices.
+    pub atlas_indices: u64,
+    /// Covered texels.
+    pub texels: u64,
+    /// Covered texels `dilate` visits.
+    pub dilate_texels: u64,
+    /// Atlas width x height.
+    pub atlas_texels: u64,
+    /// Kernel edge.
+    pub kernel_size: u32,
+    /// Seam taps in use (0 where the blending mode has none).
+    pub seam_taps: u64,
+    /// Global nodes.
+    pub nodes: u64,
+    /// Gather entries.
+    pub gather_entries: u64,
+    /// Global entry pairs of the blending mode's matrix.
+    pub global_pairs: u64,
+    /// Texture pixels (1 without a texture).
+    pub texture_pixels: u64,
+    /// Shadow-map side.
+    pub shadow_side: u64,
+    /// Shadow-map layers.
+    pub shadow_layers: u64,
+    /// Output pixels.
+    pub pixels: u64,
+}
+
+impl Counts {
+    /// Elements of `item`. A buffer holds at least one element (empty data is padded).
+    pub fn elements(&self, item: Item) -> u64 {
+        let n = match item {
+            Item::AtlasVertices => self.atlas_vertices,
+            Item::AtlasIndices => self.atlas_indices,
+            Item::CoveredTexels => self.texels,
+            Item::DilateTexels => self.dilate_texels,
+            Item::ChartIds | Item::IlluminationMap | Item::LocalResponse => self.atlas_texels,
+            Item::Kernels => self.texels * kernel_pairs(self.kernel_size) as u64,
+            Item::SeamRows => self.texels + 1,
+            Item::SeamEntries => self.seam_taps,
+            Item::GatherRows | Item::GlobalRows => self.nodes + 1,
+            Item::GatherEntries => self.gather_entries,
+            Item::GlobalEntries => self.global_pairs,
+            Item::Texture => self.texture_pixels,
+            Item::NodeIrradiance | Item::NodeRadiosity => self.nodes,
+            Item::ShadowMaps => self.shadow_side * self.shadow_side * self.shadow_layers,
+            Item::Radiance
+            | Item::Depth
+            | Item::Display
+            | Item::RadianceReadback
+            | Item::DisplayReadback => self.pixels,
+        };
+        n.max(1)
+    }
+
+    /// Bytes of `item`.
+    pub fn bytes(&self, item: Item) -> u64 {
+        self.elements(item) * item.bytes()
+    }
+
+    /// Bytes of several items.
+    pub fn sum(&self, items: &[Item]) -> u64 {
+        items.iter().map(|&i| self.bytes(i)).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_taps_to_an_element() {
+        assert_eq!(kernel_pairs(1), 1);
+        assert_eq!(kernel_pairs(7), 25);
+        assert_eq!(kernel_pairs(8), 32);
+    }
+
+    #[test]
+    fn element_sizes_follow_the_formats() {
+        for item in Item::ALL {
+            if item.format() != vk::Format::UNDEFINED && item != Item::Texture {
+                let texel = crate::gpu::resources::texel_format_bytes(item.format());
+                if let Some(b) = texel {
+                    assert_eq!(b, item.bytes(), "{item:?}");
+                }
+            }
+        }
+        assert_eq!(Item::Kernels.bytes(), 16);
+        assert_eq!(Item::GatherEntries.bytes(), 8);
+        assert_eq!(Item::ShadowMaps.bytes(), 4);
+        let names: std::collections::BTreeSet<_> = Item::ALL.iter().map(|i| i.name()).collect();
+        assert_eq!(names.len(), Item::ALL.len());
+    }
+
+    #[test]
+    fn counts_give_bytes() {
+        let c = Counts {
+            texels: 10,
+            kernel_size: 7,
+            nodes: 3,
+            shadow_side: 8,
+            shadow_layers: 6,
+            ..Counts::default()
+        };
+        assert_eq!(c.bytes(Item::Kernels), 10 * 25 * 16);
+        assert_eq!(c.bytes(Item::GlobalRows), 4 * 4);
+        assert_eq!(c.bytes(Item::ShadowMaps), 8 * 8 * 6 * 4);
+        assert_eq!(
+            c.bytes(Item::SeamEntries),
+            16,
+            "empty buffers hold one element"
+        );
+    }
+}
