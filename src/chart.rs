@@ -86,44 +86,29 @@ pub fn sweep(
     };
     let mut out = vec![("auto".to_string(), base)];
     let kernels: &[u32] = if quick { &[5] } else { &[5, 7, 9, 11] };
-    for &k in kernels.iter().filter(|k| **k != auto.kernel_size) {
-        out.push((
-            format!("kernel {k}"),
-            SettingsOverrides {
-                kernel_size: Some(k),
-                ..base
-            },
-        ));
-    }
     let texels: &[f64] = if quick { &[2.0] } else { &[0.5, 0.7, 1.4, 2.0] };
-    for &f in texels {
-        out.push((
-            format!("texel x{f}"),
-            SettingsOverrides {
-                texel_mm: Some(auto.texel_mm * f),
-                ..base
-            },
-        ));
-    }
     let spacings: &[f64] = if quick { &[] } else { &[0.5, 2.0] };
-    for &f in spacings {
-        out.push((
-            format!("nodes x{f}"),
-            SettingsOverrides {
-                node_spacing_mm: Some(auto.node_spacing_mm * f),
-                ..base
-            },
-        ));
-    }
     let prunes: &[f64] = if quick { &[0.05] } else { &[0.001, 0.02, 0.05] };
+    let mut vary = |label: String, change: &dyn Fn(&mut SettingsOverrides)| {
+        let mut o = base;
+        change(&mut o);
+        out.push((label, o));
+    };
+    for &k in kernels.iter().filter(|k| **k != auto.kernel_size) {
+        vary(format!("kernel {k}"), &|o| o.kernel_size = Some(k));
+    }
+    for &f in texels {
+        vary(format!("texel x{f}"), &|o| {
+            o.texel_mm = Some(auto.texel_mm * f)
+        });
+    }
+    for &f in spacings {
+        vary(format!("nodes x{f}"), &|o| {
+            o.node_spacing_mm = Some(auto.node_spacing_mm * f)
+        });
+    }
     for &p in prunes {
-        out.push((
-            format!("prune {p}"),
-            SettingsOverrides {
-                prune_tolerance: Some(p),
-                ..base
-            },
-        ));
+        vary(format!("prune {p}"), &|o| o.prune_tolerance = Some(p));
     }
     out
 }

@@ -438,7 +438,7 @@ fn estimate_bounds_the_requirements() {
         let r = Requirements::of(&scene, &pre, Blend::Optimized);
         let item = |name: &str| r.items.iter().find(|i| i.0 == name).unwrap().1;
         let kernel_elements = pre.atlas.texels.len() as u64
-            * translucent::preprocess::layout::kernel_pairs(pre.settings.kernel_size) as u64;
+            * translucent::layout::kernel_pairs(pre.settings.kernel_size) as u64;
         let bytes = item("kernels") + item("illumination map") + item("local response") + item("chart ids");
         for (name, estimated, real) in [
             ("kernel elements", e.kernel_elements, kernel_elements),
@@ -451,5 +451,43 @@ fn estimate_bounds_the_requirements() {
                 "{what}: {name} estimated {estimated}, needed {real}"
             );
         }
+    }
+}
+
+/// Preprocessing is a function of its inputs: the same scene and settings give the same atlas,
+/// nodes and operators, bit for bit, whatever the threads' timing and hash-map order (the
+/// atlas, the nodes and the operators are built in parallel and through hash maps; the cache
+/// and the byte-identity checks of refactors rely on this).
+#[test]
+fn preprocessing_is_deterministic() {
+    let scene = Scene::from_desc(
+        translucent::scene::desc::SceneDesc::parse("[output]\nwidth = 96\nheight = 96\n").unwrap(),
+        std::path::Path::new(""),
+        &Overrides::default(),
+    )
+    .unwrap();
+    let choice =
+        translucent::preprocess::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
+    let build = || {
+        let mut p = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
+        p.ops.seconds = [0.0; 3];
+        p.times = Default::default();
+        p
+    };
+    let first = build();
+    for run in 1..4 {
+        let again = build();
+        assert!(first.atlas == again.atlas, "run {run}: the atlas differs");
+        assert!(first.nodes == again.nodes, "run {run}: the nodes differ");
+        let (a, b) = (&first.ops, &again.ops);
+        assert!(a.kernels == b.kernels, "run {run}: kernels differ");
+        assert!(a.seams == b.seams, "run {run}: seam taps differ");
+        assert!(a.global == b.global, "run {run}: F differs");
+        assert!(a.optimized == b.optimized, "run {run}: the fit differs");
+        assert!(
+            a.direct_optimized == b.direct_optimized,
+            "run {run}: beta differs"
+        );
+        assert!(first == again, "run {run}: the preprocessing differs");
     }
 }

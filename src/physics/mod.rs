@@ -2,6 +2,8 @@
 
 pub mod dipole;
 pub mod material;
+pub mod rgb;
 
 pub use dipole::{fresnel_diffuse_reflectance, fresnel_transmittance, Dipole};
 pub use material::{Material, MaterialError};
+pub use rgb::Rgb;

@@ -44,13 +44,23 @@
 
 use super::atlas::Atlas;
 use super::nodes::Nodes;
-use crate::physics::{Dipole, Material};
+use crate::physics::{Dipole, Material, Rgb};
 use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Pairs closer than this many node spacings get the integrated (not lumped) F entry.
 pub const NEAR_SPACINGS: f64 = 2.5;
+
+/// Edge, in texels, of the reference window the optimized blending's fit matches around each
+/// receiver texel (the paper's 9x9). It is the fit's reach, not the kernel's: with a smaller
+/// kernel the fitted global entries take over what the window holds beyond the kernel.
+pub const FIT_WINDOW_TEXELS: f64 = 9.0;
+
+/// Ridge weight of the fit's prior (the unfitted F entries), relative to the mean diagonal of
+/// its normal equations: enough to keep rows with few constraining texels well posed, small
+/// enough not to pull the fit away from the reference where it is constrained.
+pub const FIT_RIDGE: f64 = 1e-3;
 
 /// How local and global responses are combined (also the `--mode` values).
 #[derive(
@@ -150,13 +160,8 @@ impl<T: Copy> Sparse<T> {
 
 impl Csr {
     /// Sum of row `r` per channel.
-    pub fn row_sum(&self, r: usize) -> [f64; 3] {
-        self.row(r).fold([0.0; 3], |mut s, (_, v)| {
-            for c in 0..3 {
-                s[c] += v[c] as f64;
-            }
-            s
-        })
+    pub fn row_sum(&self, r: usize) -> Rgb {
+        self.row(r).map(|(_, v)| Rgb::from_f32(v)).sum()
     }
 }
 
@@ -209,7 +214,7 @@ pub struct Operators {
 /// mean, R_d + (c^2 / 24) Laplacian(R_d): R_d is convex away from its peak, so the bare
 /// midpoint rule underestimates every tap (by about 1 % of R_total in all, which showed as a
 /// uniform darkening of the slab and the bunny).
-fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64; 3] {
+fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> Rgb {
     let ts = &atlas.texels[s];
     let area = ts.area as f64;
     let xs = ts.position.as_dvec3();
@@ -218,12 +223,15 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64;
     let h = atlas.texel_mm;
     if r < rho {
         rgb(dipoles, |d| d.disc_mean(rho))
-    } else if r < 2.5 * h {
-        // Sub-samples per side: 6 next to the receiver, 3 further out.
-        let m = if r < 1.5 * h { 6 } else { 3 };
+    } else if r < SUBSAMPLE_REACH_TEXELS * h {
+        let m = if r < FINE_SUBSAMPLE_REACH_TEXELS * h {
+            FINE_SUBSAMPLES
+        } else {
+            COARSE_SUBSAMPLES
+        };
         let chart = &atlas.charts[ts.chart as usize];
         let (u, v) = chart.axes;
-        let mut acc = [0.0; 3];
+        let mut acc = Rgb::ZERO;
         let step = h / m as f64;
         let weight = 1.0 / (m * m) as f64;
         for j in 0..m {
@@ -233,9 +241,7 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64;
                     (j as f64 + 0.5) * step - 0.5 * h,
                 );
                 let ry = x.distance(xs + u * a + v * b);
-                for c in 0..3 {
-                    acc[c] += dipoles[c].rd_cell_mean(ry, step * step / 24.0) * weight;
-                }
+                acc += rgb(dipoles, |d| d.rd_cell_mean(ry, step * step / 24.0) * weight);
             }
         }
         acc
@@ -244,8 +250,18 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> [f64;
     }
 }
 
-fn rgb(dipoles: &[Dipole; 3], f: impl Fn(&Dipole) -> f64) -> [f64; 3] {
-    [f(&dipoles[0]), f(&dipoles[1]), f(&dipoles[2])]
+/// Receivers closer than this many texels to a source texel sample it (the profile is too
+/// curved there for one sample of the cell-mean rule).
+const SUBSAMPLE_REACH_TEXELS: f64 = 2.5;
+/// Receivers closer than this many texels sample it finely.
+const FINE_SUBSAMPLE_REACH_TEXELS: f64 = 1.5;
+/// Sub-samples per texel side close to the receiver.
+const FINE_SUBSAMPLES: usize = 6;
+/// Sub-samples per texel side further out.
+const COARSE_SUBSAMPLES: usize = 3;
+
+fn rgb(dipoles: &[Dipole; 3], f: impl Fn(&Dipole) -> f64) -> Rgb {
+    Rgb::from_fn(|c| f(&dipoles[c]))
 }
 
 /// Progress callback: (stage name, done, total).
@@ -309,6 +325,193 @@ fn cholesky_solve(m: &mut [f64], b: &mut [f64], n: usize) -> bool {
     true
 }
 
+/// The texel <-> node basis (see [`super::nodes`]): phi_p(t) per texel, each node's support
+/// (the texels where phi_p > 0, with phi_p), its area A_p = sum_t phi_p(t) A_t and its gather
+/// weights phi_p(t) A_t / A_p.
+struct Basis {
+    phi_rows: Vec<Vec<(u32, f32)>>,
+    supports: Vec<Vec<(u32, f32)>>,
+    node_area: Vec<f64>,
+    gather: Vec<Vec<(u32, f32)>>,
+}
+
+impl Basis {
+    fn new(atlas: &Atlas, nodes: &Nodes) -> Basis {
+        let phi_rows = texel_nodes(atlas, nodes);
+        let mut supports: Vec<Vec<(u32, f32)>> = vec![Vec::new(); nodes.positions.len()];
+        for (t, row) in phi_rows.iter().enumerate() {
+            for &(p, w) in row {
+                supports[p as usize].push((t as u32, w));
+            }
+        }
+        let weighted_area = |t: u32, w: f32| w as f64 * atlas.texels[t as usize].area as f64;
+        let node_area: Vec<f64> = supports
+            .iter()
+            .map(|s| s.iter().map(|&(t, w)| weighted_area(t, w)).sum())
+            .collect();
+        let gather = supports
+            .iter()
+            .zip(&node_area)
+            .map(|(s, &a)| {
+                s.iter()
+                    .map(|&(t, w)| {
+                        let g = if a > 0.0 {
+                            weighted_area(t, w) / a
+                        } else {
+                            0.0
+                        };
+                        (t, g as f32)
+                    })
+                    .collect()
+            })
+            .collect();
+        Basis {
+            phi_rows,
+            supports,
+            node_area,
+            gather,
+        }
+    }
+
+    /// Centroid c_p and second moment per axis m_p of each node's support (each texel adding
+    /// its own h^2 / 12), for the far pairs' second-order quadrature; a node without support
+    /// sits at its position with no spread.
+    fn moments(&self, atlas: &Atlas, positions: &[DVec3]) -> Vec<(DVec3, f64)> {
+        let weighted_area = |t: u32, w: f32| w as f64 * atlas.texels[t as usize].area as f64;
+        let at = |t: u32| atlas.texels[t as usize].position.as_dvec3();
+        self.supports
+            .iter()
+            .zip(&self.node_area)
+            .zip(positions)
+            .map(|((s, &a), &x)| {
+                if a <= 0.0 {
+                    return (x, 0.0);
+                }
+                let c = s
+                    .iter()
+                    .map(|&(t, w)| at(t) * weighted_area(t, w))
+                    .sum::<DVec3>()
+                    / a;
+                let m2 = s
+                    .iter()
+                    .map(|&(t, w)| {
+                        at(t).distance_squared(c) * w as f64 * atlas.texels[t as usize].area as f64
+                    })
+                    .sum::<f64>()
+                    / a;
+                (c, 0.5 * m2 + atlas.texel_mm * atlas.texel_mm / 12.0)
+            })
+            .collect()
+    }
+}
+
+/// The local kernels: per covered texel its k x k window of K_t(s) A_s over texels of the same
+/// chart (zero elsewhere), row-major.
+fn local_kernels(
+    atlas: &Atlas,
+    kernel_size: u32,
+    dipoles: &[Dipole; 3],
+    progress: Progress<'_>,
+) -> Vec<[f32; 3]> {
+    let n_texels = atlas.texels.len() as u64;
+    let k = kernel_size as i64;
+    let half = k / 2;
+    let done = std::sync::atomic::AtomicU64::new(0);
+    let kernels = atlas
+        .texels
+        .par_iter()
+        .flat_map_iter(|t| {
+            let xt = t.position.as_dvec3();
+            let mut out = Vec::with_capacity((k * k) as usize);
+            for dy in -half..=half {
+                for dx in -half..=half {
+                    let w = match atlas.texel_at(t.x as i64 + dx, t.y as i64 + dy) {
+                        Some(s) if atlas.texels[s].chart == t.chart => {
+                            texel_mean(atlas, s, xt, dipoles) * atlas.texels[s].area as f64
+                        }
+                        _ => Rgb::ZERO,
+                    };
+                    out.push(w.to_f32());
+                }
+            }
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if n.is_multiple_of(4096) {
+                progress("kernels", n, n_texels);
+            }
+            out
+        })
+        .collect();
+    progress("kernels", n_texels, n_texels);
+    kernels
+}
+
+/// The global F, one receiver row at a time, each pruned under `prune_tolerance`. Pairs
+/// closer than [`NEAR_SPACINGS`] sum over the source's support texels; far pairs use the
+/// second-order quadrature A_p (R_d(|c_p - x|) + m_p/2 Laplacian R_d) with the support's
+/// centroid c_p and second moment m_p.
+fn global_response(
+    atlas: &Atlas,
+    nodes: &Nodes,
+    basis: &Basis,
+    dipoles: &[Dipole; 3],
+    prune_tolerance: f64,
+    progress: Progress<'_>,
+) -> (Csr, PruneReport) {
+    let n_nodes = nodes.positions.len();
+    let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
+    let moments = basis.moments(atlas, &positions);
+    let near = NEAR_SPACINGS * nodes.spacing_mm;
+    let done = std::sync::atomic::AtomicU64::new(0);
+    let rows: Vec<PrunedRow> = (0..n_nodes)
+        .into_par_iter()
+        .map(|q| {
+            let xq = positions[q];
+            // The near field is integrated as seen from the centre of q's own texel (where
+            // phi_q peaks), so that the peak of R_d falls on that texel's exact disc mean
+            // rather than between sub-samples, the same way as in the kernels.
+            let xc = receiver_texel(&basis.supports[q])
+                .map(|c| atlas.texels[c].position.as_dvec3())
+                .unwrap_or(xq);
+            let row: Vec<(u32, Rgb)> = (0..n_nodes)
+                .map(|p| {
+                    let f = if positions[p].distance(xq) < near {
+                        basis.supports[p]
+                            .iter()
+                            .map(|&(t, w)| {
+                                let wa = w as f64 * atlas.texels[t as usize].area as f64;
+                                texel_mean(atlas, t as usize, xc, dipoles) * wa
+                            })
+                            .sum()
+                    } else {
+                        let (c, m) = moments[p];
+                        let rc = c.distance(xc);
+                        rgb(dipoles, |d| {
+                            basis.node_area[p] * d.rd_cell_mean(rc, 0.5 * m)
+                        })
+                    };
+                    (p as u32, f)
+                })
+                .collect();
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if n.is_multiple_of(256) {
+                progress("global", n, n_nodes as u64);
+            }
+            prune_row(row, prune_tolerance, q as u32)
+        })
+        .collect();
+    progress("global", n_nodes as u64, n_nodes as u64);
+    let prune = PruneReport {
+        dense_entries: (n_nodes * n_nodes) as u64,
+        kept_entries: rows.iter().map(|r| r.0.len() as u64).sum(),
+        max_dropped: rows.iter().map(|r| r.1).fold(0.0, f64::max),
+        mean_dropped: rows.iter().map(|r| r.1).sum::<f64>() / n_nodes.max(1) as f64,
+    };
+    (
+        Csr::from_rows(rows.into_iter().map(|r| r.0).collect()),
+        prune,
+    )
+}
+
 impl Operators {
     /// The global matrix blending `mode` uses, and whether its diagonal is left out (simple
     /// blending: the local response and the direct term carry the near field); none for
@@ -335,7 +538,10 @@ impl Operators {
         })
     }
 
-    /// Builds all operators. `prune_tolerance` bounds the fraction of each row of F dropped.
+    /// Builds all operators, one stage after another: the texel <-> node basis, the local
+    /// kernels and seam taps, the global F (pruned so that each row loses at most
+    /// `prune_tolerance` of its sum), the near-field fit of optimized blending and the direct
+    /// terms of both blendings.
     pub fn build(
         atlas: &Atlas,
         nodes: &Nodes,
@@ -345,172 +551,27 @@ impl Operators {
         progress: Progress<'_>,
     ) -> Operators {
         let dipoles = material.dipoles();
-        let n_nodes = nodes.positions.len();
-        let n_texels = atlas.texels.len();
-
-        // Texel -> node basis and node supports.
-        let phi_rows = texel_nodes(atlas, nodes);
-        let mut supports: Vec<Vec<(u32, f32)>> = vec![Vec::new(); n_nodes];
-        for (t, row) in phi_rows.iter().enumerate() {
-            for &(p, w) in row {
-                supports[p as usize].push((t as u32, w));
-            }
-        }
-        let node_area: Vec<f64> = supports
-            .iter()
-            .map(|s| {
-                s.iter()
-                    .map(|(t, w)| *w as f64 * atlas.texels[*t as usize].area as f64)
-                    .sum()
-            })
-            .collect();
-        let gather: Vec<Vec<(u32, f32)>> = supports
-            .iter()
-            .zip(&node_area)
-            .map(|(s, a)| {
-                s.iter()
-                    .map(|(t, w)| {
-                        (
-                            *t,
-                            if *a > 0.0 {
-                                (*w as f64 * atlas.texels[*t as usize].area as f64 / a) as f32
-                            } else {
-                                0.0
-                            },
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
+        let basis = Basis::new(atlas, nodes);
         progress("basis", 1, 1);
 
-        // Local kernels.
         let clock = std::time::Instant::now();
-        let k = kernel_size as i64;
-        let half = k / 2;
-        let done = std::sync::atomic::AtomicU64::new(0);
-        let kernels: Vec<[f32; 3]> = atlas
-            .texels
-            .par_iter()
-            .flat_map_iter(|t| {
-                let xt = t.position.as_dvec3();
-                let mut out = Vec::with_capacity((k * k) as usize);
-                for dy in -half..=half {
-                    for dx in -half..=half {
-                        let w = match atlas.texel_at(t.x as i64 + dx, t.y as i64 + dy) {
-                            Some(s) if atlas.texels[s].chart == t.chart => {
-                                let mean = texel_mean(atlas, s, xt, &dipoles);
-                                mean.map(|m| m * atlas.texels[s].area as f64)
-                            }
-                            _ => [0.0; 3],
-                        };
-                        out.push(w.map(|x| x as f32));
-                    }
-                }
-                let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if n.is_multiple_of(4096) {
-                    progress("kernels", n, n_texels as u64);
-                }
-                out
-            })
-            .collect();
-        progress("kernels", n_texels as u64, n_texels as u64);
+        let kernels = local_kernels(atlas, kernel_size, &dipoles, progress);
         let seams = seam_taps(atlas, kernel_size, &dipoles);
         let kernels_s = clock.elapsed().as_secs_f64();
-        let clock = std::time::Instant::now();
 
-        // Global F, one receiver row at a time, pruned. Far pairs: second-order quadrature of
-        // the node's support, A_p (R_d(|c_p - x|) + m_p/2 Laplacian R_d), with c_p the support's
-        // centroid and m_p its second moment per axis (each texel adding its own h^2/12).
-        let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
-        let moments: Vec<(DVec3, f64)> = supports
-            .iter()
-            .zip(&node_area)
-            .zip(&positions)
-            .map(|((s, &a), &x)| {
-                if a <= 0.0 {
-                    return (x, 0.0);
-                }
-                let c = s
-                    .iter()
-                    .map(|(t, w)| {
-                        atlas.texels[*t as usize].position.as_dvec3()
-                            * (*w as f64 * atlas.texels[*t as usize].area as f64)
-                    })
-                    .sum::<DVec3>()
-                    / a;
-                let m2 = s
-                    .iter()
-                    .map(|(t, w)| {
-                        atlas.texels[*t as usize]
-                            .position
-                            .as_dvec3()
-                            .distance_squared(c)
-                            * *w as f64
-                            * atlas.texels[*t as usize].area as f64
-                    })
-                    .sum::<f64>()
-                    / a;
-                (c, 0.5 * m2 + atlas.texel_mm * atlas.texel_mm / 12.0)
-            })
-            .collect();
-        let near = NEAR_SPACINGS * nodes.spacing_mm;
-        let done = std::sync::atomic::AtomicU64::new(0);
-        let rows: Vec<PrunedRow> = (0..n_nodes)
-            .into_par_iter()
-            .map(|q| {
-                let xq = positions[q];
-                // The near field is integrated as seen from the centre of q's own texel (where
-                // phi_q peaks), so that the peak of R_d falls on that texel's exact disc mean
-                // rather than between sub-samples, the same way as in the kernels.
-                let xc = receiver_texel(&supports[q])
-                    .map(|c| atlas.texels[c].position.as_dvec3())
-                    .unwrap_or(xq);
-                let mut row: Vec<(u32, [f64; 3])> = Vec::with_capacity(n_nodes);
-                for p in 0..n_nodes {
-                    let r = positions[p].distance(xq);
-                    let f = if r < near {
-                        let mut acc = [0.0; 3];
-                        for &(t, w) in &supports[p] {
-                            let mean = texel_mean(atlas, t as usize, xc, &dipoles);
-                            let wa = w as f64 * atlas.texels[t as usize].area as f64;
-                            for c in 0..3 {
-                                acc[c] += wa * mean[c];
-                            }
-                        }
-                        acc
-                    } else {
-                        let (c, m) = moments[p];
-                        let rc = c.distance(xc);
-                        rgb(&dipoles, |d| node_area[p] * d.rd_cell_mean(rc, 0.5 * m))
-                    };
-                    row.push((p as u32, f));
-                }
-                let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if n.is_multiple_of(256) {
-                    progress("global", n, n_nodes as u64);
-                }
-                prune_row(row, prune_tolerance, q as u32)
-            })
-            .collect();
-        progress("global", n_nodes as u64, n_nodes as u64);
-        let prune = PruneReport {
-            dense_entries: (n_nodes * n_nodes) as u64,
-            kept_entries: rows.iter().map(|r| r.0.len() as u64).sum(),
-            max_dropped: rows.iter().map(|r| r.1).fold(0.0, f64::max),
-            mean_dropped: rows.iter().map(|r| r.1).sum::<f64>() / n_nodes.max(1) as f64,
-        };
-        let global = Csr::from_rows(rows.into_iter().map(|r| r.0).collect());
+        let clock = std::time::Instant::now();
+        let (global, prune) =
+            global_response(atlas, nodes, &basis, &dipoles, prune_tolerance, progress);
         let global_s = clock.elapsed().as_secs_f64();
-        let clock = std::time::Instant::now();
 
+        let clock = std::time::Instant::now();
         let mut ops = Operators {
             kernel_size,
             kernels,
             seams,
-            texel_nodes: Csr1::from_rows(phi_rows),
-            gather: Csr1::from_rows(gather),
-            node_area: node_area.iter().map(|a| *a as f32).collect(),
+            texel_nodes: Csr1::from_rows(basis.phi_rows),
+            gather: Csr1::from_rows(basis.gather),
+            node_area: basis.node_area.iter().map(|a| *a as f32).collect(),
             global,
             optimized: Csr::default(),
             direct_simple: Vec::new(),
@@ -518,45 +579,24 @@ impl Operators {
             prune,
             seconds: [kernels_s, global_s, 0.0],
         };
-        ops.optimized = ops.fit_near_field(atlas, nodes, &dipoles, &supports, progress);
+        ops.optimized = ops.fit_near_field(atlas, nodes, &dipoles, &basis.supports, progress);
         ops.seconds[2] = clock.elapsed().as_secs_f64();
-        let simple_sums: Vec<[f64; 3]> = (0..n_nodes)
-            .map(|q| {
-                let mut s = ops.global.row_sum(q);
-                if let Some((_, d)) = ops.global.row(q).find(|(p, _)| *p as usize == q) {
-                    for c in 0..3 {
-                        s[c] -= d[c] as f64;
-                    }
-                }
-                s
-            })
-            .collect();
-        let optimized_sums: Vec<[f64; 3]> =
-            (0..n_nodes).map(|q| ops.optimized.row_sum(q)).collect();
-        ops.direct_simple = ops.direct_term(&simple_sums, Blend::Simple.seam_taps());
-        ops.direct_optimized = ops.direct_term(&optimized_sums, Blend::Optimized.seam_taps());
+        ops.direct_simple = ops.direct_term(Blend::Simple);
+        ops.direct_optimized = ops.direct_term(Blend::Optimized);
         progress("blending", 1, 1);
         ops
     }
 
     /// Sum of texel `t`'s kernel per channel (P_win): the window, plus the seam taps with
     /// `seams`.
-    pub fn kernel_sum(&self, t: usize, seams: bool) -> [f64; 3] {
+    pub fn kernel_sum(&self, t: usize, seams: bool) -> Rgb {
         let kk = (self.kernel_size * self.kernel_size) as usize;
-        let mut s = self.kernels[t * kk..(t + 1) * kk]
+        let mut s: Rgb = self.kernels[t * kk..(t + 1) * kk]
             .iter()
-            .fold([0.0; 3], |mut s, w| {
-                for c in 0..3 {
-                    s[c] += w[c] as f64;
-                }
-                s
-            });
+            .map(|&w| Rgb::from_f32(w))
+            .sum();
         if seams && t < self.seams.rows() {
-            for (_, w) in self.seams.row(t) {
-                for c in 0..3 {
-                    s[c] += w[c] as f64;
-                }
-            }
+            s = self.seams.row(t).fold(s, |s, (_, w)| s + Rgb::from_f32(w));
         }
         s
     }
@@ -587,23 +627,34 @@ impl Operators {
         }
     }
 
-    /// beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t): under locally uniform
-    /// light, kernel + beta + W then give exactly what the full F gives.
-    fn direct_term(&self, row_sums: &[[f64; 3]], seams: bool) -> Vec<[f32; 3]> {
-        let full_sums: Vec<[f64; 3]> = (0..self.global.rows())
+    /// beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t), W the global matrix
+    /// `mode` multiplies (F^0 for simple blending): under locally uniform light, kernel + beta
+    /// + W then give exactly what the full F gives.
+    fn direct_term(&self, mode: Blend) -> Vec<[f32; 3]> {
+        let used: Vec<Rgb> = match self.global_matrix(mode) {
+            None => vec![Rgb::ZERO; self.global.rows()],
+            Some((m, skip_diagonal)) => (0..m.rows())
+                .map(|q| {
+                    let diagonal = m.row(q).find(|(p, _)| *p as usize == q);
+                    match diagonal {
+                        Some((_, d)) if skip_diagonal => m.row_sum(q) - Rgb::from_f32(d),
+                        _ => m.row_sum(q),
+                    }
+                })
+                .collect(),
+        };
+        let full: Vec<Rgb> = (0..self.global.rows())
             .map(|q| self.global.row_sum(q))
             .collect();
         (0..self.kernels.len() / (self.kernel_size * self.kernel_size) as usize)
             .map(|t| {
-                let win = self.kernel_sum(t, seams);
-                let mut g = [0.0; 3];
-                for (q, phi) in self.texel_nodes.row(t) {
-                    let full = full_sums[q as usize];
-                    for c in 0..3 {
-                        g[c] += phi as f64 * (full[c] - row_sums[q as usize][c]);
-                    }
-                }
-                [0, 1, 2].map(|c| (g[c] - win[c]) as f32)
+                let win = self.kernel_sum(t, mode.seam_taps());
+                let g: Rgb = self
+                    .texel_nodes
+                    .row(t)
+                    .map(|(q, phi)| (full[q as usize] - used[q as usize]) * phi as f64)
+                    .sum();
+                (g - win).to_f32()
             })
             .collect()
     }
@@ -618,7 +669,8 @@ impl Operators {
         progress: Progress<'_>,
     ) -> Csr {
         let n_nodes = nodes.positions.len();
-        let footprint = 4.5 * atlas.texel_mm * std::f64::consts::SQRT_2;
+        // Nodes whose support can meet the reference window around the receiver texel.
+        let footprint = 0.5 * FIT_WINDOW_TEXELS * atlas.texel_mm * std::f64::consts::SQRT_2;
         let reach = footprint + nodes.spacing_mm;
         let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
         let done = std::sync::atomic::AtomicU64::new(0);
@@ -643,7 +695,7 @@ impl Operators {
                 texels.dedup();
                 let n = near.len();
                 let mut m = vec![0.0; n * n];
-                let mut rhs = vec![[0.0f64; 3]; n];
+                let mut rhs = vec![Rgb::ZERO; n];
                 // `near` and `row` are sorted by node index.
                 let col_of = |p: u32| near.binary_search(&p).ok();
                 let mut phi = Vec::with_capacity(4);
@@ -652,7 +704,7 @@ impl Operators {
                     // Kernel weight of s in c's kernel (window or seam tap), if s lies in it.
                     let kw = self.kernel_weight(atlas, c as usize, s as usize);
                     let mean = texel_mean(atlas, s as usize, xc, dipoles);
-                    let mut target = [0, 1, 2].map(|ch| mean[ch] - kw[ch] as f64 / ts.area as f64);
+                    let mut target = mean - Rgb::from_f32(kw) / ts.area as f64;
                     phi.clear();
                     for (p, w) in self.texel_nodes.row(s as usize) {
                         if let Some(i) = col_of(p) {
@@ -662,22 +714,18 @@ impl Operators {
                             // Sources outside the fitted set keep their F entry: part of the
                             // model's response that the fitted entries must not repeat.
                             let a = self.node_area[p as usize].max(1e-30) as f64;
-                            for ch in 0..3 {
-                                target[ch] -= w as f64 * f[ch] as f64 / a;
-                            }
+                            target -= Rgb::from_f32(f) * w as f64 / a;
                         }
                     }
                     for &(i, wi) in &phi {
                         for &(j, wj) in &phi {
                             m[i * n + j] += wi * wj;
                         }
-                        for ch in 0..3 {
-                            rhs[i][ch] += wi * target[ch];
-                        }
+                        rhs[i] += target * wi;
                     }
                 }
                 let trace: f64 = (0..n).map(|i| m[i * n + i]).sum::<f64>() / n.max(1) as f64;
-                let lambda = 1e-3 * trace.max(1e-30);
+                let lambda = FIT_RIDGE * trace.max(1e-30);
                 let prior: Vec<[f64; 3]> = near
                     .iter()
                     .map(|&p| {
@@ -757,7 +805,7 @@ fn seam_taps(atlas: &Atlas, kernel_size: u32, dipoles: &[Dipole; 3]) -> Csr {
                                 continue;
                             }
                             let mean = texel_mean(atlas, s as usize, x, dipoles);
-                            let w = mean.map(|m| (m * ts.area as f64) as f32);
+                            let w = (mean * ts.area as f64).to_f32();
                             row.push((s, w));
                         }
                     }
@@ -784,70 +832,39 @@ type PrunedRow = (Vec<(u32, [f32; 3])>, f64);
 /// Drops the smallest entries of a row while the dropped mass stays within `tolerance` of
 /// the row's sum in every channel, and scales the kept ones to keep the row's sum. Returns the
 /// kept entries and the dropped fraction.
-fn prune_row(
-    mut row: Vec<(u32, [f64; 3])>,
-    tolerance: f64,
-    diagonal: u32,
-) -> (Vec<(u32, [f32; 3])>, f64) {
-    let sums = row.iter().fold([0.0f64; 3], |mut s, e| {
-        for c in 0..3 {
-            s[c] += e.1[c];
-        }
-        s
-    });
-    let frac = |e: &[f64; 3]| {
-        (0..3)
-            .map(|c| if sums[c] > 0.0 { e[c] / sums[c] } else { 0.0 })
-            .fold(0.0, f64::max)
-    };
-    row.sort_by(|a, b| frac(&a.1).total_cmp(&frac(&b.1)));
-    let mut dropped = [0.0f64; 3];
+fn prune_row(mut row: Vec<(u32, Rgb)>, tolerance: f64, diagonal: u32) -> PrunedRow {
+    let sums: Rgb = row.iter().map(|e| e.1).sum();
+    let frac = |e: Rgb| e.ratio_or_zero(sums).max_channel().max(0.0);
+    row.sort_by(|a, b| frac(a.1).total_cmp(&frac(b.1)));
+    let mut dropped = Rgb::ZERO;
     let mut keep = vec![true; row.len()];
     for (i, e) in row.iter().enumerate() {
         if e.0 == diagonal {
             continue;
         }
-        let next = [0, 1, 2].map(|c| dropped[c] + e.1[c]);
+        let next = dropped + e.1;
         if (0..3).any(|c| sums[c] > 0.0 && next[c] > tolerance * sums[c]) {
             break;
         }
         dropped = next;
         keep[i] = false;
     }
-    let worst = (0..3)
-        .map(|c| {
-            if sums[c] > 0.0 {
-                dropped[c] / sums[c]
-            } else {
-                0.0
-            }
-        })
-        .fold(0.0, f64::max);
+    let worst = dropped.ratio_or_zero(sums).max_channel().max(0.0);
     // The kept entries carry the dropped mass, in proportion, so that the row's sum (the
     // response to uniform light) is the unpruned one: pruning moves a little far-field light
     // nearer instead of losing it, which would darken everything by up to the tolerance.
-    let kept_sums =
-        row.iter()
-            .zip(&keep)
-            .filter(|(_, k)| **k)
-            .fold([0.0f64; 3], |mut s, (e, _)| {
-                for c in 0..3 {
-                    s[c] += e.1[c];
-                }
-                s
-            });
-    let scale = [0, 1, 2].map(|c| {
-        if kept_sums[c] > 0.0 {
-            sums[c] / kept_sums[c]
-        } else {
-            1.0
-        }
-    });
+    let kept_sums: Rgb = row
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(e, _)| e.1)
+        .sum();
+    let scale = sums.zip(kept_sums, |s, k| if k > 0.0 { s / k } else { 1.0 });
     let mut kept: Vec<(u32, [f32; 3])> = row
         .iter()
         .zip(&keep)
         .filter(|(_, k)| **k)
-        .map(|(e, _)| (e.0, [0, 1, 2].map(|c| (e.1[c] * scale[c]) as f32)))
+        .map(|(e, _)| (e.0, (e.1 * scale).to_f32()))
         .collect();
     kept.sort_by_key(|e| e.0);
     (kept, worst)
@@ -859,11 +876,11 @@ mod tests {
 
     #[test]
     fn pruning_respects_the_tolerance_and_keeps_the_diagonal() {
-        let row: Vec<(u32, [f64; 3])> = (0..100)
+        let row: Vec<(u32, Rgb)> = (0..100)
             .map(|i| {
                 (
                     i,
-                    [1.0 / (1.0 + i as f64).powi(2), 0.01, 1.0 / (1.0 + i as f64)],
+                    Rgb([1.0 / (1.0 + i as f64).powi(2), 0.01, 1.0 / (1.0 + i as f64)]),
                 )
             })
             .collect();
