@@ -229,13 +229,13 @@ pub fn texture_means(scene: &Scene, pre: &Preprocessed) -> (Vec<[f64; 3]>, Vec<[
     };
     let node = (0..pre.ops.gather.rows())
         .map(|p| {
-            let mut m = [0.0; 3];
-            for (t, w) in pre.ops.gather.row(p) {
-                for c in 0..3 {
-                    m[c] += w as f64 * texel[t as usize][c];
-                }
-            }
-            m.map(|x| if x > 0.0 { x } else { 1.0 })
+            let m: crate::physics::Rgb = pre
+                .ops
+                .gather
+                .row(p)
+                .map(|(t, w)| crate::physics::Rgb(texel[t as usize]) * w as f64)
+                .sum();
+            m.map(|x| if x > 0.0 { x } else { 1.0 }).0
         })
         .collect();
     (texel, node)

@@ -2,6 +2,7 @@
 
 use super::atlas::Atlas;
 use super::operators::{Blend, Csr, Operators};
+use crate::physics::Rgb;
 
 /// Radiosity B per texel and per node for one illumination map.
 #[derive(Debug, Clone)]
@@ -28,33 +29,28 @@ pub fn local(
     let k = ops.kernel_size as i64;
     let half = k / 2;
     let kk = (k * k) as usize;
+    let e = |s: usize| Rgb::from_f32(irradiance[s]);
     atlas
         .texels
         .iter()
         .enumerate()
         .map(|(t, tx)| {
-            let mut b = [0.0; 3];
+            let mut b = Rgb::ZERO;
             for dy in -half..=half {
                 for dx in -half..=half {
                     if let Some(s) = atlas.texel_at(tx.x as i64 + dx, tx.y as i64 + dy) {
                         let w = ops.kernels[t * kk + ((dy + half) * k + dx + half) as usize];
-                        for c in 0..3 {
-                            b[c] += w[c] as f64 * irradiance[s][c] as f64;
-                        }
+                        b += Rgb::from_f32(w) * e(s);
                     }
                 }
             }
             for (s, w) in ops.seams.row(t).filter(|_| seams) {
-                for c in 0..3 {
-                    b[c] += w[c] as f64 * irradiance[s as usize][c] as f64;
-                }
+                b += Rgb::from_f32(w) * e(s as usize);
             }
             if let Some(beta) = direct {
-                for c in 0..3 {
-                    b[c] += beta[t][c] as f64 * irradiance[t][c] as f64;
-                }
+                b += Rgb::from_f32(beta[t]) * e(t);
             }
-            b
+            b.0
         })
         .collect()
 }
@@ -63,12 +59,11 @@ pub fn local(
 pub fn gather(ops: &Operators, irradiance: &[[f32; 3]]) -> Vec<[f64; 3]> {
     (0..ops.gather.rows())
         .map(|p| {
-            ops.gather.row(p).fold([0.0; 3], |mut e, (t, w)| {
-                for c in 0..3 {
-                    e[c] += w as f64 * irradiance[t as usize][c] as f64;
-                }
-                e
-            })
+            ops.gather
+                .row(p)
+                .map(|(t, w)| Rgb::from_f32(irradiance[t as usize]) * w as f64)
+                .sum::<Rgb>()
+                .0
         })
         .collect()
 }
@@ -77,14 +72,12 @@ pub fn gather(ops: &Operators, irradiance: &[[f32; 3]]) -> Vec<[f64; 3]> {
 pub fn global(matrix: &Csr, node_irradiance: &[[f64; 3]], skip_diagonal: bool) -> Vec<[f64; 3]> {
     (0..matrix.rows())
         .map(|q| {
-            matrix.row(q).fold([0.0; 3], |mut b, (p, w)| {
-                if !(skip_diagonal && p as usize == q) {
-                    for c in 0..3 {
-                        b[c] += w[c] as f64 * node_irradiance[p as usize][c];
-                    }
-                }
-                b
-            })
+            matrix
+                .row(q)
+                .filter(|(p, _)| !(skip_diagonal && *p as usize == q))
+                .map(|(p, w)| Rgb::from_f32(w) * Rgb(node_irradiance[p as usize]))
+                .sum::<Rgb>()
+                .0
         })
         .collect()
 }
@@ -103,21 +96,18 @@ pub fn apply(atlas: &Atlas, ops: &Operators, irradiance: &[[f32; 3]], mode: Blen
         local(atlas, ops, irradiance, direct, mode.seam_taps())
     };
     let node_irradiance = gather(ops, irradiance);
-    let node_global = match mode {
-        Blend::Local => vec![[0.0; 3]; node_irradiance.len()],
-        Blend::Global => global(&ops.global, &node_irradiance, false),
-        Blend::Simple => global(&ops.global, &node_irradiance, true),
-        Blend::Optimized => global(&ops.optimized, &node_irradiance, false),
+    let node_global = match ops.global_matrix(mode) {
+        None => vec![[0.0; 3]; node_irradiance.len()],
+        Some((matrix, skip_diagonal)) => global(matrix, &node_irradiance, skip_diagonal),
     };
     let texel = (0..n_texels)
         .map(|t| {
-            let mut b = local[t];
-            for (q, phi) in ops.texel_nodes.row(t) {
-                for c in 0..3 {
-                    b[c] += phi as f64 * node_global[q as usize][c];
-                }
-            }
-            b
+            let global: Rgb = ops
+                .texel_nodes
+                .row(t)
+                .map(|(q, phi)| Rgb(node_global[q as usize]) * phi as f64)
+                .sum();
+            (Rgb(local[t]) + global).0
         })
         .collect();
     Applied {
