@@ -7,6 +7,8 @@
 
 layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
 layout(set = 0, binding = 3) uniform sampler2D albedo_texture;
+// Single scattering along the view ray (the `single` pass), added where SINGLE.
+layout(set = 0, binding = 4) uniform sampler2D single;
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
@@ -23,6 +25,9 @@ layout(push_constant) uniform Push {
 
 // False for scenes without a texture (T = 1): the sample is compiled out.
 layout(constant_id = 0) const bool TEXTURED = true;
+// True where the model computes single scattering per frame (its profile then holds the
+// higher orders only).
+layout(constant_id = 1) const bool SINGLE = false;
 
 // The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
 // (three square roots instead of a pow, which was a third of the former tone-mapping pass on
@@ -65,7 +70,10 @@ void main() {
     if (TEXTURED) {
         b *= texture(albedo_texture, in_uv).rgb;
     }
-    vec3 l = fresnel_transmittance(frame.material.x, cos_o) * b / PI;
+    vec3 l = fresnel_transmittance(frame.material.x, cos_o) * exit_lobe(cos_o) * b / PI;
+    if (SINGLE) {
+        l += texelFetch(single, ivec2(gl_FragCoord.xy), 0).rgb;
+    }
     out_radiance = vec4(l, 1.0);
     out_display = vec4(srgb_encode(l * push.exposure), 1.0);
 }

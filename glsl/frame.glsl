@@ -5,6 +5,7 @@
 
 #define MAX_LIGHTS 8
 #define MAX_SHADOW_LAYERS 48
+#define EXIT_LOBE_SAMPLES 16
 #define LIGHT_DIRECTIONAL 0u
 #define LIGHT_POINT 1u
 #define LIGHT_SPOT 2u
@@ -20,12 +21,26 @@ struct Light {
 
 layout(std140, set = 0, binding = 0) uniform Frame {
     mat4 view_proj;        // world (mm) -> camera clip space
+    mat4 inverse_view_proj; // camera clip space -> world (mm)
     vec4 camera_pos;       // xyz
     vec4 material;         // x: relative index of refraction eta
+    vec4 sigma_s;          // rgb: reduced scattering coefficient, 1/mm
+    vec4 sigma_t;          // rgb: sigma_s' + sigma_a, 1/mm
     uvec4 counts;          // x: number of lights, y: number of shadow-map layers
     Light lights[MAX_LIGHTS];
     mat4 shadow_view_proj[MAX_SHADOW_LAYERS]; // world (mm) -> shadow-map clip space, per layer
+    mat4 shadow_inverse[MAX_SHADOW_LAYERS];   // shadow-map clip space -> world (mm), per layer
+    vec4 exit_lobe[EXIT_LOBE_SAMPLES]; // rgb: exit radiance / Lambertian at cosines (i + 0.5) / 16
 } frame;
+
+// The profile's exit radiance relative to a Lambertian exit at exit cosine mu (1 for the
+// dipole), linear between the samples.
+vec3 exit_lobe(float mu) {
+    float x = clamp(mu * float(EXIT_LOBE_SAMPLES) - 0.5, 0.0, float(EXIT_LOBE_SAMPLES - 1));
+    int i = min(int(floor(x)), EXIT_LOBE_SAMPLES - 2);
+    float f = x - float(i);
+    return mix(frame.exit_lobe[i].rgb, frame.exit_lobe[i + 1].rgb, f);
+}
 
 // Direction towards the light (normalised) and the irradiance it delivers at x, before the
 // cosine and visibility terms.

@@ -110,6 +110,16 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
                 + per(I::NodeIrradiance, 2 * c.global_pairs),
             b(I::NodeRadiosity),
         ),
+        PassName::Thickness => (mesh, b(I::BackDepth)),
+        // Per pixel its back depth and, per step and light, one shadow-map texel.
+        PassName::Single => (
+            mesh + b(I::BackDepth)
+                + per(
+                    I::ShadowMaps,
+                    c.pixels * crate::passes::single::STEPS as u64 * c.lights,
+                ),
+            b(I::SingleScattering) + b(I::SingleDepth),
+        ),
         PassName::Composite => (
             mesh + b(I::NodeRadiosity) + per(I::LocalResponse, c.pixels),
             b(I::Radiance) + b(I::Depth) + b(I::Display),

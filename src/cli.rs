@@ -52,11 +52,28 @@ pub enum Command {
     /// Error near chart borders: the method's B texel by texel (CPU, no rasterisation) against
     /// the reference, by distance to the nearest chart border, for every blending mode.
     Borders(BordersArgs),
+    /// Tabulate the half-space profile by Monte Carlo (every albedo of the table; writes the
+    /// file the tabulated model ships with, assets/profiles/halfspace.txt).
+    Tabulate(TabulateArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
     /// Open a window: orbit, zoom and pan with the mouse, move the light, switch material and
     /// blending live (keys listed in the overlay); `--script` drives it without input.
     View(ViewArgs),
+}
+
+/// Arguments of `tabulate`.
+#[derive(Debug, Args)]
+pub struct TabulateArgs {
+    /// Paths per albedo.
+    #[arg(long, default_value_t = 4_000_000)]
+    pub paths: u64,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The table file to write.
+    #[arg(long, default_value = "assets/profiles/halfspace.txt")]
+    pub out: PathBuf,
 }
 
 /// Arguments of `borders`.
@@ -240,6 +257,9 @@ pub struct SceneArgs {
     /// Relative index of refraction replacing the material's (1 for `truth`).
     #[arg(long)]
     pub eta: Option<f64>,
+    /// Radial profile replacing the material's: dipole, or tabulated (eta = 1 only).
+    #[arg(long, value_enum)]
+    pub model: Option<crate::physics::Model>,
 }
 
 impl SceneArgs {
@@ -255,6 +275,7 @@ impl SceneArgs {
             width: self.width,
             height: self.height,
             eta: self.eta,
+            model: self.model,
         }
     }
 }
@@ -1140,6 +1161,46 @@ fn check_validation(gpu: &Gpu) -> Result<()> {
     Ok(gpu.validation.check()?)
 }
 
+fn tabulate(args: &TabulateArgs) -> Result<()> {
+    use crate::physics::profile::{table_albedos, table_radii, HalfSpaceTable};
+    if args.paths == 0 || args.paths > 1 << 40 {
+        anyhow::bail!("--paths must be between 1 and 2^40, not {}", args.paths);
+    }
+    let radii = table_radii();
+    let albedos = table_albedos();
+    let clock = std::time::Instant::now();
+    let mut all = Vec::new();
+    let mut multiple = Vec::new();
+    let mut lobes = Vec::new();
+    for (i, &a) in albedos.iter().enumerate() {
+        let e = crate::truth::halfspace::simulate(a, &radii, args.paths, args.seed);
+        eprintln!(
+            "albedo {a:.6} ({}/{}): reflectance {:.5}, orders >= 2 {:.5} ({:.0} s)",
+            i + 1,
+            albedos.len(),
+            e.total_all,
+            e.total_multiple,
+            clock.elapsed().as_secs_f64()
+        );
+        all.push((e.total_all, e.all_orders));
+        multiple.push((e.total_multiple, e.multiple));
+        lobes.push((e.lobe_all, e.lobe_multiple));
+    }
+    let table = HalfSpaceTable {
+        albedos,
+        radii,
+        all,
+        multiple,
+        lobes,
+        paths: args.paths,
+    };
+    crate::output::write_atomic(&args.out, |tmp| {
+        std::fs::write(tmp, table.to_text()).map_err(anyhow::Error::from)
+    })?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
 fn devices() -> Result<()> {
     let list = list_devices()?;
     if list.is_empty() {
@@ -1193,6 +1254,7 @@ pub fn main() -> ExitCode {
         Some(Command::Compare(args)) => compare(args),
         Some(Command::Chart(args)) => chart(&cli, args),
         Some(Command::Borders(args)) => borders(args),
+        Some(Command::Tabulate(args)) => tabulate(args),
         Some(Command::Devices) => devices(),
         Some(Command::View(args)) => view(&cli, args),
     };

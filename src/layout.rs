@@ -55,11 +55,17 @@ pub enum Item {
     RadianceReadback,
     /// Host-visible copy of the display image.
     DisplayReadback,
+    /// Single-scattered radiance per output pixel (models with the pass; 1 element else).
+    SingleScattering,
+    /// Depth of the nearest back face per output pixel (the same models).
+    BackDepth,
+    /// Depth of the single-scattering pass (the same models).
+    SingleDepth,
 }
 
 impl Item {
     /// Every item, in the memory report's order.
-    pub const ALL: [Item; 23] = [
+    pub const ALL: [Item; 26] = [
         Item::AtlasVertices,
         Item::AtlasIndices,
         Item::CoveredTexels,
@@ -83,6 +89,9 @@ impl Item {
         Item::Display,
         Item::RadianceReadback,
         Item::DisplayReadback,
+        Item::SingleScattering,
+        Item::BackDepth,
+        Item::SingleDepth,
     ];
 
     /// Its name: the Vulkan object's debug name and the memory report's label.
@@ -111,6 +120,9 @@ impl Item {
             Item::Display => "display",
             Item::RadianceReadback => "radiance readback",
             Item::DisplayReadback => "display readback",
+            Item::SingleScattering => "single scattering",
+            Item::BackDepth => "back-face depth",
+            Item::SingleDepth => "single-scattering depth",
         }
     }
 
@@ -134,10 +146,11 @@ impl Item {
             | Item::NodeIrradiance
             | Item::NodeRadiosity
             | Item::Radiance
-            | Item::RadianceReadback => F::R32G32B32A32_SFLOAT,
+            | Item::RadianceReadback
+            | Item::SingleScattering => F::R32G32B32A32_SFLOAT,
             Item::GatherEntries => F::R32G32_SFLOAT,
             Item::Texture => F::R8G8B8A8_SRGB,
-            Item::ShadowMaps | Item::Depth => F::D32_SFLOAT,
+            Item::ShadowMaps | Item::Depth | Item::BackDepth | Item::SingleDepth => F::D32_SFLOAT,
             Item::Display | Item::DisplayReadback => F::R8G8B8A8_UNORM,
         }
     }
@@ -193,8 +206,12 @@ pub struct Counts {
     pub shadow_side: u64,
     /// Shadow-map layers.
     pub shadow_layers: u64,
+    /// Lights.
+    pub lights: u64,
     /// Output pixels.
     pub pixels: u64,
+    /// Whether the model has the single-scattering passes.
+    pub single: bool,
 }
 
 impl Counts {
@@ -220,6 +237,13 @@ impl Counts {
             | Item::Display
             | Item::RadianceReadback
             | Item::DisplayReadback => self.pixels,
+            Item::SingleScattering | Item::BackDepth | Item::SingleDepth => {
+                if self.single {
+                    self.pixels
+                } else {
+                    0
+                }
+            }
         };
         n.max(1)
     }

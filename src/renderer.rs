@@ -42,6 +42,8 @@ struct CaptureBuffers {
     local: Arc<Buffer>,
     node_irradiance: Arc<Buffer>,
     node_radiosity: Arc<Buffer>,
+    /// Single-scattered radiance per pixel (models with the pass).
+    single: Option<Arc<Buffer>>,
 }
 
 /// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
@@ -55,6 +57,8 @@ pub struct Captured {
     pub node_irradiance: Vec<[f32; 4]>,
     /// Global node radiosity.
     pub node_radiosity: Vec<[f32; 4]>,
+    /// Single-scattered radiance, RGBA per output pixel (empty without the pass).
+    pub single: Vec<[f32; 4]>,
 }
 
 /// How to render.
@@ -276,6 +280,40 @@ impl Renderer {
             node_radiosity,
             options.global_layout,
         );
+        let single_pass = scene.material.model.has_single_pass();
+        let single = if single_pass {
+            let mesh = passes::single::MeshInputs {
+                frame,
+                vertices,
+                indices,
+                index_count: data.index_count,
+            };
+            let image = |g: &mut RenderGraph, item: Item| {
+                g.image(item.name(), ImageDesc::new(item.format(), w, h))
+            };
+            let back = image(&mut g, Item::BackDepth);
+            let single = image(&mut g, Item::SingleScattering);
+            let single_depth = image(&mut g, Item::SingleDepth);
+            passes::single::thickness(&mut g, mesh, back);
+            passes::single::single(
+                &mut g,
+                mesh,
+                passes::single::SingleInputs { shadow_maps, back },
+                single,
+                single_depth,
+            );
+            single
+        } else {
+            let black = Image::from_pixels(
+                gpu,
+                "no single scattering",
+                Item::SingleScattering.format(),
+                1,
+                1,
+                &[0; 16],
+            )?;
+            g.import_image(Arc::new(black), Access::Sampled(Stage::Fragment))
+        };
         passes::composite::add(
             &mut g,
             passes::composite::CompositeInputs {
@@ -287,6 +325,8 @@ impl Renderer {
                 local,
                 texture,
                 textured: scene.texture.is_some(),
+                single,
+                single_pass,
             },
             passes::composite::CompositeTargets {
                 hdr,
@@ -351,15 +391,21 @@ impl Renderer {
                 local: host_buffer(gpu, "capture local", atlas_bytes)?,
                 node_irradiance: host_buffer(gpu, "capture node irradiance", node_bytes)?,
                 node_radiosity: host_buffer(gpu, "capture node radiosity", node_bytes)?,
+                single: single_pass
+                    .then(|| host_buffer(gpu, "capture single scattering", pixels * 16))
+                    .transpose()?,
             };
             let mut to_host =
                 |buffer: &Arc<Buffer>| g.import_buffer(buffer.clone(), Some(Access::HostRead));
-            let pairs = vec![
+            let mut pairs = vec![
                 (map, to_host(&b.irradiance)),
                 (local, to_host(&b.local)),
                 (node_irradiance, to_host(&b.node_irradiance)),
                 (node_radiosity, to_host(&b.node_radiosity)),
             ];
+            if let Some(buffer) = &b.single {
+                pairs.push((single, to_host(buffer)));
+            }
             passes::readback::add(&mut g, PassName::Capture.as_str(), pairs);
             Some(b)
         } else {
@@ -534,6 +580,13 @@ impl Renderer {
             local: read_back(&b.local, atlas_texels)?,
             node_irradiance: read_back(&b.node_irradiance, nodes)?,
             node_radiosity: read_back(&b.node_radiosity, nodes)?,
+            single: match &b.single {
+                Some(buffer) => {
+                    let s = &self.scene;
+                    read_back(buffer, s.width as usize * s.height as usize)?
+                }
+                None => Vec::new(),
+            },
         }))
     }
 

@@ -131,6 +131,23 @@ fn bad_scene_files_are_refused_clearly() {
     let mut missing = bin();
     missing.args(["render", "/nonexistent/scene.toml"]);
     fails_with(missing, "cannot read scene file '/nonexistent/scene.toml'");
+    // The half-space models on the default scene (skim milk, eta = 1.3), and an unknown one.
+    let mut model = bin();
+    model.args([
+        "render",
+        "--model",
+        "halfspace-single",
+        "--frames",
+        "1",
+        "--out",
+    ]);
+    model.arg(dir.join("out"));
+    fails_with(model, "model 'halfspace-single' is the profile of an index-matched medium (eta = 1), not eta = 1.3");
+    let mut unknown = bin();
+    unknown.args(["render", "--model", "multipole"]);
+    let o = unknown.output().unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("halfspace-single"), "{}", stderr(&o));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -330,10 +347,9 @@ fn chart_runs_on_a_small_scene() {
     for r in &rows {
         let err: f64 = r.split(',').nth(11).unwrap().parse().unwrap();
         assert!(err.is_finite() && err >= 0.0, "{r}");
-        // Against truth (eta = 1): the dipole misses ketchup's single scattering, so every
-        // point is far from it.
+        // Against truth (eta = 1): measured, finite, never exact at 16 paths per pixel.
         let truth: f64 = r.split(',').nth(15).unwrap().parse().unwrap();
-        assert!(truth.is_finite() && truth > 0.1, "{r}");
+        assert!(truth.is_finite() && truth > 0.0, "{r}");
     }
     assert!(String::from_utf8_lossy(&o.stdout)
         .contains("truth: 16 paths per pixel and channel, traced and cached"));

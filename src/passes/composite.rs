@@ -37,6 +37,11 @@ pub struct CompositeInputs {
     /// Whether the scene has a texture; without one (T = 1) the shader is specialised without
     /// the sample (a sixth of the pass on lavapipe).
     pub textured: bool,
+    /// Single-scattered radiance per pixel (from `single`; a 1x1 black image where the model
+    /// has no such pass).
+    pub single: ResourceId,
+    /// Whether the model has the single-scattering pass (the shader adds `single` only then).
+    pub single_pass: bool,
 }
 
 /// The images `composite` writes.
@@ -59,6 +64,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
         .access(i.node_radiosity, Access::TexelRead(Stage::Vertex))
         .access(i.local, Access::StorageRead(Stage::Fragment))
         .access(i.texture, Access::Sampled(Stage::Fragment))
+        .access(i.single, Access::Sampled(Stage::Fragment))
         .access(t.hdr, Access::ColorAttachment)
         .access(t.display, Access::ColorAttachment)
         .access(t.depth, Access::DepthAttachment)
@@ -69,6 +75,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                 .texel(1, i.node_radiosity, Item::NodeRadiosity.format())
                 .storage_image(2, i.local)
                 .sampled(3, i.texture, Sampler::linear(gpu, true)?)
+                .sampled(4, i.single, Sampler::nearest(gpu)?)
                 .finish()?;
             let pipeline = Pipeline::graphics::<f32>(
                 gpu,
@@ -82,7 +89,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     depth_format: DEPTH_FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     depth_bias: None,
-                    fragment_constants: &[i.textured as u32],
+                    fragment_constants: &[i.textured as u32, i.single_pass as u32],
                 },
                 set,
             )?;

@@ -291,12 +291,14 @@ pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::
             .map(|t| t.width() as u64 * t.height() as u64)
             .unwrap_or(1),
         shadow_side: crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0 as u64,
+        lights: scene.lights.len() as u64,
         shadow_layers: scene
             .lights
             .iter()
             .map(|l| crate::scene::shadow::layers_of(l) as u64)
             .sum(),
         pixels: scene.width as u64 * scene.height as u64,
+        single: scene.material.model.has_single_pass(),
     }
 }
 

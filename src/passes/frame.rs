@@ -21,12 +21,21 @@ pub struct GpuLight {
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct FrameUniforms {
     view_proj: [[f32; 4]; 4],
+    inverse_view_proj: [[f32; 4]; 4],
     camera_pos: [f32; 4],
     material: [f32; 4],
+    sigma_s: [f32; 4],
+    sigma_t: [f32; 4],
     counts: [u32; 4],
     lights: [GpuLight; MAX_LIGHTS],
     shadow_view_proj: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
+    shadow_inverse: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
+    exit_lobe: [[f32; 4]; EXIT_LOBE_SAMPLES],
 }
+
+/// Samples of the exit lobe in the uniforms (`EXIT_LOBE_SAMPLES` in glsl/frame.glsl): the
+/// exit cosine at the centres of equal bins over (0, 1].
+pub const EXIT_LOBE_SAMPLES: usize = 16;
 
 impl FrameUniforms {
     /// Uniforms for `scene` with its lights as given and `shadow_map_size`-texel shadow maps.
@@ -34,12 +43,22 @@ impl FrameUniforms {
         let (center, radius) = scene.bounds();
         let aspect = scene.width as f32 / scene.height as f32;
         let mut u = FrameUniforms::zeroed();
-        u.view_proj = scene
-            .camera
-            .view_proj(aspect, center, radius)
-            .to_cols_array_2d();
+        let view_proj = scene.camera.view_proj(aspect, center, radius);
+        u.view_proj = view_proj.to_cols_array_2d();
+        u.inverse_view_proj = view_proj.inverse().to_cols_array_2d();
         u.camera_pos = scene.camera.position.extend(1.0).to_array();
-        u.material = [scene.material.eta as f32, 0.0, 0.0, 0.0];
+        let m = &scene.material;
+        u.material = [m.eta as f32, 0.0, 0.0, 0.0];
+        let profiles = m.profiles();
+        for (i, lobe) in u.exit_lobe.iter_mut().enumerate() {
+            let mu = (i as f64 + 0.5) / EXIT_LOBE_SAMPLES as f64;
+            let f = profiles.each_ref().map(|p| p.exit_lobe(mu) as f32);
+            *lobe = [f[0], f[1], f[2], 1.0];
+        }
+        let (s, a) = (m.sigma_s_prime, m.sigma_a);
+        u.sigma_s = [s[0] as f32, s[1] as f32, s[2] as f32, 0.0];
+        let t = [0, 1, 2].map(|c| (s[c] + a[c]) as f32);
+        u.sigma_t = [t[0], t[1], t[2], 0.0];
         let mut layer = 0usize;
         for (slot, light) in u.lights.iter_mut().zip(lights) {
             let shadows = shadow_projections(light, center, radius, shadow_map_size);
@@ -48,6 +67,7 @@ impl FrameUniforms {
             }
             for (k, s) in shadows.iter().enumerate() {
                 u.shadow_view_proj[layer + k] = s.view_proj.to_cols_array_2d();
+                u.shadow_inverse[layer + k] = s.view_proj.inverse().to_cols_array_2d();
             }
             let shadow = shadows[0];
             let kind = match light.kind {
@@ -80,11 +100,11 @@ mod tests {
 
     #[test]
     fn uniform_layout_matches_std140() {
-        // mat4 + 3 vec4 + 8 lights of (4 vec4 + uvec4) + 48 mat4.
+        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 vec4.
         assert_eq!(std::mem::size_of::<GpuLight>(), 80);
         assert_eq!(
             std::mem::size_of::<FrameUniforms>(),
-            64 + 48 + 8 * 80 + 48 * 64
+            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16
         );
     }
 }

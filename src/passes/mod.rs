@@ -10,6 +10,7 @@ pub mod illum;
 pub mod overlay;
 pub mod readback;
 pub mod shadow;
+pub mod single;
 
 use crate::gpu::{Gpu, Pipeline};
 use crate::graph::RecordContext;
@@ -32,6 +33,10 @@ pub enum PassName {
     Gather,
     /// Global response.
     Global,
+    /// Back-face depth from the camera (models with a single-scattering pass).
+    Thickness,
+    /// Single scattering along the view rays.
+    Single,
     /// Final image.
     Composite,
     /// Images to the host.
@@ -44,13 +49,15 @@ pub enum PassName {
 
 impl PassName {
     /// Every pass.
-    pub const ALL: [PassName; 10] = [
+    pub const ALL: [PassName; 12] = [
         PassName::Shadow,
         PassName::Illum,
         PassName::Dilate,
         PassName::Local,
         PassName::Gather,
         PassName::Global,
+        PassName::Thickness,
+        PassName::Single,
         PassName::Composite,
         PassName::Readback,
         PassName::Capture,
@@ -80,6 +87,8 @@ impl PassName {
             PassName::Local => "local",
             PassName::Gather => "gather",
             PassName::Global => "global",
+            PassName::Thickness => "thickness",
+            PassName::Single => "single",
             PassName::Composite => "composite",
             PassName::Readback => "readback",
             PassName::Capture => "capture",

@@ -12,6 +12,12 @@ use ash::vk;
 /// Format of the shadow maps.
 pub const FORMAT: vk::Format = Item::ShadowMaps.format();
 
+/// Constant depth bias of the shadow maps (in the format's smallest resolvable steps).
+pub const DEPTH_BIAS_CONSTANT: f32 = 1.0;
+/// Slope-scaled depth bias of the shadow maps (times the depth's largest slope per texel);
+/// `single` takes it back out to measure distances inside the object.
+pub const DEPTH_BIAS_SLOPE: f32 = 1.5;
+
 /// Resources the shadow pass touches.
 pub struct ShadowInputs {
     /// Frame uniforms (light transforms).
@@ -48,7 +54,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                     depth_format: FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     fragment_constants: &[],
-                    depth_bias: Some((1.0, 1.5)),
+                    depth_bias: Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE)),
                 },
                 set,
             )?;

@@ -4,7 +4,48 @@
 //! SIGGRAPH 2001, Figure 5 (in 1/mm, RGB); relative index of refraction 1.3 except marble (1.5).
 
 use super::dipole::Dipole;
-use serde::Serialize;
+use super::profile::{HalfSpaceTable, Orders, Profile, Tabulated};
+use serde::{Deserialize, Serialize};
+
+/// The radial profile the method integrates (`[material] model`, `--model`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Model {
+    /// The classical dipole (Jensen et al. 2001), the paper's model; any eta.
+    Dipole,
+    /// The exact half-space profile of an index-matched medium (eta = 1 only), every
+    /// scattering order, from Monte Carlo; the exit taken as diffuse.
+    Halfspace,
+    /// The exact half-space profile of orders >= 2 and single scattering computed per frame
+    /// along each view ray (the `thickness` and `single` passes); eta = 1 only.
+    HalfspaceSingle,
+}
+
+impl Model {
+    /// The most accurate model for a medium of relative index `eta`: the tabulated profile
+    /// where it applies (eta = 1), the dipole elsewhere.
+    pub fn for_eta(eta: f64) -> Model {
+        if eta == 1.0 {
+            Model::HalfspaceSingle
+        } else {
+            Model::Dipole
+        }
+    }
+
+    /// The name in scene files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Dipole => "dipole",
+            Model::Halfspace => "halfspace",
+            Model::HalfspaceSingle => "halfspace-single",
+        }
+    }
+
+    /// Whether single scattering is its own pass.
+    pub fn has_single_pass(self) -> bool {
+        self == Model::HalfspaceSingle
+    }
+}
 
 /// A homogeneous medium, per RGB channel.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -15,6 +56,8 @@ pub struct Material {
     pub sigma_a: [f64; 3],
     /// Relative index of refraction of the medium.
     pub eta: f64,
+    /// The radial profile integrated for it.
+    pub model: Model,
 }
 
 /// (name, sigma_s', sigma_a, eta) of every preset.
@@ -79,6 +122,9 @@ pub enum MaterialError {
     /// eta out of the physical range the model supports.
     #[error("index of refraction eta = {0} is outside the supported range [1.0, 3.0]")]
     BadEta(f64),
+    /// The tabulated profile asked for a medium that is not index-matched.
+    #[error("model '{0}' is the profile of an index-matched medium (eta = 1), not eta = {1}; use model 'dipole' or eta = 1")]
+    HalfspaceNeedsIndexMatch(&'static str, f64),
 }
 
 /// Normalises a preset name: lower case, without spaces, dashes or underscores.
@@ -100,6 +146,7 @@ impl Material {
                 sigma_s_prime: *s,
                 sigma_a: *a,
                 eta: *eta,
+                model: Model::for_eta(*eta),
             })
             .ok_or_else(|| {
                 MaterialError::UnknownPreset(
@@ -140,6 +187,39 @@ impl Material {
             sigma_s_prime,
             sigma_a,
             eta,
+            model: Model::for_eta(eta),
+        })
+    }
+
+    /// The same medium with `model` (refused where it does not apply).
+    pub fn with_model(self, model: Model) -> Result<Material, MaterialError> {
+        if model != Model::Dipole && self.eta != 1.0 {
+            return Err(MaterialError::HalfspaceNeedsIndexMatch(
+                model.name(),
+                self.eta,
+            ));
+        }
+        Ok(Material { model, ..self })
+    }
+
+    /// The profile of each channel under the material's model.
+    pub fn profiles(&self) -> [Profile; 3] {
+        [0, 1, 2].map(|c| match self.model {
+            Model::Dipole => Profile::Dipole(Dipole::new(
+                self.sigma_s_prime[c],
+                self.sigma_a[c],
+                self.eta,
+            )),
+            Model::Halfspace | Model::HalfspaceSingle => Profile::Tabulated(Tabulated::new(
+                HalfSpaceTable::shipped(),
+                self.sigma_s_prime[c],
+                self.sigma_a[c],
+                if self.model.has_single_pass() {
+                    Orders::Multiple
+                } else {
+                    Orders::All
+                },
+            )),
         })
     }
 
@@ -148,9 +228,9 @@ impl Material {
         [0, 1, 2].map(|c| Dipole::new(self.sigma_s_prime[c], self.sigma_a[c], self.eta))
     }
 
-    /// Total diffuse reflectance per channel.
+    /// Total diffuse reflectance per channel, under the material's model.
     pub fn total_reflectance(&self) -> [f64; 3] {
-        self.dipoles().map(|d| d.total_reflectance())
+        self.profiles().map(|p| p.total_reflectance())
     }
 }
 

@@ -2,8 +2,9 @@
 
 pub mod dipole;
 pub mod material;
+pub mod profile;
 pub mod rgb;
 
 pub use dipole::{fresnel_diffuse_reflectance, fresnel_transmittance, Dipole};
-pub use material::{Material, MaterialError};
+pub use material::{Material, MaterialError, Model};
 pub use rgb::Rgb;

@@ -85,6 +85,21 @@ pub fn choose(
         &object_scale(scene, target_error, DEFAULT_MAX_TEXELS),
         overrides,
     );
+    // The model is the material's; said with the derived settings, with why.
+    let m = &scene.material;
+    choice.reasons.push(format!(
+        "model {}: {}",
+        m.model.name(),
+        match (m.model, m.model == crate::physics::Model::for_eta(m.eta)) {
+            (crate::physics::Model::HalfspaceSingle, true) => {
+                "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1)"
+            }
+            (crate::physics::Model::Dipole, true) => {
+                "the classical dipole (the half-space models need eta = 1)"
+            }
+            (_, _) => "given",
+        }
+    ));
     // Not a preprocessing setting, but chosen from the texel like them: said here with them.
     let (_, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
     choice.reasons.push(why);

@@ -44,7 +44,7 @@
 
 use super::atlas::Atlas;
 use super::nodes::Nodes;
-use crate::physics::{Dipole, Material, Rgb};
+use crate::physics::{profile::Profile, Material, Rgb};
 use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -214,7 +214,7 @@ pub struct Operators {
 /// mean, R_d + (c^2 / 24) Laplacian(R_d): R_d is convex away from its peak, so the bare
 /// midpoint rule underestimates every tap (by about 1 % of R_total in all, which showed as a
 /// uniform darkening of the slab and the bunny).
-fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Dipole; 3]) -> Rgb {
+fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Profile; 3]) -> Rgb {
     let ts = &atlas.texels[s];
     let area = ts.area as f64;
     let xs = ts.position.as_dvec3();
@@ -260,7 +260,7 @@ const FINE_SUBSAMPLES: usize = 6;
 /// Sub-samples per texel side further out.
 const COARSE_SUBSAMPLES: usize = 3;
 
-fn rgb(dipoles: &[Dipole; 3], f: impl Fn(&Dipole) -> f64) -> Rgb {
+fn rgb(dipoles: &[Profile; 3], f: impl Fn(&Profile) -> f64) -> Rgb {
     Rgb::from_fn(|c| f(&dipoles[c]))
 }
 
@@ -410,7 +410,7 @@ impl Basis {
 fn local_kernels(
     atlas: &Atlas,
     kernel_size: u32,
-    dipoles: &[Dipole; 3],
+    dipoles: &[Profile; 3],
     progress: Progress<'_>,
 ) -> Vec<[f32; 3]> {
     let n_texels = atlas.texels.len() as u64;
@@ -453,7 +453,7 @@ fn global_response(
     atlas: &Atlas,
     nodes: &Nodes,
     basis: &Basis,
-    dipoles: &[Dipole; 3],
+    dipoles: &[Profile; 3],
     prune_tolerance: f64,
     progress: Progress<'_>,
 ) -> (Csr, PruneReport) {
@@ -550,7 +550,7 @@ impl Operators {
         prune_tolerance: f64,
         progress: Progress<'_>,
     ) -> Operators {
-        let dipoles = material.dipoles();
+        let dipoles = material.profiles();
         let basis = Basis::new(atlas, nodes);
         progress("basis", 1, 1);
 
@@ -664,7 +664,7 @@ impl Operators {
         &self,
         atlas: &Atlas,
         nodes: &Nodes,
-        dipoles: &[Dipole; 3],
+        dipoles: &[Profile; 3],
         supports: &[Vec<(u32, f32)>],
         progress: Progress<'_>,
     ) -> Csr {
@@ -773,7 +773,7 @@ impl Operators {
 /// Seam taps (see the module documentation): per texel, the texels of other charts within the
 /// kernel's inscribed disc, with their kernel weights. Found through a uniform grid of cells
 /// one disc radius wide.
-fn seam_taps(atlas: &Atlas, kernel_size: u32, dipoles: &[Dipole; 3]) -> Csr {
+fn seam_taps(atlas: &Atlas, kernel_size: u32, dipoles: &[Profile; 3]) -> Csr {
     use std::collections::HashMap;
     let radius = (kernel_size / 2) as f64 * atlas.texel_mm + 0.5 * atlas.texel_mm;
     let cell = |p: DVec3| {

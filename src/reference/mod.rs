@@ -20,7 +20,7 @@ pub mod borders;
 pub mod metrics;
 
 use crate::geometry::bvh::Bvh;
-use crate::physics::{fresnel_transmittance, Dipole};
+use crate::physics::{fresnel_transmittance, profile::Profile};
 use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -279,7 +279,7 @@ impl Tree {
         Self::build(clusters, s, left + 1, mid, end);
     }
 
-    fn eval(&self, x: DVec3, dipoles: &[Dipole; 3], theta: f64) -> [f64; 3] {
+    fn eval(&self, x: DVec3, dipoles: &[Profile; 3], theta: f64) -> [f64; 3] {
         let rho = (self.sample_area / std::f64::consts::PI).sqrt();
         let mut b = [0.0; 3];
         let mut stack = vec![0usize];
@@ -345,15 +345,21 @@ pub fn b_at(scene: &Scene, settings: ReferenceSettings, points: &[DVec3]) -> Vec
     let bvh = Bvh::new(&m.positions, &m.indices);
     let (lit, _) = samples(scene, &bvh, settings.spacing_mm);
     let tree = Tree::new(lit, 0.5 * settings.spacing_mm * settings.spacing_mm);
-    let dipoles = scene.material.dipoles();
+    let dipoles = scene.material.profiles();
     points
         .par_iter()
         .map(|p| tree.eval(*p, &dipoles, settings.theta))
         .collect()
 }
 
+/// Quadrature nodes per stretch of a view ray inside the object for the single scattering of
+/// the models that have it.
+pub const SINGLE_STEPS: u32 = 48;
+
 impl Reference {
-    /// Computes the reference image and vertex values of `scene`.
+    /// Computes the reference image and vertex values of `scene`: the profile integrated over
+    /// the lit surface (the exit lobe and Fresnel at the pixel), plus, for the models with a
+    /// single-scattering pass, the exact single scattering along the view ray.
     pub fn compute(scene: &Scene, settings: ReferenceSettings) -> Reference {
         let m = &scene.mesh;
         let bvh = Bvh::new(&m.positions, &m.indices);
@@ -361,13 +367,23 @@ impl Reference {
         let lit_samples = lit.len();
         // Sub-triangle areas vary; the disc mean uses the typical one (spacing^2 / 2).
         let tree = Tree::new(lit, 0.5 * settings.spacing_mm * settings.spacing_mm);
-        let dipoles = scene.material.dipoles();
+        let dipoles = scene.material.profiles();
+        // Models that compute single scattering per frame: the exact single scattering along
+        // each view ray (deterministic quadrature through the BVH), added to the profile's.
+        let single = scene
+            .material
+            .model
+            .has_single_pass()
+            .then(|| crate::truth::Tracer::for_single_scattering(scene).ok())
+            .flatten();
         let (w, h) = (scene.width, scene.height);
         let radiance: Vec<f32> = (0..h)
             .into_par_iter()
             .flat_map_iter(|y| {
                 let bvh = &bvh;
                 let tree = &tree;
+                let dipoles = &dipoles;
+                let single = &single;
                 (0..w).flat_map(move |x| {
                     let (o, d) = camera_ray(scene, x, y);
                     match bvh.intersect(o, d, f64::INFINITY) {
@@ -382,13 +398,18 @@ impl Reference {
                                 .normalize_or(DVec3::Z);
                             let cos_o = n.dot(-d).abs();
                             let ft = fresnel_transmittance(scene.material.eta, cos_o);
-                            let b = tree.eval(p, &dipoles, settings.theta);
-                            [
-                                (ft * b[0] / std::f64::consts::PI) as f32,
-                                (ft * b[1] / std::f64::consts::PI) as f32,
-                                (ft * b[2] / std::f64::consts::PI) as f32,
-                                1.0,
-                            ]
+                            let b = tree.eval(p, dipoles, settings.theta);
+                            let l = |c: usize| {
+                                let ss = single
+                                    .as_ref()
+                                    .map(|t| {
+                                        let mut scratch = crate::truth::Scratch::default();
+                                        t.single_scattering(o, d, c, SINGLE_STEPS, &mut scratch)
+                                    })
+                                    .unwrap_or(0.0);
+                                ft * dipoles[c].exit_lobe(cos_o) * b[c] / std::f64::consts::PI + ss
+                            };
+                            [l(0) as f32, l(1) as f32, l(2) as f32, 1.0]
                         }
                     }
                 })

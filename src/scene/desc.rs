@@ -152,6 +152,9 @@ pub struct MaterialDesc {
     pub sigma_a: Option<[f64; 3]>,
     /// Relative index of refraction.
     pub eta: Option<f64>,
+    /// The radial profile: "dipole" or "tabulated" (eta = 1 only); by default the tabulated
+    /// profile where eta = 1, the dipole elsewhere.
+    pub model: Option<crate::physics::Model>,
 }
 
 /// `[output]`.

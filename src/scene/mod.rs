@@ -36,6 +36,8 @@ pub struct Overrides {
     pub height: Option<u32>,
     /// `--eta`: the relative index of refraction, replacing the material's.
     pub eta: Option<f64>,
+    /// `--model`: the radial profile, replacing the material's.
+    pub model: Option<crate::physics::Model>,
 }
 
 /// A light, resolved.
@@ -192,6 +194,9 @@ impl Scene {
         }
         if let Some(eta) = overrides.eta {
             desc.material.eta = Some(eta);
+        }
+        if let Some(model) = overrides.model {
+            desc.material.model = Some(model);
         }
         if let Some(w) = overrides.width {
             desc.output.width = Some(w);
@@ -418,6 +423,10 @@ impl Scene {
                 }
             }
         };
+        let material = match mat.model {
+            Some(model) => material.with_model(model).context("[material]")?,
+            None => material,
+        };
 
         // Output.
         let od = &mut desc.output;
@@ -573,6 +582,34 @@ mod tests {
     }
 
     #[test]
+    fn the_model_follows_the_index_unless_given() {
+        let load = |text: &str| {
+            Scene::from_desc(
+                SceneDesc::parse(text).unwrap(),
+                Path::new(""),
+                &Overrides::default(),
+            )
+            .unwrap()
+            .material
+            .model
+        };
+        use crate::physics::Model;
+        assert_eq!(load("[material]\npreset = \"skimmilk\""), Model::Dipole);
+        assert_eq!(
+            load("[material]\npreset = \"skimmilk\"\neta = 1.0"),
+            Model::HalfspaceSingle
+        );
+        assert_eq!(
+            load("[material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"dipole\""),
+            Model::Dipole
+        );
+        assert_eq!(
+            load("[material]\npreset = \"ketchup\"\neta = 1.0\nmodel = \"halfspace\""),
+            Model::Halfspace
+        );
+    }
+
+    #[test]
     fn bad_descriptions_are_refused_with_the_field_named() {
         let cases = [
             ("lights = []", "no lights"),
@@ -586,6 +623,10 @@ mod tests {
                 "sigma_a",
             ),
             ("[material]\npreset = \"marble\"\neta = 0.0", "eta"),
+            (
+                "[material]\npreset = \"marble\"\nmodel = \"halfspace-single\"",
+                "index-matched medium (eta = 1), not eta = 1.5",
+            ),
             (
                 "[camera]\nposition = [0.0, 0.0, 0.0]\ntarget = [0.0, 0.0, 0.0]",
                 "coincide",

@@ -1,0 +1,157 @@
+//! Single scattering along the view ray, for the models whose profile holds the higher orders
+//! only (`Model::HalfspaceSingle`):
+//! - `thickness`: the depth of the nearest face turned away from the camera, where each view
+//!   ray leaves the object;
+//! - `single`: per covered pixel, the light scattered once inside, from the visible surface
+//!   to that exit, with each light's attenuation from the distance it travels inside (its
+//!   shadow map's first surface to the point); `composite` adds it. See `glsl/single.frag`.
+
+use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
+use super::PassName;
+use super::{draw_mesh, DrawTarget, MeshDraw};
+use crate::gpu::{shaders, GraphicsDesc, Pipeline, Sampler};
+use crate::graph::{Access, RenderGraph, ResourceId, Stage};
+use crate::layout::Item;
+use ash::vk;
+
+/// Format of the single-scattering image.
+pub const FORMAT: vk::Format = Item::SingleScattering.format();
+/// Format of the back-face depth and of the pass's own depth.
+pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
+
+/// Intervals along each view ray (equal optical depth in the least extinguishing channel).
+pub const STEPS: u32 = 16;
+
+/// The push constants of `single` (`Push` in glsl/single.frag).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct SinglePush {
+    /// Intervals along each view ray.
+    steps: u32,
+    /// The shadow maps' slope-scaled depth bias factor, taken back out.
+    slope_bias: f32,
+}
+
+/// The mesh both passes draw and the frame uniforms.
+#[derive(Clone, Copy)]
+pub struct MeshInputs {
+    /// Frame uniforms.
+    pub frame: ResourceId,
+    /// Atlas mesh vertices.
+    pub vertices: ResourceId,
+    /// Atlas mesh indices.
+    pub indices: ResourceId,
+    /// Index count.
+    pub index_count: u32,
+}
+
+fn camera_desc<'a>(fragment: &'a [u8], color: &'a [vk::Format]) -> GraphicsDesc<'a> {
+    GraphicsDesc {
+        vertex: shaders::CAMERA_VERT,
+        fragment: Some(fragment),
+        vertex_bindings: &ATLAS_VERTEX_BINDINGS,
+        // Position and normal.
+        vertex_attributes: &ATLAS_VERTEX_ATTRIBUTES[..2],
+        color_formats: color,
+        depth_format: DEPTH_FORMAT,
+        cull: vk::CullModeFlags::NONE,
+        depth_bias: None,
+        fragment_constants: &[],
+    }
+}
+
+/// Declares `thickness`, writing the back-face depth `back`.
+pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
+    graph
+        .pass(PassName::Thickness.as_str())
+        .access(i.frame, Access::Uniform(Stage::Fragment))
+        .access(i.vertices, Access::VertexBuffer)
+        .access(i.indices, Access::IndexBuffer)
+        .access(back, Access::DepthAttachment)
+        .setup(move |gpu, res| {
+            let set = res.bind().uniform(0, i.frame).finish()?;
+            let pipeline = Pipeline::graphics::<()>(
+                gpu,
+                PassName::Thickness.as_str(),
+                &camera_desc(shaders::THICKNESS_FRAG, &[]),
+                set,
+            )?;
+            let back = res.image(back).clone();
+            let mesh = MeshDraw {
+                vertices: res.buffer(i.vertices).raw,
+                indices: res.buffer(i.indices).raw,
+                count: i.index_count,
+            };
+            Ok(Box::new(move |rec| {
+                let target = DrawTarget {
+                    color: &[],
+                    depth: Some((back.view, vk::AttachmentStoreOp::STORE)),
+                    extent: back.info.extent,
+                };
+                draw_mesh(rec, &target, &pipeline, mesh, || {});
+            }))
+        });
+}
+
+/// What `single` reads besides the mesh.
+pub struct SingleInputs {
+    /// Shadow maps (raw depth).
+    pub shadow_maps: ResourceId,
+    /// Back-face depth from `thickness`.
+    pub back: ResourceId,
+}
+
+/// Declares `single`, writing the single-scattered radiance into `out` (with its own depth
+/// buffer `depth`, discarded).
+pub fn single(
+    graph: &mut RenderGraph,
+    m: MeshInputs,
+    i: SingleInputs,
+    out: ResourceId,
+    depth: ResourceId,
+) {
+    graph
+        .pass(PassName::Single.as_str())
+        .access(m.frame, Access::Uniform(Stage::Fragment))
+        .access(m.vertices, Access::VertexBuffer)
+        .access(m.indices, Access::IndexBuffer)
+        .access(i.shadow_maps, Access::Sampled(Stage::Fragment))
+        .access(i.back, Access::Sampled(Stage::Fragment))
+        .access(out, Access::ColorAttachment)
+        .access(depth, Access::DepthAttachment)
+        .setup(move |gpu, res| {
+            let set = res
+                .bind()
+                .uniform(0, m.frame)
+                .sampled(1, i.shadow_maps, Sampler::nearest(gpu)?)
+                .sampled(2, i.back, Sampler::nearest(gpu)?)
+                .finish()?;
+            let pipeline = Pipeline::graphics::<SinglePush>(
+                gpu,
+                PassName::Single.as_str(),
+                &camera_desc(shaders::SINGLE_FRAG, &[FORMAT]),
+                set,
+            )?;
+            let out = res.image(out).clone();
+            let depth = res.image(depth).clone();
+            let mesh = MeshDraw {
+                vertices: res.buffer(m.vertices).raw,
+                indices: res.buffer(m.indices).raw,
+                count: m.index_count,
+            };
+            Ok(Box::new(move |rec| {
+                let target = DrawTarget {
+                    color: &[out.view],
+                    depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),
+                    extent: out.info.extent,
+                };
+                let push = SinglePush {
+                    steps: STEPS,
+                    slope_bias: super::shadow::DEPTH_BIAS_SLOPE,
+                };
+                draw_mesh(rec, &target, &pipeline, mesh, || {
+                    pipeline.push(rec.cmd, &push)
+                });
+            }))
+        });
+}

@@ -1,0 +1,212 @@
+//! Monte Carlo of a semi-infinite, index-matched, isotropically scattering medium lit by a
+//! pencil beam at normal incidence: where the light comes out, by scattering order. The
+//! tabulated profile ([`crate::physics::profile::Tabulated`]) is made from these runs.
+//!
+//! Units are optical: sigma_t = 1, so a radius is r sigma_t and a profile value is
+//! R(r) / sigma_t^2. A path starts at the origin heading into z > 0, flies exponential free
+//! paths, scatters isotropically with probability `albedo` at each collision (analog
+//! absorption otherwise) and leaves when it crosses z = 0; its exit radius is recorded with
+//! the number of scattering events it had.
+
+use super::rng::Rng;
+use rayon::prelude::*;
+
+/// Exits of one simulation: cumulative fractions of the incident power at each radius.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Exits {
+    /// Scattering albedo simulated.
+    pub albedo: f64,
+    /// Paths traced.
+    pub paths: u64,
+    /// Fraction of the power leaving within radius `radii[j]` after >= 1 scattering events.
+    pub all_orders: Vec<f64>,
+    /// The same for >= 2 events (multiple scattering only).
+    pub multiple: Vec<f64>,
+    /// Fraction leaving anywhere after >= 1 events (total diffuse reflectance).
+    pub total_all: f64,
+    /// Fraction leaving anywhere after >= 2 events.
+    pub total_multiple: f64,
+    /// Exit radiance relative to a Lambertian exit of the same flux, per bin of the exit
+    /// cosine ([`LOBE_BINS`] equal bins over (0, 1]), after >= 1 events.
+    pub lobe_all: Vec<f64>,
+    /// The same after >= 2 events.
+    pub lobe_multiple: Vec<f64>,
+}
+
+/// Bins of the exit cosine in [`Exits::lobe_all`] and [`Exits::lobe_multiple`].
+pub const LOBE_BINS: usize = 16;
+
+/// Radiance relative to a Lambertian exit per cosine bin from the exits' cosine histogram: a
+/// Lambertian exit has the cosine density 2 mu, so the ratio is density / (2 mu) over each
+/// bin (2 mu integrated over the bin: mu1^2 - mu0^2).
+fn lobe(bins: &[u64]) -> Vec<f64> {
+    let total: u64 = bins.iter().sum();
+    let n = bins.len() as f64;
+    bins.iter()
+        .enumerate()
+        .map(|(i, &b)| {
+            let (m0, m1) = (i as f64 / n, (i + 1) as f64 / n);
+            if total == 0 {
+                1.0
+            } else {
+                b as f64 / total as f64 / (m1 * m1 - m0 * m0)
+            }
+        })
+        .collect()
+}
+
+/// Traces `paths` paths in a medium of `albedo` and counts their exits inside each of
+/// `radii` (optical units, increasing). Deterministic for a given `seed`: each chunk of paths
+/// has its own random stream.
+pub fn simulate(albedo: f64, radii: &[f64], paths: u64, seed: u64) -> Exits {
+    const CHUNK: u64 = 1 << 14;
+    let chunks = paths.div_ceil(CHUNK);
+    let m = radii.len();
+    // Per chunk: counts per bin (exits with radius in (radii[j-1], radii[j]]; bin m beyond
+    // the last radius), for >= 1 and >= 2 events.
+    let counts = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let mut rng = Rng::new(&[seed, albedo.to_bits(), c]);
+            // Radius bins of both order sets, then cosine bins of both.
+            let mut h = vec![0u64; 2 * (m + 1) + 2 * LOBE_BINS];
+            let n = CHUNK.min(paths - c * CHUNK);
+            for _ in 0..n {
+                if let Some((r, mu, events)) = trace(albedo, &mut rng) {
+                    let bin = radii.partition_point(|&x| x < r);
+                    let cos_bin = ((mu * LOBE_BINS as f64) as usize).min(LOBE_BINS - 1);
+                    h[bin] += 1;
+                    h[2 * (m + 1) + cos_bin] += 1;
+                    if events >= 2 {
+                        h[m + 1 + bin] += 1;
+                        h[2 * (m + 1) + LOBE_BINS + cos_bin] += 1;
+                    }
+                }
+            }
+            h
+        })
+        .reduce(
+            || vec![0u64; 2 * (m + 1) + 2 * LOBE_BINS],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x += y;
+                }
+                a
+            },
+        );
+    let (radial, cosines) = counts.split_at(2 * (m + 1));
+    let cumulative = |bins: &[u64]| -> (Vec<f64>, f64) {
+        let mut acc = 0u64;
+        let c = bins[..m]
+            .iter()
+            .map(|&b| {
+                acc += b;
+                acc as f64 / paths as f64
+            })
+            .collect();
+        (c, (acc + bins[m]) as f64 / paths as f64)
+    };
+    let (all_orders, total_all) = cumulative(&radial[..m + 1]);
+    let (multiple, total_multiple) = cumulative(&radial[m + 1..]);
+    Exits {
+        albedo,
+        paths,
+        all_orders,
+        multiple,
+        total_all,
+        total_multiple,
+        lobe_all: lobe(&cosines[..LOBE_BINS]),
+        lobe_multiple: lobe(&cosines[LOBE_BINS..]),
+    }
+}
+
+/// One path: its exit radius, exit cosine and scattering events, or none if it was absorbed.
+fn trace(albedo: f64, rng: &mut Rng) -> Option<(f64, f64, u32)> {
+    let (mut x, mut y, mut z) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut dx, mut dy, mut dz) = (0.0f64, 0.0f64, 1.0f64);
+    let mut events = 0u32;
+    loop {
+        let t = -(1.0 - rng.uniform()).ln();
+        let nz = z + dz * t;
+        if nz <= 0.0 {
+            // Crosses the surface: the exit point is where the segment meets z = 0.
+            let s = z / -dz;
+            let (ex, ey) = (x + dx * s, y + dy * s);
+            return Some(((ex * ex + ey * ey).sqrt(), -dz, events));
+        }
+        x += dx * t;
+        y += dy * t;
+        z = nz;
+        if rng.uniform() >= albedo {
+            return None;
+        }
+        events += 1;
+        let cos = 2.0 * rng.uniform() - 1.0;
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let phi = 2.0 * std::f64::consts::PI * rng.uniform();
+        (dx, dy, dz) = (sin * phi.cos(), sin * phi.sin(), cos);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Single scattering at normal incidence has a closed form: a path scattered once at
+    /// depth z leaves towards mu < 0 with probability (1/2) integral of e^(-z/|mu|) dmu, so
+    /// the total is (albedo/2) integral_0^1 mu/(1+mu) dmu = (albedo/2)(1 - ln 2).
+    #[test]
+    fn single_scattering_matches_the_closed_form() {
+        let albedo = 0.6;
+        let e = simulate(albedo, &[1.0], 400_000, 7);
+        let single = e.total_all - e.total_multiple;
+        let want = 0.5 * albedo * (1.0 - std::f64::consts::LN_2);
+        assert!((single / want - 1.0).abs() < 0.01, "{single} vs {want}");
+        // The cumulative fractions never exceed the totals and increase with the radius.
+        assert!(e.all_orders[0] <= e.total_all && e.multiple[0] <= e.total_multiple);
+    }
+
+    /// Single scattering's exit lobe in closed form: once scattered at normal incidence, a path
+    /// leaves towards mu with density proportional to mu / (1 + mu) (the half-space's
+    /// single-scattering radiance, albedo E / (4 pi (1 + mu)), times mu); relative to a
+    /// Lambertian exit of the same flux that is 1 / (2 (1 - ln 2) (1 + mu)).
+    #[test]
+    fn the_single_scattering_lobe_matches_the_closed_form() {
+        let e = simulate(0.6, &[1.0], 2_000_000, 5);
+        let n = LOBE_BINS as f64;
+        let single = e.total_all - e.total_multiple;
+        for i in 0..LOBE_BINS {
+            // The lobes are per unit flux of their orders: single = all - multiple.
+            let f = (e.total_all * e.lobe_all[i] - e.total_multiple * e.lobe_multiple[i]) / single;
+            let (m0, m1) = (i as f64 / n, (i + 1) as f64 / n);
+            // The closed form averaged over the bin with the Lambertian weight 2 mu.
+            let steps = 64;
+            let want: f64 = (0..steps)
+                .map(|k| {
+                    let mu = m0 + (k as f64 + 0.5) / steps as f64 * (m1 - m0);
+                    2.0 * mu / (2.0 * (1.0 - std::f64::consts::LN_2) * (1.0 + mu))
+                })
+                .sum::<f64>()
+                * (m1 - m0)
+                / steps as f64
+                / (m1 * m1 - m0 * m0);
+            assert!((f / want - 1.0).abs() < 0.03, "bin {i}: {f} vs {want}");
+        }
+    }
+
+    /// The cumulative fractions grow with the radius towards the totals, and more albedo
+    /// reflects more.
+    #[test]
+    fn cumulative_fractions_grow_to_the_totals() {
+        let radii = [0.1, 1.0, 10.0, 100.0];
+        let low = simulate(0.5, &radii, 50_000, 1);
+        let high = simulate(0.95, &radii, 50_000, 1);
+        for e in [&low, &high] {
+            assert!(e.all_orders.windows(2).all(|w| w[0] <= w[1]));
+            assert!(e.multiple.windows(2).all(|w| w[0] <= w[1]));
+            assert!(e.all_orders[3] <= e.total_all && e.total_all - e.all_orders[3] < 1e-3);
+            assert!(e.multiple.iter().zip(&e.all_orders).all(|(m, a)| m <= a));
+        }
+        assert!(high.total_all > low.total_all && high.total_multiple > 2.0 * low.total_multiple);
+    }
+}
