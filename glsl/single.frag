@@ -5,16 +5,17 @@
 //   L1 = sum over lights of  integral_0^s_exit  sigma_s / (4 pi) E_l e^(-sigma_t (s + d_l(s))) ds,
 // where s runs along the view ray from the visible surface to where it leaves the object
 // (the nearest back face, from `thickness`), and d_l(s) is the distance the light travels
-// inside before it reaches the point: from the first surface the light's shadow map sees to
-// the point (exact for a convex object; where the light's path leaves and re-enters the
-// object, the air between is counted as medium).
+// inside before it reaches the point: from the first surface the light's shadow map sees
+// (its depth without the shadow bias, from the `entry` pass) to the point (exact for a convex
+// object; where the light's path leaves and re-enters the object, the air between is counted
+// as medium).
 // The ray is cut into STEPS intervals of equal optical depth in the least extinguishing
 // channel; over each, s + d_l(s) is taken as linear between its ends (d_l looked up at both),
 // so the exponential integrates exactly per channel.
 #include "frame.glsl"
 #include "shadow.glsl"
 
-layout(set = 0, binding = 1) uniform sampler2DArray shadow_depth;
+layout(set = 0, binding = 1) uniform sampler2DArray entry_depth;
 layout(set = 0, binding = 2) uniform sampler2D back_depth;
 
 layout(location = 0) in vec3 in_position;
@@ -24,7 +25,6 @@ layout(location = 0) out vec4 out_single;
 
 layout(push_constant) uniform Push {
     uint steps;
-    float slope_bias;      // the shadow pass's slope-scaled depth bias factor
 } push;
 
 // The world point behind clip-space depth `z` at normalised device coordinates `ndc`.
@@ -48,25 +48,10 @@ float light_depth(Light l, vec3 p, vec3 travel) {
     if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) {
         return 0.0;
     }
-    float z = texture(shadow_depth, vec3(uv, float(layer))).r;
+    float z = texture(entry_depth, vec3(uv, float(layer))).r;
     if (z >= 1.0) {
         return 0.0;
     }
-    // The shadow pass pushed its depths away from the light by the slope-scaled bias (a
-    // factor times the depth's largest slope per texel): take it back, the slope measured
-    // from the neighbouring texels on the same surface (the smaller difference per axis).
-    vec2 texel = 1.0 / vec2(textureSize(shadow_depth, 0).xy);
-    float slope = 0.0;
-    for (int axis = 0; axis < 2; ++axis) {
-        vec2 o = axis == 0 ? vec2(texel.x, 0.0) : vec2(0.0, texel.y);
-        float a = texture(shadow_depth, vec3(uv + o, float(layer))).r;
-        float b = texture(shadow_depth, vec3(uv - o, float(layer))).r;
-        float da = a < 1.0 ? abs(a - z) : 1.0;
-        float db = b < 1.0 ? abs(b - z) : 1.0;
-        float m = min(da, db);
-        slope = max(slope, m < 1.0 ? m : 0.0);
-    }
-    z -= push.slope_bias * slope;
     vec3 entry = unproject(frame.shadow_inverse[layer], ndc.xy, z);
     return max(dot(p - entry, travel), 0.0);
 }

@@ -110,13 +110,15 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
                 + per(I::NodeIrradiance, 2 * c.global_pairs),
             b(I::NodeRadiosity),
         ),
+        // Five shadow texels per texel (itself and four neighbours).
+        PassName::Entry => (5 * b(I::ShadowMaps), b(I::EntryDepth)),
         PassName::Thickness => (mesh, b(I::BackDepth)),
-        // Per pixel its back depth and, per step and light, one shadow-map texel.
+        // Per pixel its back depth and, per interval end and light, one entry-depth texel.
         PassName::Single => (
             mesh + b(I::BackDepth)
                 + per(
-                    I::ShadowMaps,
-                    c.pixels * crate::passes::single::STEPS as u64 * c.lights,
+                    I::EntryDepth,
+                    c.pixels * (crate::passes::single::STEPS as u64 + 1) * c.lights,
                 ),
             b(I::SingleScattering) + b(I::SingleDepth),
         ),

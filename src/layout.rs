@@ -61,11 +61,13 @@ pub enum Item {
     BackDepth,
     /// Depth of the single-scattering pass (the same models).
     SingleDepth,
+    /// Light-entry depth per shadow-map texel, without the shadow bias (the same models).
+    EntryDepth,
 }
 
 impl Item {
     /// Every item, in the memory report's order.
-    pub const ALL: [Item; 26] = [
+    pub const ALL: [Item; 27] = [
         Item::AtlasVertices,
         Item::AtlasIndices,
         Item::CoveredTexels,
@@ -92,6 +94,7 @@ impl Item {
         Item::SingleScattering,
         Item::BackDepth,
         Item::SingleDepth,
+        Item::EntryDepth,
     ];
 
     /// Its name: the Vulkan object's debug name and the memory report's label.
@@ -123,6 +126,7 @@ impl Item {
             Item::SingleScattering => "single scattering",
             Item::BackDepth => "back-face depth",
             Item::SingleDepth => "single-scattering depth",
+            Item::EntryDepth => "light-entry depth",
         }
     }
 
@@ -149,6 +153,7 @@ impl Item {
             | Item::RadianceReadback
             | Item::SingleScattering => F::R32G32B32A32_SFLOAT,
             Item::GatherEntries => F::R32G32_SFLOAT,
+            Item::EntryDepth => F::R32_SFLOAT,
             Item::Texture => F::R8G8B8A8_SRGB,
             Item::ShadowMaps | Item::Depth | Item::BackDepth | Item::SingleDepth => F::D32_SFLOAT,
             Item::Display | Item::DisplayReadback => F::R8G8B8A8_UNORM,
@@ -237,6 +242,13 @@ impl Counts {
             | Item::Display
             | Item::RadianceReadback
             | Item::DisplayReadback => self.pixels,
+            Item::EntryDepth => {
+                if self.single {
+                    self.shadow_side * self.shadow_side * self.shadow_layers
+                } else {
+                    0
+                }
+            }
             Item::SingleScattering | Item::BackDepth | Item::SingleDepth => {
                 if self.single {
                     self.pixels

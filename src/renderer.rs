@@ -291,6 +291,11 @@ impl Renderer {
             let image = |g: &mut RenderGraph, item: Item| {
                 g.image(item.name(), ImageDesc::new(item.format(), w, h))
             };
+            let entry = g.image(
+                Item::EntryDepth.name(),
+                ImageDesc::layered(passes::single::ENTRY_FORMAT, s, s, layers),
+            );
+            passes::single::entry(&mut g, shadow_maps, entry);
             let back = image(&mut g, Item::BackDepth);
             let single = image(&mut g, Item::SingleScattering);
             let single_depth = image(&mut g, Item::SingleDepth);
@@ -298,7 +303,7 @@ impl Renderer {
             passes::single::single(
                 &mut g,
                 mesh,
-                passes::single::SingleInputs { shadow_maps, back },
+                passes::single::SingleInputs { entry, back },
                 single,
                 single_depth,
             );

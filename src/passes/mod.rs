@@ -33,7 +33,9 @@ pub enum PassName {
     Gather,
     /// Global response.
     Global,
-    /// Back-face depth from the camera (models with a single-scattering pass).
+    /// Light-entry depths without the shadow bias (models with a single-scattering pass).
+    Entry,
+    /// Back-face depth from the camera (the same models).
     Thickness,
     /// Single scattering along the view rays.
     Single,
@@ -49,8 +51,9 @@ pub enum PassName {
 
 impl PassName {
     /// Every pass.
-    pub const ALL: [PassName; 12] = [
+    pub const ALL: [PassName; 13] = [
         PassName::Shadow,
+        PassName::Entry,
         PassName::Illum,
         PassName::Dilate,
         PassName::Local,
@@ -70,6 +73,7 @@ impl PassName {
         matches!(
             self,
             PassName::Shadow
+                | PassName::Entry
                 | PassName::Illum
                 | PassName::Dilate
                 | PassName::Local
@@ -87,6 +91,7 @@ impl PassName {
             PassName::Local => "local",
             PassName::Gather => "gather",
             PassName::Global => "global",
+            PassName::Entry => "entry",
             PassName::Thickness => "thickness",
             PassName::Single => "single",
             PassName::Composite => "composite",
@@ -218,6 +223,6 @@ mod tests {
             assert_eq!(PassName::parse(p.as_str()), Some(p));
         }
         assert_eq!(PassName::parse("tonemap"), None);
-        assert_eq!(PassName::ALL.iter().filter(|p| p.is_light()).count(), 6);
+        assert_eq!(PassName::ALL.iter().filter(|p| p.is_light()).count(), 7);
     }
 }

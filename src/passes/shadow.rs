@@ -15,7 +15,7 @@ pub const FORMAT: vk::Format = Item::ShadowMaps.format();
 /// Constant depth bias of the shadow maps (in the format's smallest resolvable steps).
 pub const DEPTH_BIAS_CONSTANT: f32 = 1.0;
 /// Slope-scaled depth bias of the shadow maps (times the depth's largest slope per texel);
-/// `single` takes it back out to measure distances inside the object.
+/// `entry` takes it back out for `single` to measure distances inside the object.
 pub const DEPTH_BIAS_SLOPE: f32 = 1.5;
 
 /// Resources the shadow pass touches.

@@ -1,5 +1,7 @@
 //! Single scattering along the view ray, for the models whose profile holds the higher orders
 //! only (`Model::HalfspaceSingle`):
+//! - `entry` (with the light passes): the shadow maps' depths without their slope-scaled
+//!   bias, where each light's ray enters the object (glsl/entry.comp);
 //! - `thickness`: the depth of the nearest face turned away from the camera, where each view
 //!   ray leaves the object;
 //! - `single`: per covered pixel, the light scattered once inside, from the visible surface
@@ -22,14 +24,38 @@ pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 /// Intervals along each view ray (equal optical depth in the least extinguishing channel).
 pub const STEPS: u32 = 16;
 
-/// The push constants of `single` (`Push` in glsl/single.frag).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct SinglePush {
-    /// Intervals along each view ray.
-    steps: u32,
-    /// The shadow maps' slope-scaled depth bias factor, taken back out.
-    slope_bias: f32,
+/// Format of the light-entry depth maps.
+pub const ENTRY_FORMAT: vk::Format = Item::EntryDepth.format();
+
+/// Declares `entry`: the shadow maps' depths without the slope-scaled bias into `entry`
+/// (layered like them).
+pub fn entry(graph: &mut RenderGraph, shadow_maps: ResourceId, entry: ResourceId) {
+    graph
+        .pass(PassName::Entry.as_str())
+        .access(shadow_maps, Access::Sampled(Stage::Compute))
+        .access(entry, Access::StorageWrite(Stage::Compute))
+        .setup(move |gpu, res| {
+            let set = res
+                .bind()
+                .sampled(0, shadow_maps, Sampler::nearest(gpu)?)
+                .storage_image(1, entry)
+                .finish()?;
+            let pipeline =
+                Pipeline::compute::<f32>(gpu, PassName::Entry.as_str(), shaders::ENTRY_COMP, set)?;
+            let info = res.image(entry).info;
+            Ok(Box::new(move |rec| {
+                pipeline.bind(rec.cmd);
+                pipeline.push(rec.cmd, &super::shadow::DEPTH_BIAS_SLOPE);
+                unsafe {
+                    rec.gpu.device.cmd_dispatch(
+                        rec.cmd,
+                        info.extent.width.div_ceil(8),
+                        info.extent.height.div_ceil(8),
+                        info.layers,
+                    )
+                };
+            }))
+        });
 }
 
 /// The mesh both passes draw and the frame uniforms.
@@ -95,8 +121,8 @@ pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
 
 /// What `single` reads besides the mesh.
 pub struct SingleInputs {
-    /// Shadow maps (raw depth).
-    pub shadow_maps: ResourceId,
+    /// Light-entry depths (from `entry`).
+    pub entry: ResourceId,
     /// Back-face depth from `thickness`.
     pub back: ResourceId,
 }
@@ -115,7 +141,7 @@ pub fn single(
         .access(m.frame, Access::Uniform(Stage::Fragment))
         .access(m.vertices, Access::VertexBuffer)
         .access(m.indices, Access::IndexBuffer)
-        .access(i.shadow_maps, Access::Sampled(Stage::Fragment))
+        .access(i.entry, Access::Sampled(Stage::Fragment))
         .access(i.back, Access::Sampled(Stage::Fragment))
         .access(out, Access::ColorAttachment)
         .access(depth, Access::DepthAttachment)
@@ -123,10 +149,10 @@ pub fn single(
             let set = res
                 .bind()
                 .uniform(0, m.frame)
-                .sampled(1, i.shadow_maps, Sampler::nearest(gpu)?)
+                .sampled(1, i.entry, Sampler::nearest(gpu)?)
                 .sampled(2, i.back, Sampler::nearest(gpu)?)
                 .finish()?;
-            let pipeline = Pipeline::graphics::<SinglePush>(
+            let pipeline = Pipeline::graphics::<u32>(
                 gpu,
                 PassName::Single.as_str(),
                 &camera_desc(shaders::SINGLE_FRAG, &[FORMAT]),
@@ -145,12 +171,8 @@ pub fn single(
                     depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),
                     extent: out.info.extent,
                 };
-                let push = SinglePush {
-                    steps: STEPS,
-                    slope_bias: super::shadow::DEPTH_BIAS_SLOPE,
-                };
                 draw_mesh(rec, &target, &pipeline, mesh, || {
-                    pipeline.push(rec.cmd, &push)
+                    pipeline.push(rec.cmd, &STEPS)
                 });
             }))
         });

@@ -1,0 +1,43 @@
+#version 460
+// The depth at which each shadow-map texel's light enters the object, without the shadow
+// pass's slope-scaled bias (a factor times the depth's largest slope per texel, which pushed
+// the stored depth away from the light): the slope is measured from the neighbouring texels
+// on the same surface (the smaller difference per axis; none across the silhouette). The
+// `single` pass reads it to measure how far light travels inside.
+
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+layout(set = 0, binding = 0) uniform sampler2DArray shadow_depth;
+layout(set = 0, binding = 1, r32f) uniform writeonly image2DArray entry_depth;
+
+layout(push_constant) uniform Push {
+    float slope_bias;      // the shadow pass's slope-scaled depth bias factor
+} push;
+
+float depth_at(ivec3 p, ivec2 size) {
+    if (any(lessThan(p.xy, ivec2(0))) || any(greaterThanEqual(p.xy, size))) {
+        return 1.0;
+    }
+    return texelFetch(shadow_depth, p, 0).r;
+}
+
+void main() {
+    ivec3 p = ivec3(gl_GlobalInvocationID.xyz);
+    ivec2 size = textureSize(shadow_depth, 0).xy;
+    if (any(greaterThanEqual(p.xy, size))) {
+        return;
+    }
+    float z = depth_at(p, size);
+    if (z < 1.0) {
+        float slope = 0.0;
+        for (int axis = 0; axis < 2; ++axis) {
+            ivec3 o = axis == 0 ? ivec3(1, 0, 0) : ivec3(0, 1, 0);
+            float a = depth_at(p + o, size);
+            float b = depth_at(p - o, size);
+            float m = min(a < 1.0 ? abs(a - z) : 1.0, b < 1.0 ? abs(b - z) : 1.0);
+            slope = max(slope, m < 1.0 ? m : 0.0);
+        }
+        z -= push.slope_bias * slope;
+    }
+    imageStore(entry_depth, p, vec4(z));
+}
