@@ -1,8 +1,11 @@
 //! `translucent chart`: speed against accuracy. A sweep over the method's knobs around the
 //! automatic setting (one knob at a time: kernel size, texel size, node spacing, pruning
 //! tolerance; every blending mode), each point timed on the device and compared with the
-//! brute-force reference. Writes `chart.csv`, `chart.svg` and `chart.png` (error against GPU
-//! frame time, one series per blending mode, the Pareto front, the automatic setting marked).
+//! brute-force reference of its model and, where there is one, the volumetric truth; other
+//! models than the scene's (the dipole as the baseline) are swept in optimized blending as
+//! series of their own. Writes `chart.csv`, `chart.svg` and `chart.png` (error against GPU
+//! frame time, one series per blending mode of the scene's model and one per other model, the
+//! Pareto front, the automatic setting marked).
 
 use crate::gpu::Gpu;
 use crate::preprocess::{
@@ -25,6 +28,8 @@ use std::path::Path;
 pub struct Point {
     /// Which knob moved ("auto" for the automatic setting).
     pub setting: String,
+    /// The model (`Model::name`).
+    pub model: String,
     /// Blending mode.
     pub mode: String,
     /// Texel edge, mm.
@@ -113,9 +118,19 @@ pub fn sweep(
     out
 }
 
+/// One model of a sweep: the scene under it, the blending modes to time, what to compare with.
+pub struct ModelRun<'a> {
+    /// The scene, its material under the model.
+    pub scene: &'a Scene,
+    /// Blending modes to time.
+    pub modes: Vec<Blend>,
+    /// The model's exact reference and the truth.
+    pub against: Baselines<'a>,
+}
+
 /// What a sweep renders and times.
 pub struct Sweep<'a> {
-    /// The scene.
+    /// The scene (its own model; warms the device up).
     pub scene: &'a Scene,
     /// The automatic setting (warms the device up).
     pub auto: &'a Choice,
@@ -141,7 +156,7 @@ pub struct Sweep<'a> {
 pub fn measure(
     gpu: &std::sync::Arc<Gpu>,
     sweep: &Sweep<'_>,
-    against: &Baselines<'_>,
+    runs: &[ModelRun<'_>],
 ) -> Result<Vec<Point>> {
     let scene = sweep.scene;
     let quiet = |_: &str, _: u64, _: u64| {};
@@ -158,41 +173,46 @@ pub fn measure(
     let mut times: Vec<Vec<f64>> = Vec::new();
     for round in 0..rounds {
         let mut i = 0;
-        for (label, o) in sweep.settings {
-            let choice = preprocess::choose(scene, o, sweep.target_error)?;
-            let (pre, _) = preprocess::prepare(scene, &choice, Some(sweep.cache_dir), &quiet)?;
-            for mode in Blend::ALL {
-                let mut r = Renderer::new(
-                    gpu,
-                    scene.clone(),
-                    &pre,
-                    Options {
-                        mode,
-                        ..Default::default()
-                    },
-                )?;
-                if round == 0 {
-                    times.push(Vec::new());
-                }
-                for f in 0..per_round + 1 {
-                    let t = r.frame(&scene.lights)?;
-                    if f >= 1 {
-                        times[i].push(t.gpu_ms);
-                    }
-                }
-                if round == 0 {
-                    let out = r.output(Vec::new())?;
-                    points.push(point(
-                        label,
-                        mode,
+        for run in runs {
+            let scene = run.scene;
+            for (label, o) in sweep.settings {
+                let choice = preprocess::choose(scene, o, sweep.target_error)?;
+                let (pre, _) = preprocess::prepare(scene, &choice, Some(sweep.cache_dir), &quiet)?;
+                for &mode in &run.modes {
+                    let mut r = Renderer::new(
+                        gpu,
+                        scene.clone(),
                         &pre,
-                        choice.settings.node_spacing_mm,
-                        &out.radiance,
-                        against,
-                        label == "auto",
-                    ));
+                        Options {
+                            mode,
+                            ..Default::default()
+                        },
+                    )?;
+                    if round == 0 {
+                        times.push(Vec::new());
+                    }
+                    for f in 0..per_round + 1 {
+                        let t = r.frame(&scene.lights)?;
+                        if f >= 1 {
+                            times[i].push(t.gpu_ms);
+                        }
+                    }
+                    if round == 0 {
+                        let out = r.output(Vec::new())?;
+                        let mut p = point(
+                            label,
+                            mode,
+                            &pre,
+                            choice.settings.node_spacing_mm,
+                            &out.radiance,
+                            &run.against,
+                            label == "auto",
+                        );
+                        p.model = scene.material.model.name().to_string();
+                        points.push(p);
+                    }
+                    i += 1;
                 }
-                i += 1;
             }
         }
     }
@@ -283,6 +303,7 @@ pub fn point(
     });
     Point {
         setting: setting.to_string(),
+        model: String::new(),
         mode: mode.name().to_string(),
         texel_mm: pre.settings.texel_mm,
         kernel: pre.settings.kernel_size,
@@ -308,10 +329,10 @@ pub const TRUTH_BIN: u32 = 4;
 
 /// `chart.csv`.
 pub fn csv(points: &[Point]) -> String {
-    let mut s = String::from("setting,mode,texel_mm,kernel,node_spacing_mm,prune,nodes,texels,nonzeros,gpu_ms,gpu_spread,rel_rms,p99,auto,pareto,rel_rms_truth,pareto_model\n");
+    let mut s = String::from("setting,mode,texel_mm,kernel,node_spacing_mm,prune,nodes,texels,nonzeros,gpu_ms,gpu_spread,rel_rms,p99,auto,pareto,rel_rms_truth,pareto_model,model\n");
     for p in points {
         s.push_str(&format!(
-            "{},{},{:.4},{},{:.3},{},{},{},{},{:.3},{:.3},{:.5},{:.5},{},{},{:.5},{}\n",
+            "{},{},{:.4},{},{:.3},{},{},{},{},{:.3},{:.3},{:.5},{:.5},{},{},{:.5},{},{}\n",
             p.setting,
             p.mode,
             p.texel_mm,
@@ -328,7 +349,8 @@ pub fn csv(points: &[Point]) -> String {
             p.auto,
             p.pareto,
             p.rel_rms_truth,
-            p.pareto_model
+            p.pareto_model,
+            p.model
         ));
     }
     s
@@ -346,12 +368,25 @@ fn register_font() {
     });
 }
 
-fn colour(mode: &str) -> RGBColor {
-    match mode {
+fn colour(series: &str) -> RGBColor {
+    match series {
         "local" => RGBColor(230, 120, 20),
         "global" => RGBColor(40, 120, 200),
         "simple" => RGBColor(120, 170, 40),
-        _ => RGBColor(200, 30, 90),
+        "optimized" => RGBColor(200, 30, 90),
+        "dipole" => RGBColor(110, 110, 110),
+        "halfspace" => RGBColor(20, 170, 170),
+        _ => RGBColor(120, 60, 200),
+    }
+}
+
+/// The series of a point: its blending mode for the first model's points (the scene's own),
+/// its model for the others' (swept in optimized blending).
+fn series_of<'a>(p: &'a Point, primary: &str) -> &'a str {
+    if p.model == primary {
+        &p.mode
+    } else {
+        &p.model
     }
 }
 
@@ -430,13 +465,27 @@ where
         .label_style(("sans-serif", 14))
         .draw()
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    for mode in ["local", "global", "simple", "optimized"] {
-        let c = colour(mode);
+    let primary = points.first().map(|p| p.model.as_str()).unwrap_or("");
+    let mut names: Vec<&str> = Vec::new();
+    for p in points {
+        let s = series_of(p, primary);
+        if !names.contains(&s) {
+            names.push(s);
+        }
+    }
+    for name in names {
+        let c = colour(name);
         let series: Vec<(f64, f64)> = points
             .iter()
-            .filter(|p| p.mode == mode)
+            .filter(|p| series_of(p, primary) == name)
             .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
             .collect();
+        // The first model's series are its modes; every other model's is its optimized one.
+        let label = if Blend::ALL.iter().any(|b| b.name() == name) {
+            format!("{primary}, {name}")
+        } else {
+            format!("{name}, optimized")
+        };
         chart
             .draw_series(
                 series
@@ -444,7 +493,7 @@ where
                     .map(|&(x, y)| Circle::new((x, y), 4, c.filled())),
             )
             .map_err(|e| anyhow::anyhow!("{e:?}"))?
-            .label(mode)
+            .label(label)
             .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
     }
     let mut front: Vec<(f64, f64)> = points
@@ -460,7 +509,7 @@ where
         .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(2)));
     let autos: Vec<(f64, f64)> = points
         .iter()
-        .filter(|p| p.auto && p.mode == "optimized")
+        .filter(|p| p.auto && p.mode == "optimized" && p.model == primary)
         .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
         .collect();
     chart
@@ -519,6 +568,7 @@ mod tests {
     fn p(mode: &str, t: f64, e: f64) -> Point {
         Point {
             setting: "s".into(),
+            model: "dipole".into(),
             mode: mode.into(),
             texel_mm: 1.0,
             kernel: 7,

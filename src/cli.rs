@@ -190,6 +190,11 @@ pub struct ChartArgs {
     /// scenes with eta = 1 only); 0 leaves the truth out.
     #[arg(long, default_value_t = 128)]
     pub truth_spp: u32,
+    /// Models to chart besides the scene's, each in optimized blending, e.g. "dipole,halfspace";
+    /// by default every other model that applies (at eta = 1: the dipole and both half-space
+    /// models; elsewhere the dipole only).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub models: Option<Vec<crate::physics::Model>>,
 }
 
 /// Arguments of `compare`.
@@ -926,6 +931,43 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
     };
     let sweep = crate::chart::sweep(&auto.settings, args.quick);
+    // The other models: each with its own scene (material under the model) and reference.
+    use crate::physics::Model;
+    let own = scene.material.model;
+    let others: Vec<Model> = match &args.models {
+        Some(m) => m.iter().copied().filter(|m| *m != own).collect(),
+        None => [Model::Dipole, Model::Halfspace, Model::HalfspaceSingle]
+            .into_iter()
+            .filter(|m| *m != own && scene.material.with_model(*m).is_ok())
+            .collect(),
+    };
+    let mut other_scenes = Vec::new();
+    for m in &others {
+        let mut s = scene.clone();
+        s.material = s
+            .material
+            .with_model(*m)
+            .with_context(|| format!("--models {}", m.name()))?;
+        let r = Reference::compute(&s, ReferenceSettings::for_scene(&s));
+        println!("reference of model {}: {} samples", m.name(), r.samples);
+        other_scenes.push((s, r));
+    }
+    let mut runs = vec![crate::chart::ModelRun {
+        scene: &scene,
+        modes: Blend::ALL.to_vec(),
+        against: baselines,
+    }];
+    let truth_baseline = runs[0].against.truth;
+    for (s, r) in &other_scenes {
+        runs.push(crate::chart::ModelRun {
+            scene: s,
+            modes: vec![Blend::Optimized],
+            against: crate::chart::Baselines {
+                reference: &r.radiance,
+                truth: truth_baseline,
+            },
+        });
+    }
     let mut points = crate::chart::measure(
         &gpu,
         &crate::chart::Sweep {
@@ -936,12 +978,13 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             cache_dir: &cache_dir,
             frames: args.frames,
         },
-        &baselines,
+        &runs,
     )?;
     for p in &points {
         println!(
-            "{:<12} {:<10} {:>8.2} ms  {:>7.3} % RMS vs model  {:>7.3} % vs truth",
+            "{:<12} {:<16} {:<10} {:>8.2} ms  {:>7.3} % RMS vs model  {:>7.3} % vs truth",
             p.setting,
+            p.model,
             p.mode,
             p.gpu_ms,
             100.0 * p.rel_rms,
@@ -973,7 +1016,10 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         ),
         &points,
     )?;
-    if let Some(a) = points.iter().find(|p| p.auto && p.mode == "optimized") {
+    if let Some(a) = points
+        .iter()
+        .find(|p| p.auto && p.mode == "optimized" && p.model == own.name())
+    {
         println!(
             "automatic setting (optimized): {:.2} ms, {:.3} % RMS vs model, {:.3} % vs truth, {}",
             a.gpu_ms,

@@ -337,13 +337,25 @@ fn chart_runs_on_a_small_scene() {
     assert!(o.status.success(), "{}", stderr(&o));
     let csv = std::fs::read_to_string(dir.join("chart.csv")).unwrap();
     let rows: Vec<&str> = csv.lines().skip(1).collect();
-    // auto, kernel 5, texel x2, prune 0.05: four settings, four modes each.
-    assert_eq!(rows.len(), 16, "{csv}");
+    // auto, kernel 5, texel x2, prune 0.05: four settings, four modes each for the scene's
+    // model (halfspace-single at eta = 1), optimized for each of the other two.
+    assert_eq!(rows.len(), 24, "{csv}");
+    let model_of = |r: &str| r.rsplit(',').next().unwrap().to_string();
+    for (model, count) in [("halfspace-single", 16), ("dipole", 4), ("halfspace", 4)] {
+        assert_eq!(
+            rows.iter().filter(|r| model_of(r) == model).count(),
+            count,
+            "{model}: {csv}"
+        );
+    }
     assert!(
         rows.iter().any(|r| r.contains(",true,")),
         "no automatic row"
     );
-    assert!(rows.iter().any(|r| r.ends_with(",true")), "no Pareto point");
+    assert!(
+        rows.iter().any(|r| r.split(',').nth(16) == Some("true")),
+        "no Pareto point"
+    );
     for r in &rows {
         let err: f64 = r.split(',').nth(11).unwrap().parse().unwrap();
         assert!(err.is_finite() && err >= 0.0, "{r}");
