@@ -407,7 +407,7 @@ where
 {
     root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let model = Panel {
-        y_desc: "relative RMS error vs exact dipole (%)",
+        y_desc: "relative RMS error vs its exact model (%)",
         error: |p| p.rel_rms,
         front: |p| p.pareto_model,
     };
@@ -639,7 +639,7 @@ mod tests {
         );
         plot(&dir, "test", &pts).unwrap();
         let svg = std::fs::read_to_string(dir.join("chart.svg")).unwrap();
-        assert!(svg.contains("volumetric truth") && svg.contains("exact dipole"));
+        assert!(svg.contains("volumetric truth") && svg.contains("its exact model"));
         assert_eq!(image::open(dir.join("chart.png")).unwrap().width(), 1800);
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -1224,13 +1224,13 @@ fn tabulate(args: &TabulateArgs) -> Result<()> {
             "albedo {a:.6} ({}/{}): reflectance {:.5}, orders >= 2 {:.5} ({:.0} s)",
             i + 1,
             albedos.len(),
-            e.total_all,
-            e.total_multiple,
+            e.all.total,
+            e.multiple.total,
             clock.elapsed().as_secs_f64()
         );
-        all.push((e.total_all, e.all_orders));
-        multiple.push((e.total_multiple, e.multiple));
-        lobes.push((e.lobe_all, e.lobe_multiple));
+        all.push((e.all.total, e.all.cumulative));
+        multiple.push((e.multiple.total, e.multiple.cumulative));
+        lobes.push((e.all.lobe, e.multiple.lobe));
     }
     let table = HalfSpaceTable {
         albedos,

@@ -194,6 +194,18 @@ pub struct ImageInfo {
     pub usage: vk::ImageUsageFlags,
 }
 
+impl ImageInfo {
+    /// A single-layer image of `format`, `width` x `height`, for `usage`.
+    pub fn single(format: vk::Format, width: u32, height: u32, usage: vk::ImageUsageFlags) -> Self {
+        ImageInfo {
+            format,
+            extent: vk::Extent2D { width, height },
+            layers: 1,
+            usage,
+        }
+    }
+}
+
 /// The copy region of a whole single-layer colour image of `extent` from or to a tightly packed
 /// buffer at offset 0.
 pub fn whole_image_copy(extent: vk::Extent2D) -> vk::BufferImageCopy {
@@ -371,39 +383,28 @@ impl Image {
         }
     }
 
-    /// A single-layer 2D image of `format`, `(width, height)` and `usage`.
-    fn single(
+    /// A single-layer 2D image of `info`, written once in a
+    /// one-shot command buffer by `write`, after its first transition (from `UNDEFINED`, the
+    /// contents discarded) to `layout` for a transfer write at `stage`.
+    fn written(
         gpu: &Arc<Gpu>,
         name: &str,
-        format: vk::Format,
-        (width, height): (u32, u32),
-        usage: vk::ImageUsageFlags,
+        info: ImageInfo,
+        (stage, layout): (vk::PipelineStageFlags2, vk::ImageLayout),
+        write: impl FnOnce(vk::CommandBuffer, &Image),
     ) -> GpuResult<Image> {
-        let info = ImageInfo {
-            format,
-            extent: vk::Extent2D { width, height },
-            layers: 1,
-            usage,
-        };
-        Image::new(gpu, name, info, false)
-    }
-
-    /// Records the image's first transition, from `UNDEFINED` (contents discarded) to
-    /// `layout` for a transfer write at `stage`, into `cmd` (recording).
-    fn first_transfer(
-        &self,
-        gpu: &Gpu,
-        cmd: vk::CommandBuffer,
-        stage: vk::PipelineStageFlags2,
-        layout: vk::ImageLayout,
-    ) {
-        self.transition(
-            gpu,
-            cmd,
-            (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
-            (stage, vk::AccessFlags2::TRANSFER_WRITE),
-            (vk::ImageLayout::UNDEFINED, layout),
-        );
+        let image = Image::new(gpu, name, info, false)?;
+        gpu.one_shot(|cmd| {
+            image.transition(
+                gpu,
+                cmd,
+                (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
+                (stage, vk::AccessFlags2::TRANSFER_WRITE),
+                (vk::ImageLayout::UNDEFINED, layout),
+            );
+            write(cmd, &image);
+        })?;
+        Ok(image)
     }
 
     /// Creates a sampled RGBA8 image from tightly packed pixels, left in
@@ -430,15 +431,13 @@ impl Image {
     ) -> GpuResult<Image> {
         assert_eq!(pixels.len() % (width * height).max(1) as usize, 0);
         let usage = vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST;
-        let image = Image::single(gpu, name, format, (width, height), usage)?;
         let staging = Buffer::staging(gpu, &format!("{name} (staging)"), pixels)?;
-        gpu.one_shot(|cmd| unsafe {
-            image.first_transfer(
-                gpu,
-                cmd,
-                vk::PipelineStageFlags2::COPY,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-            );
+        let to = (
+            vk::PipelineStageFlags2::COPY,
+            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        );
+        let info = ImageInfo::single(format, width, height, usage);
+        Image::written(gpu, name, info, to, |cmd, image| unsafe {
             let region = [whole_image_copy(vk::Extent2D { width, height })];
             gpu.device.cmd_copy_buffer_to_image(
                 cmd,
@@ -464,8 +463,7 @@ impl Image {
                     vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
                 ),
             );
-        })?;
-        Ok(image)
+        })
     }
 }
 
@@ -482,21 +480,15 @@ impl Image {
         let usage = vk::ImageUsageFlags::STORAGE
             | vk::ImageUsageFlags::TRANSFER_DST
             | vk::ImageUsageFlags::TRANSFER_SRC;
-        let image = Image::single(gpu, name, format, (width, height), usage)?;
-        let range = image.range();
-        gpu.one_shot(|cmd| unsafe {
-            image.first_transfer(
-                gpu,
-                cmd,
-                vk::PipelineStageFlags2::CLEAR,
-                vk::ImageLayout::GENERAL,
-            );
+        let to = (vk::PipelineStageFlags2::CLEAR, vk::ImageLayout::GENERAL);
+        let info = ImageInfo::single(format, width, height, usage);
+        Image::written(gpu, name, info, to, |cmd, image| unsafe {
             gpu.device.cmd_clear_color_image(
                 cmd,
                 image.raw,
                 vk::ImageLayout::GENERAL,
                 &vk::ClearColorValue { float32: [0.0; 4] },
-                &[range],
+                &[image.range()],
             );
             let done = [vk::MemoryBarrier2::default()
                 .src_stage_mask(vk::PipelineStageFlags2::CLEAR)
@@ -505,8 +497,7 @@ impl Image {
                 .dst_access_mask(vk::AccessFlags2::MEMORY_READ | vk::AccessFlags2::MEMORY_WRITE)];
             gpu.device
                 .cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().memory_barriers(&done));
-        })?;
-        Ok(image)
+        })
     }
 }
 

@@ -155,6 +155,13 @@ impl PassBuilder<'_> {
         self
     }
 
+    /// Declares that the pass draws the mesh in `vertices` and `indices` (vertex and index
+    /// buffer reads).
+    pub fn mesh(self, vertices: ResourceId, indices: ResourceId) -> Self {
+        self.access(vertices, Access::VertexBuffer)
+            .access(indices, Access::IndexBuffer)
+    }
+
     /// Gives the pass its setup closure, which returns the per-frame record closure.
     pub fn setup(
         self,

@@ -59,8 +59,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
     graph
         .pass(PassName::Composite.as_str())
         .access(i.frame, Access::Uniform(Stage::Vertex))
-        .access(i.vertices, Access::VertexBuffer)
-        .access(i.indices, Access::IndexBuffer)
+        .mesh(i.vertices, i.indices)
         .access(i.node_radiosity, Access::TexelRead(Stage::Vertex))
         .access(i.local, Access::StorageRead(Stage::Fragment))
         .access(i.texture, Access::Sampled(Stage::Fragment))
@@ -96,11 +95,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
             let hdr = res.image(t.hdr).clone();
             let display = res.image(t.display).clone();
             let depth = res.image(t.depth).clone();
-            let mesh = MeshDraw {
-                vertices: res.buffer(i.vertices).raw,
-                indices: res.buffer(i.indices).raw,
-                count: i.index_count,
-            };
+            let mesh = MeshDraw::of(res, i.vertices, i.indices, i.index_count);
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[hdr.view, display.view],

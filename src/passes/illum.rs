@@ -31,8 +31,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
     graph
         .pass(PassName::Illum.as_str())
         .access(inputs.frame, Access::Uniform(Stage::Fragment))
-        .access(inputs.vertices, Access::VertexBuffer)
-        .access(inputs.indices, Access::IndexBuffer)
+        .mesh(inputs.vertices, inputs.indices)
         .access(inputs.shadow_maps, Access::Sampled(Stage::Fragment))
         .access(map, Access::ColorAttachment)
         .setup(move |gpu, res| {
@@ -63,11 +62,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                 set,
             )?;
             let map = res.image(map).clone();
-            let mesh = MeshDraw {
-                vertices: res.buffer(inputs.vertices).raw,
-                indices: res.buffer(inputs.indices).raw,
-                count: inputs.index_count,
-            };
+            let mesh = MeshDraw::of(res, inputs.vertices, inputs.indices, inputs.index_count);
             let size = [map.info.extent.width as f32, map.info.extent.height as f32];
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {

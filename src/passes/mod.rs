@@ -152,6 +152,23 @@ pub struct MeshDraw {
     pub count: u32,
 }
 
+impl MeshDraw {
+    /// The buffers behind the graph resources `vertices` and `indices`, drawing `count`
+    /// indices.
+    pub fn of(
+        res: &crate::graph::PassResources<'_>,
+        vertices: crate::graph::ResourceId,
+        indices: crate::graph::ResourceId,
+        count: u32,
+    ) -> MeshDraw {
+        MeshDraw {
+            vertices: res.buffer(vertices).raw,
+            indices: res.buffer(indices).raw,
+            count,
+        }
+    }
+}
+
 /// Records one cleared draw of `mesh` with `pipeline` into `target`: begin rendering, bind,
 /// `push` (push constants), viewport, draw, end.
 pub fn draw_mesh(

@@ -37,8 +37,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
     graph
         .pass(PassName::Shadow.as_str())
         .access(inputs.frame, Access::Uniform(Stage::Vertex))
-        .access(inputs.vertices, Access::VertexBuffer)
-        .access(inputs.indices, Access::IndexBuffer)
+        .mesh(inputs.vertices, inputs.indices)
         .access(maps, Access::DepthAttachment)
         .setup(move |gpu, res| {
             let set = res.bind().uniform(0, inputs.frame).finish()?;
@@ -59,11 +58,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                 set,
             )?;
             let maps = res.image(maps).clone();
-            let mesh = MeshDraw {
-                vertices: res.buffer(inputs.vertices).raw,
-                indices: res.buffer(inputs.indices).raw,
-                count: inputs.index_count,
-            };
+            let mesh = MeshDraw::of(res, inputs.vertices, inputs.indices, inputs.index_count);
             Ok(Box::new(move |rec| {
                 for layer in 0..inputs.layers {
                     let target = DrawTarget {

@@ -91,8 +91,7 @@ pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
     graph
         .pass(PassName::Thickness.as_str())
         .access(i.frame, Access::Uniform(Stage::Fragment))
-        .access(i.vertices, Access::VertexBuffer)
-        .access(i.indices, Access::IndexBuffer)
+        .mesh(i.vertices, i.indices)
         .access(back, Access::DepthAttachment)
         .setup(move |gpu, res| {
             let set = res.bind().uniform(0, i.frame).finish()?;
@@ -103,11 +102,7 @@ pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
                 set,
             )?;
             let back = res.image(back).clone();
-            let mesh = MeshDraw {
-                vertices: res.buffer(i.vertices).raw,
-                indices: res.buffer(i.indices).raw,
-                count: i.index_count,
-            };
+            let mesh = MeshDraw::of(res, i.vertices, i.indices, i.index_count);
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[],
@@ -139,8 +134,7 @@ pub fn single(
     graph
         .pass(PassName::Single.as_str())
         .access(m.frame, Access::Uniform(Stage::Fragment))
-        .access(m.vertices, Access::VertexBuffer)
-        .access(m.indices, Access::IndexBuffer)
+        .mesh(m.vertices, m.indices)
         .access(i.entry, Access::Sampled(Stage::Fragment))
         .access(i.back, Access::Sampled(Stage::Fragment))
         .access(out, Access::ColorAttachment)
@@ -160,11 +154,7 @@ pub fn single(
             )?;
             let out = res.image(out).clone();
             let depth = res.image(depth).clone();
-            let mesh = MeshDraw {
-                vertices: res.buffer(m.vertices).raw,
-                indices: res.buffer(m.indices).raw,
-                count: m.index_count,
-            };
+            let mesh = MeshDraw::of(res, m.vertices, m.indices, m.index_count);
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[out.view],

@@ -11,29 +11,33 @@
 use super::rng::Rng;
 use rayon::prelude::*;
 
-/// Exits of one simulation: cumulative fractions of the incident power at each radius.
+/// Where the light of one set of scattering orders leaves.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderExits {
+    /// Fraction of the incident power leaving within each radius.
+    pub cumulative: Vec<f64>,
+    /// Fraction leaving anywhere.
+    pub total: f64,
+    /// Exit radiance relative to a Lambertian exit of the same flux, per bin of the exit
+    /// cosine ([`LOBE_BINS`] equal bins over (0, 1]).
+    pub lobe: Vec<f64>,
+}
+
+/// Exits of one simulation, for every order (>= 1 scattering events: the total diffuse
+/// reflectance) and for multiple scattering (>= 2 events).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Exits {
     /// Scattering albedo simulated.
     pub albedo: f64,
     /// Paths traced.
     pub paths: u64,
-    /// Fraction of the power leaving within radius `radii[j]` after >= 1 scattering events.
-    pub all_orders: Vec<f64>,
-    /// The same for >= 2 events (multiple scattering only).
-    pub multiple: Vec<f64>,
-    /// Fraction leaving anywhere after >= 1 events (total diffuse reflectance).
-    pub total_all: f64,
-    /// Fraction leaving anywhere after >= 2 events.
-    pub total_multiple: f64,
-    /// Exit radiance relative to a Lambertian exit of the same flux, per bin of the exit
-    /// cosine ([`LOBE_BINS`] equal bins over (0, 1]), after >= 1 events.
-    pub lobe_all: Vec<f64>,
-    /// The same after >= 2 events.
-    pub lobe_multiple: Vec<f64>,
+    /// Every order.
+    pub all: OrderExits,
+    /// Orders >= 2.
+    pub multiple: OrderExits,
 }
 
-/// Bins of the exit cosine in [`Exits::lobe_all`] and [`Exits::lobe_multiple`].
+/// Bins of the exit cosine in [`OrderExits::lobe`].
 pub const LOBE_BINS: usize = 16;
 
 /// Radiance relative to a Lambertian exit per cosine bin from the exits' cosine histogram: a
@@ -95,28 +99,26 @@ pub fn simulate(albedo: f64, radii: &[f64], paths: u64, seed: u64) -> Exits {
             },
         );
     let (radial, cosines) = counts.split_at(2 * (m + 1));
-    let cumulative = |bins: &[u64]| -> (Vec<f64>, f64) {
+    let exits = |bins: &[u64], cosines: &[u64]| -> OrderExits {
         let mut acc = 0u64;
-        let c = bins[..m]
+        let cumulative = bins[..m]
             .iter()
             .map(|&b| {
                 acc += b;
                 acc as f64 / paths as f64
             })
             .collect();
-        (c, (acc + bins[m]) as f64 / paths as f64)
+        OrderExits {
+            cumulative,
+            total: (acc + bins[m]) as f64 / paths as f64,
+            lobe: lobe(cosines),
+        }
     };
-    let (all_orders, total_all) = cumulative(&radial[..m + 1]);
-    let (multiple, total_multiple) = cumulative(&radial[m + 1..]);
     Exits {
         albedo,
         paths,
-        all_orders,
-        multiple,
-        total_all,
-        total_multiple,
-        lobe_all: lobe(&cosines[..LOBE_BINS]),
-        lobe_multiple: lobe(&cosines[LOBE_BINS..]),
+        all: exits(&radial[..m + 1], &cosines[..LOBE_BINS]),
+        multiple: exits(&radial[m + 1..], &cosines[LOBE_BINS..]),
     }
 }
 
@@ -159,11 +161,11 @@ mod tests {
     fn single_scattering_matches_the_closed_form() {
         let albedo = 0.6;
         let e = simulate(albedo, &[1.0], 400_000, 7);
-        let single = e.total_all - e.total_multiple;
+        let single = e.all.total - e.multiple.total;
         let want = 0.5 * albedo * (1.0 - std::f64::consts::LN_2);
         assert!((single / want - 1.0).abs() < 0.01, "{single} vs {want}");
         // The cumulative fractions never exceed the totals and increase with the radius.
-        assert!(e.all_orders[0] <= e.total_all && e.multiple[0] <= e.total_multiple);
+        assert!(e.all.cumulative[0] <= e.all.total && e.multiple.cumulative[0] <= e.multiple.total);
     }
 
     /// Single scattering's exit lobe in closed form: once scattered at normal incidence, a path
@@ -174,10 +176,10 @@ mod tests {
     fn the_single_scattering_lobe_matches_the_closed_form() {
         let e = simulate(0.6, &[1.0], 2_000_000, 5);
         let n = LOBE_BINS as f64;
-        let single = e.total_all - e.total_multiple;
+        let single = e.all.total - e.multiple.total;
         for i in 0..LOBE_BINS {
             // The lobes are per unit flux of their orders: single = all - multiple.
-            let f = (e.total_all * e.lobe_all[i] - e.total_multiple * e.lobe_multiple[i]) / single;
+            let f = (e.all.total * e.all.lobe[i] - e.multiple.total * e.multiple.lobe[i]) / single;
             let (m0, m1) = (i as f64 / n, (i + 1) as f64 / n);
             // The closed form averaged over the bin with the Lambertian weight 2 mu.
             let steps = 64;
@@ -202,11 +204,12 @@ mod tests {
         let low = simulate(0.5, &radii, 50_000, 1);
         let high = simulate(0.95, &radii, 50_000, 1);
         for e in [&low, &high] {
-            assert!(e.all_orders.windows(2).all(|w| w[0] <= w[1]));
-            assert!(e.multiple.windows(2).all(|w| w[0] <= w[1]));
-            assert!(e.all_orders[3] <= e.total_all && e.total_all - e.all_orders[3] < 1e-3);
-            assert!(e.multiple.iter().zip(&e.all_orders).all(|(m, a)| m <= a));
+            let (a, m) = (&e.all.cumulative, &e.multiple.cumulative);
+            assert!(a.windows(2).all(|w| w[0] <= w[1]));
+            assert!(m.windows(2).all(|w| w[0] <= w[1]));
+            assert!(a[3] <= e.all.total && e.all.total - a[3] < 1e-3);
+            assert!(m.iter().zip(a).all(|(m, a)| m <= a));
         }
-        assert!(high.total_all > low.total_all && high.total_multiple > 2.0 * low.total_multiple);
+        assert!(high.all.total > low.all.total && high.multiple.total > 2.0 * low.multiple.total);
     }
 }
