@@ -8,14 +8,15 @@
 //!
 //! Each case is also rendered with an index-matched boundary (eta = 1, optimized blending) and
 //! compared with its committed volumetric truth (`tests/truth-data/stability/`, 4x4 bins, the
-//! truth's noise removed): the last column, where the dipole itself is wrong. The truth images
+//! truth's noise removed), under the dipole and under the half-space model with its
+//! single-scattering pass: the last two columns, where the model itself is wrong. The truth images
 //! are made by this suite: `TRANSLUCENT_WRITE_TRUTH=512 cargo test --release --test stability
 //! -- --test-threads 1` traces each case with 512 paths per pixel and channel and writes them.
 
 mod common;
 
 use glam::{Mat4, Vec3};
-use translucent::physics::Material;
+use translucent::physics::{Material, Model};
 use translucent::preprocess::{operators::Blend, settings::SettingsOverrides};
 use translucent::reference::{metrics, Reference, ReferenceSettings};
 use translucent::renderer::Options;
@@ -70,13 +71,14 @@ fn measure(name: &str, scene: &Scene, o: SettingsOverrides, bound: f64) -> [f64;
             ));
         }
     }
-    let t = vs_truth(name, scene, o);
-    line.push_str(&format!(
-        " {:.1} / {:.1} / {:.1} |",
-        100.0 * t[0],
-        100.0 * t[1],
-        100.0 * t[2]
-    ));
+    for t in vs_truth(name, scene, o) {
+        line.push_str(&format!(
+            " {:.1} / {:.1} / {:.1} |",
+            100.0 * t[0],
+            100.0 * t[1],
+            100.0 * t[2]
+        ));
+    }
     println!("{line} {:.0} |", 100.0 * bound);
     let max = worst.iter().copied().fold(0.0, f64::max);
     assert!(
@@ -88,11 +90,12 @@ fn measure(name: &str, scene: &Scene, o: SettingsOverrides, bound: f64) -> [f64;
     worst
 }
 
-/// The case with eta = 1 (optimized blending) against its committed volumetric truth: relative
-/// RMS per channel after 4x4 binning with the truth's noise removed. With
+/// The case with eta = 1 (optimized blending) against its committed volumetric truth, under the
+/// classical dipole and under the default model at eta = 1: relative RMS per channel after 4x4
+/// binning with the truth's noise removed. With
 /// `TRANSLUCENT_WRITE_TRUTH=SPP` the truth is traced with SPP paths per pixel and channel and
 /// written first.
-fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [f64; 3] {
+fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [[f64; 3]; 2] {
     // "sphere r = 15 mm, ketchup" -> "sphere-r-15-mm-ketchup".
     let slug = name
         .split(|c: char| !c.is_ascii_alphanumeric())
@@ -129,10 +132,16 @@ fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [f64; 3] {
         })
     };
     let ((w, h, truth), (_, _, sigma)) = (read(&image), read(&noise));
-    let pre = common::preprocess(&s, o);
-    let out = common::render(&s, &pre, Options::default(), 1);
-    assert!(out.radiance.iter().all(|v| v.is_finite()));
-    metrics::compare_binned(&out.radiance, &truth, Some(&sigma), w, h, 4).rel_rms
+    // The dipole, then the default model at eta = 1 (the half-space profile with single
+    // scattering as a pass).
+    [Model::Dipole, Model::HalfspaceSingle].map(|model| {
+        let mut s = s.clone();
+        s.material = s.material.with_model(model).unwrap();
+        let pre = common::preprocess(&s, o);
+        let out = common::render(&s, &pre, Options::default(), 1);
+        assert!(out.radiance.iter().all(|v| v.is_finite()));
+        metrics::compare_binned(&out.radiance, &truth, Some(&sigma), w, h, 4).rel_rms
+    })
 }
 
 const LIGHT_ABOVE: &str = "[[lights]]\nkind = \"directional\"\ndirection = [0.3, -1.0, -0.2]\n";
