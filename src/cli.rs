@@ -364,10 +364,33 @@ pub struct RenderArgs {
     pub pre: PreprocessArgs,
 }
 
-fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
+/// Most frames a command renders or warms up with: a hundred thousand frames are hours on a
+/// CPU device; a count beyond that is a typo, refused before anything runs or is allocated.
+pub const MAX_FRAMES: usize = 100_000;
+
+/// Refuses a frame count outside `min..=MAX_FRAMES`, naming the flag.
+fn frame_count(flag: &str, n: usize, min: usize) -> Result<()> {
+    if n < min || n > MAX_FRAMES {
+        bail!("{flag} {n} must lie between {min} and {MAX_FRAMES}");
     }
+    Ok(())
+}
+
+/// Refuses an image with NaN or infinite values (a comparison would silently skip them).
+fn finite_image(path: &std::path::Path, rgba: &[f32]) -> Result<()> {
+    let bad = rgba.iter().filter(|v| !v.is_finite()).count();
+    if bad > 0 {
+        bail!(
+            "{} holds {bad} NaN or infinite value(s) of {}: no error can be measured against them",
+            path.display(),
+            rgba.len()
+        );
+    }
+    Ok(())
+}
+
+fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
+    frame_count("--frames", args.frames, 1)?;
     let scene = args.input.load()?;
     println!(
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
@@ -535,9 +558,8 @@ fn precompute(args: &PrecomputeArgs) -> Result<()> {
 }
 
 fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
+    frame_count("--frames", args.frames, 1)?;
+    frame_count("--warmup", args.warmup, 0)?;
     let scene = args.input.load()?;
     output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
@@ -699,6 +721,8 @@ fn compare(args: &CompareArgs) -> Result<()> {
     use crate::reference::metrics;
     let (w, h, a) = output::read_exr(&args.render)?;
     let (w2, h2, b) = output::read_exr(&args.reference)?;
+    finite_image(&args.render, &a)?;
+    finite_image(&args.reference, &b)?;
     if (w, h) != (w2, h2) {
         bail!("the images differ in size: {w}x{h} vs {w2}x{h2}");
     }
@@ -880,9 +904,7 @@ fn truth(args: &TruthArgs) -> Result<()> {
 
 fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     use crate::reference::{Reference, ReferenceSettings};
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
+    frame_count("--frames", args.frames, 1)?;
     let scene = args.input.load()?;
     output::create_dir(&args.out)?;
     let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;

@@ -199,7 +199,17 @@ fn broken_objs_are_refused_clearly() {
     fails_with(c, "does not exist");
     let mut c = bin();
     c.args(["render", "--frames", "0"]);
-    fails_with(c, "--frames must be at least 1");
+    fails_with(c, "--frames 0 must lie between 1 and 100000");
+    // Counts that would allocate terabytes or never end are refused before anything runs.
+    let mut c = bin();
+    c.args(["render", "--frames", "99999999999"]);
+    fails_with(c, "--frames 99999999999 must lie between 1 and 100000");
+    let mut c = bin();
+    c.args(["bench", "--warmup", "99999999999"]);
+    fails_with(c, "--warmup 99999999999 must lie between 0 and 100000");
+    let mut c = bin();
+    c.args(["chart", "--frames", "100001"]);
+    fails_with(c, "--frames 100001 must lie between 1 and 100000");
     let mut c = bin();
     c.args(["render", "--width", "0"]);
     fails_with(c, "at least 1x1");
@@ -419,6 +429,19 @@ fn reference_and_compare_write_their_outputs() {
         .arg(dir.join("reference.exr"))
         .arg(dir.join("missing.exr"));
     fails_with(c, "missing.exr");
+    // An image with NaN in it is refused by name, not compared as if the NaN were not there.
+    let (w, h, mut img) = translucent::output::read_exr(&dir.join("reference.exr")).unwrap();
+    let covered = img.chunks(4).position(|p| p[3] > 0.5).unwrap();
+    img[4 * covered] = f32::NAN;
+    let nan = dir.join("nan.exr");
+    translucent::output::write_exr(&nan, w, h, &img).unwrap();
+    let mut c = bin();
+    c.arg("compare")
+        .arg(&nan)
+        .arg(dir.join("reference.exr"))
+        .arg("--out")
+        .arg(dir.join("cmp-nan"));
+    fails_with(c, "nan.exr holds 1 NaN or infinite value(s)");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
