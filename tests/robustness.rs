@@ -196,9 +196,11 @@ fn output_faults_leave_no_partial_files() {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1500));
-    let _ = Command::new("kill")
+    let killed = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
-        .status();
+        .status()
+        .expect("kill(1) runs (Debian: procps, installed by .ci/run)");
+    assert!(killed.success(), "kill -INT failed: {killed}");
     let status = child.wait().unwrap();
     assert!(
         !status.success(),
