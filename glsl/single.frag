@@ -19,6 +19,8 @@ layout(set = 0, binding = 1) uniform sampler2DArray entry_depth;
 layout(set = 0, binding = 2) uniform sampler2D back_depth;
 
 layout(location = 0) in vec3 in_position;
+// Written by camera.vert, which `thickness` shares; declared so that the interface matches
+// (an unconsumed vertex output is a validation warning).
 layout(location = 1) in vec3 in_normal;
 
 layout(location = 0) out vec4 out_single;

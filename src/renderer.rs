@@ -10,7 +10,12 @@
 use crate::gpu::{Buffer, Gpu, Image};
 use crate::graph::{timing::FrameTiming, Access, FrameGraph, ImageDesc, RenderGraph, Stage};
 use crate::layout::Item;
-use crate::passes::{self, compute, data::SubsurfaceData, frame::FrameUniforms, PassName};
+use crate::passes::{
+    self, compute,
+    data::SubsurfaceData,
+    frame::{FrameUniforms, MaterialUniforms},
+    PassName,
+};
 use crate::preprocess::{operators::Blend, Preprocessed};
 use crate::scene::{Light, Scene};
 use anyhow::{Context, Result};
@@ -93,6 +98,8 @@ pub struct Renderer {
     capture: Option<CaptureBuffers>,
     /// Edge of the shadow maps, texels.
     shadow_map_size: u32,
+    /// The uniforms that follow from the material (fixed for a renderer).
+    material_uniforms: MaterialUniforms,
     last_lights: Option<Vec<Light>>,
     window: Option<(Arc<Image>, passes::overlay::Text)>,
     readback_requested: bool,
@@ -419,6 +426,8 @@ impl Renderer {
         let graph = g.build(gpu)?;
         Ok(Renderer {
             gpu: gpu.clone(),
+            // Before `scene` moves in.
+            material_uniforms: MaterialUniforms::of(&scene.material),
             scene,
             graph,
             uniforms,
@@ -555,7 +564,12 @@ impl Renderer {
     }
 
     fn write_uniforms(&self, lights: &[Light]) -> Result<()> {
-        let uniforms = FrameUniforms::new(&self.scene, lights, self.shadow_map_size)?;
+        let uniforms = FrameUniforms::new(
+            &self.scene,
+            &self.material_uniforms,
+            lights,
+            self.shadow_map_size,
+        )?;
         if !self.uniforms.write_mapped(bytemuck::bytes_of(&uniforms)) {
             anyhow::bail!("the uniform buffer is not host-visible");
         }

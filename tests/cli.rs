@@ -197,19 +197,30 @@ fn broken_objs_are_refused_clearly() {
     let mut c = bin();
     c.args(["render", "--mesh", "/nonexistent/mesh.obj"]);
     fails_with(c, "does not exist");
-    let mut c = bin();
-    c.args(["render", "--frames", "0"]);
-    fails_with(c, "--frames 0 must lie between 1 and 100000");
-    // Counts that would allocate terabytes or never end are refused before anything runs.
-    let mut c = bin();
-    c.args(["render", "--frames", "99999999999"]);
-    fails_with(c, "--frames 99999999999 must lie between 1 and 100000");
-    let mut c = bin();
-    c.args(["bench", "--warmup", "99999999999"]);
-    fails_with(c, "--warmup 99999999999 must lie between 0 and 100000");
-    let mut c = bin();
-    c.args(["chart", "--frames", "100001"]);
-    fails_with(c, "--frames 100001 must lie between 1 and 100000");
+    // Frame counts of zero, and counts that would allocate terabytes or never end, are refused
+    // before anything runs.
+    for (args, needle) in [
+        (
+            ["render", "--frames", "0"],
+            "--frames 0 must lie between 1 and 100000",
+        ),
+        (
+            ["render", "--frames", "99999999999"],
+            "--frames 99999999999 must lie between 1 and 100000",
+        ),
+        (
+            ["bench", "--warmup", "99999999999"],
+            "--warmup 99999999999 must lie between 0 and 100000",
+        ),
+        (
+            ["chart", "--frames", "100001"],
+            "--frames 100001 must lie between 1 and 100000",
+        ),
+    ] {
+        let mut c = bin();
+        c.args(args);
+        fails_with(c, needle);
+    }
     let mut c = bin();
     c.args(["render", "--width", "0"]);
     fails_with(c, "at least 1x1");

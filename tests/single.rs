@@ -5,29 +5,16 @@
 
 mod common;
 
-use std::path::Path;
-use translucent::output::read_exr;
 use translucent::preprocess::settings::SettingsOverrides;
 use translucent::reference::metrics;
 use translucent::renderer::{Options, Renderer};
-use translucent::scene::{Overrides, Scene};
 
 /// The single-scattering image of `scene` (64x64) against `truth_dir`, relative RMS after 4x4
 /// binning with the truth's noise removed, per channel.
 fn single_error(name: &str, truth_dir: &str) -> [f64; 3] {
-    let scene = Scene::load(
-        Some(Path::new(&format!("assets/scenes/truth/{name}.toml"))),
-        &Overrides {
-            width: Some(64),
-            height: Some(64),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let scene = common::truth_scene(name, Some(64), None);
     assert!(scene.material.model.has_single_pass());
-    let dir = Path::new("tests/truth-data").join(truth_dir);
-    let (w, h, truth) = read_exr(&dir.join("truth.exr")).unwrap();
-    let (_, _, noise) = read_exr(&dir.join("noise.exr")).unwrap();
+    let (w, h, truth, noise) = common::committed_truth(truth_dir);
     let pre = common::preprocess(&scene, SettingsOverrides::default());
     let gpu = common::gpu();
     let options = Options {
@@ -78,18 +65,8 @@ fn single_scattering_of_the_ketchup_sphere_matches_the_truth() {
 /// sampling, set the difference.
 #[test]
 fn the_references_single_scattering_matches_the_truth() {
-    let scene = Scene::load(
-        Some(Path::new("assets/scenes/truth/sphere-ketchup.toml")),
-        &Overrides {
-            width: Some(64),
-            height: Some(64),
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let dir = Path::new("tests/truth-data/sphere-ketchup-single");
-    let (w, h, truth) = read_exr(&dir.join("truth.exr")).unwrap();
-    let (_, _, noise) = read_exr(&dir.join("noise.exr")).unwrap();
+    let scene = common::truth_scene("sphere-ketchup", Some(64), None);
+    let (w, h, truth, noise) = common::committed_truth("sphere-ketchup-single");
     let tracer = translucent::truth::Tracer::for_single_scattering(&scene).unwrap();
     let mut scratch = translucent::truth::Scratch::default();
     let mut image = vec![0.0f32; (4 * w * h) as usize];
@@ -100,17 +77,9 @@ fn the_references_single_scattering_matches_the_truth() {
                 continue;
             }
             let i = 4 * (y * w + x) as usize;
-            for c in 0..3 {
-                let l = tracer.single_scattering(
-                    o,
-                    d,
-                    c,
-                    translucent::reference::SINGLE_STEPS,
-                    &mut scratch,
-                );
-                image[i + c] = l as f32;
-            }
-            image[i + 3] = 1.0;
+            let l =
+                tracer.single_scattering(o, d, translucent::reference::SINGLE_STEPS, &mut scratch);
+            image[i..i + 4].copy_from_slice(&[l[0] as f32, l[1] as f32, l[2] as f32, 1.0]);
         }
     }
     let e = metrics::compare_binned(&image, &truth, Some(&noise), w, h, 4);

@@ -8,28 +8,14 @@
 
 mod common;
 
-use std::path::Path;
-use translucent::output::read_exr;
 use translucent::physics::Model;
 use translucent::preprocess::settings::SettingsOverrides;
 use translucent::reference::metrics;
 use translucent::renderer::Options;
-use translucent::scene::{Overrides, Scene};
 
 fn case(name: &str, model: Model, bounds: [f64; 3]) {
-    let scene = Scene::load(
-        Some(Path::new(&format!("assets/scenes/truth/{name}.toml"))),
-        &Overrides {
-            width: Some(64),
-            height: Some(64),
-            model: Some(model),
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let dir = Path::new("tests/truth-data").join(name);
-    let (w, h, truth) = read_exr(&dir.join("truth.exr")).unwrap();
-    let (_, _, noise) = read_exr(&dir.join("noise.exr")).unwrap();
+    let scene = common::truth_scene(name, Some(64), Some(model));
+    let (w, h, truth, noise) = common::committed_truth(name);
     assert_eq!((w, h), (scene.width, scene.height));
     let pre = common::preprocess(&scene, SettingsOverrides::default());
     let out = common::render(&scene, &pre, Options::default(), 1);
@@ -109,11 +95,7 @@ fn skim_milk_slab_lit_from_behind() {
 /// -1.7 %.
 #[test]
 fn semi_infinite_skim_milk() {
-    let scene = Scene::load(
-        Some(Path::new("assets/scenes/truth/halfspace-skimmilk.toml")),
-        &Overrides::default(),
-    )
-    .unwrap();
+    let scene = common::truth_scene("halfspace-skimmilk", None, None);
     assert_eq!(scene.material.model, Model::HalfspaceSingle);
     let pre = common::preprocess(&scene, SettingsOverrides::default());
     let out = common::render(&scene, &pre, Options::default(), 1);

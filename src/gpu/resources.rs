@@ -510,11 +510,12 @@ pub struct TexelView {
     pub buffer: Arc<Buffer>,
 }
 
-/// Bytes per element of the texel-buffer formats the passes use (`None` for others).
-pub fn texel_format_bytes(format: vk::Format) -> Option<u64> {
+/// Bytes per texel or element of the formats the renderer uses (`None` for others): the one
+/// table of format sizes, read by the texel views and by `layout::Item::bytes`.
+pub const fn format_bytes(format: vk::Format) -> Option<u64> {
     use vk::Format as F;
     Some(match format {
-        F::R32_UINT | F::R32_SFLOAT => 4,
+        F::R32_UINT | F::R32_SFLOAT | F::D32_SFLOAT | F::R8G8B8A8_UNORM | F::R8G8B8A8_SRGB => 4,
         F::R32G32_UINT | F::R32G32_SFLOAT | F::R16G16B16A16_SFLOAT => 8,
         F::R32G32B32A32_UINT | F::R32G32B32A32_SFLOAT => 16,
         _ => return None,
@@ -522,14 +523,13 @@ pub fn texel_format_bytes(format: vk::Format) -> Option<u64> {
 }
 
 impl TexelView {
-    /// Views the whole of `buffer` as elements of `format` (a format of
-    /// [`texel_format_bytes`]).
+    /// Views the whole of `buffer` as elements of `format` (a format of [`format_bytes`]).
     pub fn of_format(
         gpu: &Arc<Gpu>,
         buffer: &Arc<Buffer>,
         format: vk::Format,
     ) -> GpuResult<TexelView> {
-        let bytes = texel_format_bytes(format).ok_or_else(|| GpuError::Interface {
+        let bytes = format_bytes(format).ok_or_else(|| GpuError::Interface {
             pipeline: buffer.name.clone(),
             problem: format!("a texel view of {format:?}, a format with no element size here"),
         })?;

@@ -1,5 +1,6 @@
 //! Per-frame uniforms shared by all passes, and the shadow projections of the lights.
 
+use crate::physics::Material;
 use crate::scene::shadow::{shadow_projections, MAX_SHADOW_LAYERS};
 use crate::scene::{desc::LightKind, Light, Scene, MAX_LIGHTS};
 use anyhow::{bail, Result};
@@ -37,9 +38,45 @@ pub struct FrameUniforms {
 /// exit cosine at the centres of equal bins over (0, 1].
 pub const EXIT_LOBE_SAMPLES: usize = 16;
 
+/// The part of [`FrameUniforms`] that follows from the material alone (index, coefficients,
+/// the profile's exit lobe): computed once per renderer, not per frame.
+#[derive(Debug, Clone, Copy)]
+pub struct MaterialUniforms {
+    material: [f32; 4],
+    sigma_s: [f32; 4],
+    sigma_t: [f32; 4],
+    exit_lobe: [[f32; 4]; EXIT_LOBE_SAMPLES],
+}
+
+impl MaterialUniforms {
+    /// The uniforms of `m` under its model.
+    pub fn of(m: &Material) -> MaterialUniforms {
+        let profiles = m.profiles();
+        let exit_lobe = std::array::from_fn(|i| {
+            let mu = (i as f64 + 0.5) / EXIT_LOBE_SAMPLES as f64;
+            let f = profiles.each_ref().map(|p| p.exit_lobe(mu) as f32);
+            [f[0], f[1], f[2], 1.0]
+        });
+        let (s, a) = (m.sigma_s_prime, m.sigma_a);
+        let t = [0, 1, 2].map(|c| (s[c] + a[c]) as f32);
+        MaterialUniforms {
+            material: [m.eta as f32, 0.0, 0.0, 0.0],
+            sigma_s: [s[0] as f32, s[1] as f32, s[2] as f32, 0.0],
+            sigma_t: [t[0], t[1], t[2], 0.0],
+            exit_lobe,
+        }
+    }
+}
+
 impl FrameUniforms {
-    /// Uniforms for `scene` with its lights as given and `shadow_map_size`-texel shadow maps.
-    pub fn new(scene: &Scene, lights: &[Light], shadow_map_size: u32) -> Result<FrameUniforms> {
+    /// Uniforms for `scene` (its material's part given as `material`) with its lights as given
+    /// and `shadow_map_size`-texel shadow maps.
+    pub fn new(
+        scene: &Scene,
+        material: &MaterialUniforms,
+        lights: &[Light],
+        shadow_map_size: u32,
+    ) -> Result<FrameUniforms> {
         let (center, radius) = scene.bounds();
         let aspect = scene.width as f32 / scene.height as f32;
         let mut u = FrameUniforms::zeroed();
@@ -47,18 +84,10 @@ impl FrameUniforms {
         u.view_proj = view_proj.to_cols_array_2d();
         u.inverse_view_proj = view_proj.inverse().to_cols_array_2d();
         u.camera_pos = scene.camera.position.extend(1.0).to_array();
-        let m = &scene.material;
-        u.material = [m.eta as f32, 0.0, 0.0, 0.0];
-        let profiles = m.profiles();
-        for (i, lobe) in u.exit_lobe.iter_mut().enumerate() {
-            let mu = (i as f64 + 0.5) / EXIT_LOBE_SAMPLES as f64;
-            let f = profiles.each_ref().map(|p| p.exit_lobe(mu) as f32);
-            *lobe = [f[0], f[1], f[2], 1.0];
-        }
-        let (s, a) = (m.sigma_s_prime, m.sigma_a);
-        u.sigma_s = [s[0] as f32, s[1] as f32, s[2] as f32, 0.0];
-        let t = [0, 1, 2].map(|c| (s[c] + a[c]) as f32);
-        u.sigma_t = [t[0], t[1], t[2], 0.0];
+        u.material = material.material;
+        u.sigma_s = material.sigma_s;
+        u.sigma_t = material.sigma_t;
+        u.exit_lobe = material.exit_lobe;
         let mut layer = 0usize;
         for (slot, light) in u.lights.iter_mut().zip(lights) {
             let shadows = shadow_projections(light, center, radius, shadow_map_size);

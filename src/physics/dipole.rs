@@ -104,14 +104,6 @@ impl Dipole {
         (f, lap)
     }
 
-    /// R_d's mean over a cell centred at distance `r`, to second order: R_d + s Laplacian(R_d),
-    /// clamped at zero, where `s` is half the cell's per-axis variance about its centre
-    /// (c^2 / 24 for a square of side c).
-    pub fn rd_cell_mean(&self, r: f64, s: f64) -> f64 {
-        let (f, lap) = self.rd_and_laplacian(r);
-        (f + s * lap).max(0.0)
-    }
-
     /// Total diffuse reflectance R_total = integral of 2 pi r R_d(r) dr, closed form:
     /// (alpha'/2) (1 + e^(-(4/3) A sqrt(3(1-alpha')))) e^(-sqrt(3(1-alpha'))).
     pub fn total_reflectance(&self) -> f64 {
@@ -131,15 +123,6 @@ impl Dipole {
             z * ((-s * z).exp() / z - (-s * d).exp() / d)
         };
         0.5 * self.albedo * (part(self.z_r) + part(self.z_v))
-    }
-
-    /// Mean of R_d over a disc of radius `rho` centred on the entry point: P(rho) / (pi rho^2).
-    /// What a texel of that area receives from itself, without the spike of R_d(0).
-    pub fn disc_mean(&self, rho: f64) -> f64 {
-        if rho <= 0.0 {
-            return self.rd(0.0);
-        }
-        self.cumulative(rho) / (PI * rho * rho)
     }
 
     /// Diffusion length 1 / sigma_tr (infinite for a non-absorbing medium).

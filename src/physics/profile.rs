@@ -199,7 +199,9 @@ impl Profile {
         }
     }
 
-    /// Mean of R over a disc of radius `rho` centred on the entry point.
+    /// Mean of R over a disc of radius `rho` centred on the entry point: the cumulative
+    /// fraction over the disc's area. What a texel of that area receives from itself, without
+    /// the spike of R(0).
     pub fn disc_mean(&self, rho: f64) -> f64 {
         if rho <= 0.0 {
             return self.rd(0.0);

@@ -214,7 +214,7 @@ pub struct Operators {
 /// mean, R_d + (c^2 / 24) Laplacian(R_d): R_d is convex away from its peak, so the bare
 /// midpoint rule underestimates every tap (by about 1 % of R_total in all, which showed as a
 /// uniform darkening of the slab and the bunny).
-fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Profile; 3]) -> Rgb {
+fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, profiles: &[Profile; 3]) -> Rgb {
     let ts = &atlas.texels[s];
     let area = ts.area as f64;
     let xs = ts.position.as_dvec3();
@@ -222,7 +222,7 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Profile; 3]) -> Rgb 
     let rho = (area / std::f64::consts::PI).sqrt();
     let h = atlas.texel_mm;
     if r < rho {
-        rgb(dipoles, |d| d.disc_mean(rho))
+        rgb(profiles, |d| d.disc_mean(rho))
     } else if r < SUBSAMPLE_REACH_TEXELS * h {
         let m = if r < FINE_SUBSAMPLE_REACH_TEXELS * h {
             FINE_SUBSAMPLES
@@ -241,12 +241,14 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, dipoles: &[Profile; 3]) -> Rgb 
                     (j as f64 + 0.5) * step - 0.5 * h,
                 );
                 let ry = x.distance(xs + u * a + v * b);
-                acc += rgb(dipoles, |d| d.rd_cell_mean(ry, step * step / 24.0) * weight);
+                acc += rgb(profiles, |d| {
+                    d.rd_cell_mean(ry, step * step / 24.0) * weight
+                });
             }
         }
         acc
     } else {
-        rgb(dipoles, |d| d.rd_cell_mean(r, h * h / 24.0))
+        rgb(profiles, |d| d.rd_cell_mean(r, h * h / 24.0))
     }
 }
 
@@ -260,8 +262,8 @@ const FINE_SUBSAMPLES: usize = 6;
 /// Sub-samples per texel side further out.
 const COARSE_SUBSAMPLES: usize = 3;
 
-fn rgb(dipoles: &[Profile; 3], f: impl Fn(&Profile) -> f64) -> Rgb {
-    Rgb::from_fn(|c| f(&dipoles[c]))
+fn rgb(profiles: &[Profile; 3], f: impl Fn(&Profile) -> f64) -> Rgb {
+    Rgb::from_fn(|c| f(&profiles[c]))
 }
 
 /// Progress callback: (stage name, done, total).
@@ -410,7 +412,7 @@ impl Basis {
 fn local_kernels(
     atlas: &Atlas,
     kernel_size: u32,
-    dipoles: &[Profile; 3],
+    profiles: &[Profile; 3],
     progress: Progress<'_>,
 ) -> Vec<[f32; 3]> {
     let n_texels = atlas.texels.len() as u64;
@@ -427,7 +429,7 @@ fn local_kernels(
                 for dx in -half..=half {
                     let w = match atlas.texel_at(t.x as i64 + dx, t.y as i64 + dy) {
                         Some(s) if atlas.texels[s].chart == t.chart => {
-                            texel_mean(atlas, s, xt, dipoles) * atlas.texels[s].area as f64
+                            texel_mean(atlas, s, xt, profiles) * atlas.texels[s].area as f64
                         }
                         _ => Rgb::ZERO,
                     };
@@ -453,7 +455,7 @@ fn global_response(
     atlas: &Atlas,
     nodes: &Nodes,
     basis: &Basis,
-    dipoles: &[Profile; 3],
+    profiles: &[Profile; 3],
     prune_tolerance: f64,
     progress: Progress<'_>,
 ) -> (Csr, PruneReport) {
@@ -479,13 +481,13 @@ fn global_response(
                             .iter()
                             .map(|&(t, w)| {
                                 let wa = w as f64 * atlas.texels[t as usize].area as f64;
-                                texel_mean(atlas, t as usize, xc, dipoles) * wa
+                                texel_mean(atlas, t as usize, xc, profiles) * wa
                             })
                             .sum()
                     } else {
                         let (c, m) = moments[p];
                         let rc = c.distance(xc);
-                        rgb(dipoles, |d| {
+                        rgb(profiles, |d| {
                             basis.node_area[p] * d.rd_cell_mean(rc, 0.5 * m)
                         })
                     };
@@ -550,18 +552,18 @@ impl Operators {
         prune_tolerance: f64,
         progress: Progress<'_>,
     ) -> Operators {
-        let dipoles = material.profiles();
+        let profiles = material.profiles();
         let basis = Basis::new(atlas, nodes);
         progress("basis", 1, 1);
 
         let clock = std::time::Instant::now();
-        let kernels = local_kernels(atlas, kernel_size, &dipoles, progress);
-        let seams = seam_taps(atlas, kernel_size, &dipoles);
+        let kernels = local_kernels(atlas, kernel_size, &profiles, progress);
+        let seams = seam_taps(atlas, kernel_size, &profiles);
         let kernels_s = clock.elapsed().as_secs_f64();
 
         let clock = std::time::Instant::now();
         let (global, prune) =
-            global_response(atlas, nodes, &basis, &dipoles, prune_tolerance, progress);
+            global_response(atlas, nodes, &basis, &profiles, prune_tolerance, progress);
         let global_s = clock.elapsed().as_secs_f64();
 
         let clock = std::time::Instant::now();
@@ -579,7 +581,7 @@ impl Operators {
             prune,
             seconds: [kernels_s, global_s, 0.0],
         };
-        ops.optimized = ops.fit_near_field(atlas, nodes, &dipoles, &basis.supports, progress);
+        ops.optimized = ops.fit_near_field(atlas, nodes, &profiles, &basis.supports, progress);
         ops.seconds[2] = clock.elapsed().as_secs_f64();
         ops.direct_simple = ops.direct_term(Blend::Simple);
         ops.direct_optimized = ops.direct_term(Blend::Optimized);
@@ -664,7 +666,7 @@ impl Operators {
         &self,
         atlas: &Atlas,
         nodes: &Nodes,
-        dipoles: &[Profile; 3],
+        profiles: &[Profile; 3],
         supports: &[Vec<(u32, f32)>],
         progress: Progress<'_>,
     ) -> Csr {
@@ -703,7 +705,7 @@ impl Operators {
                     let ts = &atlas.texels[s as usize];
                     // Kernel weight of s in c's kernel (window or seam tap), if s lies in it.
                     let kw = self.kernel_weight(atlas, c as usize, s as usize);
-                    let mean = texel_mean(atlas, s as usize, xc, dipoles);
+                    let mean = texel_mean(atlas, s as usize, xc, profiles);
                     let mut target = mean - Rgb::from_f32(kw) / ts.area as f64;
                     phi.clear();
                     for (p, w) in self.texel_nodes.row(s as usize) {
@@ -773,7 +775,7 @@ impl Operators {
 /// Seam taps (see the module documentation): per texel, the texels of other charts within the
 /// kernel's inscribed disc, with their kernel weights. Found through a uniform grid of cells
 /// one disc radius wide.
-fn seam_taps(atlas: &Atlas, kernel_size: u32, dipoles: &[Profile; 3]) -> Csr {
+fn seam_taps(atlas: &Atlas, kernel_size: u32, profiles: &[Profile; 3]) -> Csr {
     use std::collections::HashMap;
     let radius = (kernel_size / 2) as f64 * atlas.texel_mm + 0.5 * atlas.texel_mm;
     let cell = |p: DVec3| {
@@ -804,7 +806,7 @@ fn seam_taps(atlas: &Atlas, kernel_size: u32, dipoles: &[Profile; 3]) -> Csr {
                             if ts.chart == t.chart || ts.position.as_dvec3().distance(x) > radius {
                                 continue;
                             }
-                            let mean = texel_mean(atlas, s as usize, x, dipoles);
+                            let mean = texel_mean(atlas, s as usize, x, profiles);
                             let w = (mean * ts.area as f64).to_f32();
                             row.push((s, w));
                         }

@@ -279,7 +279,7 @@ impl Tree {
         Self::build(clusters, s, left + 1, mid, end);
     }
 
-    fn eval(&self, x: DVec3, dipoles: &[Profile; 3], theta: f64) -> [f64; 3] {
+    fn eval(&self, x: DVec3, profiles: &[Profile; 3], theta: f64) -> [f64; 3] {
         let rho = (self.sample_area / std::f64::consts::PI).sqrt();
         let mut b = [0.0; 3];
         let mut stack = vec![0usize];
@@ -299,7 +299,7 @@ impl Tree {
                     + 2.0 * (u.x * u.y * cv[3] + u.x * u.z * cv[4] + u.y * u.z * cv[5]);
                 let trace = cv[0] + cv[1] + cv[2];
                 for k in 0..3 {
-                    let (f, f1, f2) = dipoles[k].rd_derivatives(d);
+                    let (f, f1, f2) = profiles[k].rd_derivatives(d);
                     b[k] +=
                         c.weight[k] * (f + 0.5 * (f2 * along + f1 / d * (trace - along))).max(0.0);
                 }
@@ -308,9 +308,9 @@ impl Tree {
                     let r = x.distance(s.position);
                     for k in 0..3 {
                         let rd = if r < rho {
-                            dipoles[k].disc_mean(rho)
+                            profiles[k].disc_mean(rho)
                         } else {
-                            dipoles[k].rd(r)
+                            profiles[k].rd(r)
                         };
                         b[k] += s.weight[k] * rd;
                     }
@@ -345,10 +345,10 @@ pub fn b_at(scene: &Scene, settings: ReferenceSettings, points: &[DVec3]) -> Vec
     let bvh = Bvh::new(&m.positions, &m.indices);
     let (lit, _) = samples(scene, &bvh, settings.spacing_mm);
     let tree = Tree::new(lit, 0.5 * settings.spacing_mm * settings.spacing_mm);
-    let dipoles = scene.material.profiles();
+    let profiles = scene.material.profiles();
     points
         .par_iter()
-        .map(|p| tree.eval(*p, &dipoles, settings.theta))
+        .map(|p| tree.eval(*p, &profiles, settings.theta))
         .collect()
 }
 
@@ -367,7 +367,7 @@ impl Reference {
         let lit_samples = lit.len();
         // Sub-triangle areas vary; the disc mean uses the typical one (spacing^2 / 2).
         let tree = Tree::new(lit, 0.5 * settings.spacing_mm * settings.spacing_mm);
-        let dipoles = scene.material.profiles();
+        let profiles = scene.material.profiles();
         // Models that compute single scattering per frame: the exact single scattering along
         // each view ray (deterministic quadrature through the BVH), added to the profile's.
         let single = scene
@@ -382,7 +382,7 @@ impl Reference {
             .flat_map_iter(|y| {
                 let bvh = &bvh;
                 let tree = &tree;
-                let dipoles = &dipoles;
+                let profiles = &profiles;
                 let single = &single;
                 (0..w).flat_map(move |x| {
                     let (o, d) = camera_ray(scene, x, y);
@@ -398,16 +398,14 @@ impl Reference {
                                 .normalize_or(DVec3::Z);
                             let cos_o = n.dot(-d).abs();
                             let ft = fresnel_transmittance(scene.material.eta, cos_o);
-                            let b = tree.eval(p, dipoles, settings.theta);
+                            let b = tree.eval(p, profiles, settings.theta);
+                            let ss = single.as_ref().map_or([0.0; 3], |t| {
+                                let mut scratch = crate::truth::Scratch::default();
+                                t.single_scattering(o, d, SINGLE_STEPS, &mut scratch)
+                            });
                             let l = |c: usize| {
-                                let ss = single
-                                    .as_ref()
-                                    .map(|t| {
-                                        let mut scratch = crate::truth::Scratch::default();
-                                        t.single_scattering(o, d, c, SINGLE_STEPS, &mut scratch)
-                                    })
-                                    .unwrap_or(0.0);
-                                ft * dipoles[c].exit_lobe(cos_o) * b[c] / std::f64::consts::PI + ss
+                                ft * profiles[c].exit_lobe(cos_o) * b[c] / std::f64::consts::PI
+                                    + ss[c]
                             };
                             [l(0) as f32, l(1) as f32, l(2) as f32, 1.0]
                         }
@@ -418,7 +416,7 @@ impl Reference {
         let vertex_b = m
             .positions
             .par_iter()
-            .map(|p| tree.eval(p.as_dvec3(), &dipoles, settings.theta))
+            .map(|p| tree.eval(p.as_dvec3(), &profiles, settings.theta))
             .collect();
         Reference {
             width: w,

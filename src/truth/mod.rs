@@ -198,15 +198,20 @@ impl<'a> Tracer<'a> {
     /// Checks that the scene can be traced ([`validate`]) and builds the ray-casting structure.
     pub fn new(scene: &'a Scene, settings: &TruthSettings) -> Result<Tracer<'a>, TruthError> {
         validate(scene, settings)?;
+        Ok(Tracer::build(scene, settings))
+    }
+
+    /// The tracer of `scene` under `settings`, whatever they are (callers check them).
+    fn build(scene: &'a Scene, settings: &TruthSettings) -> Tracer<'a> {
         let (_, radius) = scene.bounds();
-        Ok(Tracer {
+        Tracer {
             scene,
             bvh: Bvh::new(&scene.mesh.positions, &scene.mesh.indices),
             medium: Medium::new(&scene.material, settings.g),
             eps: 1e-9 * radius.max(1e-3) as f64,
             min_order: settings.min_order,
             max_order: settings.max_order,
-        })
+        }
     }
 
     /// The tracer of the single scattering the `single` pass computes, for `reference`: the
@@ -217,55 +222,61 @@ impl<'a> Tracer<'a> {
         if (eta - 1.0).abs() > 1e-9 {
             return Err(TruthError::Eta(eta));
         }
-        let (_, radius) = scene.bounds();
-        Ok(Tracer {
-            scene,
-            bvh: Bvh::new(&scene.mesh.positions, &scene.mesh.indices),
-            medium: Medium::new(&scene.material, 0.0),
-            eps: 1e-9 * radius.max(1e-3) as f64,
+        let settings = TruthSettings {
+            g: 0.0,
             min_order: 1,
             max_order: 1,
-        })
+            ..Default::default()
+        };
+        Ok(Tracer::build(scene, &settings))
     }
 
-    /// Single-scattered radiance of channel `c` arriving at `o` from `-d`, by quadrature
+    /// Single-scattered radiance arriving at `o` from `-d` per channel, by quadrature
     /// (deterministic): over every stretch of the ray inside the medium, `steps` nodes at equal
-    /// steps of the camera ray's transmittance, each with exact next-event estimation through
-    /// the BVH (the light's transmittance from the distance it travels inside).
+    /// steps of the camera ray's transmittance in each channel, each with exact next-event
+    /// estimation through the BVH (the light's transmittance from the distance it travels
+    /// inside). The camera ray's crossings are found once for the three channels.
     pub fn single_scattering(
         &self,
         o: DVec3,
         d: DVec3,
-        c: usize,
         steps: u32,
         scratch: &mut Scratch,
-    ) -> f64 {
-        let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
+    ) -> [f64; 3] {
         let mut crossings = Vec::new();
-        let mut raw = Vec::new();
-        self.bvh
-            .crossings_along(o, d, f64::INFINITY, self.eps, &mut raw, &mut crossings);
-        let (mut depth, mut from, mut before) = (0i32, 0.0f64, 0.0f64);
-        let mut sum = 0.0;
-        for cr in &crossings {
-            if depth > 0 {
-                // Inside over [from, cr.t], behind optical depth `before` of earlier stretches.
-                let length = cr.t - from;
-                let total = 1.0 - (-sigma_t * length).exp();
-                let mut part = 0.0;
-                for k in 0..steps {
-                    let u = (k as f64 + 0.5) / steps as f64 * total;
-                    let s = -(1.0 - u).ln() / sigma_t;
-                    let x = o + d * (from + s);
-                    part += self.next_event(x, d, c, depth, scratch);
+        self.bvh.crossings_along(
+            o,
+            d,
+            f64::INFINITY,
+            self.eps,
+            &mut Vec::new(),
+            &mut crossings,
+        );
+        std::array::from_fn(|c| {
+            let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
+            let (mut depth, mut from, mut before) = (0i32, 0.0f64, 0.0f64);
+            let mut sum = 0.0;
+            for cr in &crossings {
+                if depth > 0 {
+                    // Inside over [from, cr.t], behind optical depth `before` of earlier
+                    // stretches.
+                    let length = cr.t - from;
+                    let total = 1.0 - (-sigma_t * length).exp();
+                    let mut part = 0.0;
+                    for k in 0..steps {
+                        let u = (k as f64 + 0.5) / steps as f64 * total;
+                        let s = -(1.0 - u).ln() / sigma_t;
+                        let x = o + d * (from + s);
+                        part += self.next_event(x, d, c, depth, scratch);
+                    }
+                    sum += (-before).exp() * albedo * part * total / steps as f64;
+                    before += sigma_t * length;
                 }
-                sum += (-before).exp() * albedo * part * total / steps as f64;
-                before += sigma_t * length;
+                depth += cr.net;
+                from = cr.t;
             }
-            depth += cr.net;
-            from = cr.t;
-        }
-        sum
+            sum
+        })
     }
 
     /// Whether the ray hits the object.

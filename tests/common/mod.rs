@@ -97,3 +97,33 @@ pub fn fails_with(mut cmd: Command, needle: &str) {
     );
     assert_eq!(o.status.code(), Some(1), "exit code: {err}");
 }
+
+/// A scene of `assets/scenes/truth/`, at `size` x `size` (the file's size with `None`), under
+/// `model` (the scene's default with `None`).
+pub fn truth_scene(
+    name: &str,
+    size: Option<u32>,
+    model: Option<translucent::physics::Model>,
+) -> Scene {
+    Scene::load(
+        Some(std::path::Path::new(&format!(
+            "assets/scenes/truth/{name}.toml"
+        ))),
+        &translucent::scene::Overrides {
+            width: size,
+            height: size,
+            model,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+/// The committed truth in `tests/truth-data/DIR`: width, height, radiance and per-pixel
+/// standard deviation (RGBA).
+pub fn committed_truth(dir: &str) -> (u32, u32, Vec<f32>, Vec<f32>) {
+    let dir = std::path::Path::new("tests/truth-data").join(dir);
+    let (w, h, truth) = translucent::output::read_exr(&dir.join("truth.exr")).unwrap();
+    let (_, _, noise) = translucent::output::read_exr(&dir.join("noise.exr")).unwrap();
+    (w, h, truth, noise)
+}
