@@ -209,33 +209,203 @@ fn sample(img: &image::RgbaImage, uv: glam::Vec2) -> [f64; 3] {
     })
 }
 
-/// Texture means per texel and per node (all 1 without a texture).
+/// Largest ratio of a texture sample to the texture mean it is divided by: texture modulation
+/// multiplies a texel's (or node's) untextured radiosity by T(x) / T_mean, which is unbounded
+/// where the mean is dark and a bright sample lies next to it (a sphere half black, half white
+/// once reached 220 times its untextured brightness). The mean is raised to at least the
+/// largest sample the fragment can meet divided by this, so the modulation is at most this
+/// many times the untextured radiosity; it keeps the mean (and so the energy) wherever the
+/// texture within reach varies by less than this factor, and all detail everywhere.
+pub const MAX_TEXTURE_RATIO: f64 = 4.0;
+
+/// Maxima of a texture (linear, per channel) over 2^l x 2^l blocks, level by level: the
+/// largest value over any uv rectangle from four lookups.
+struct MaxPyramid {
+    /// Per level: width, height, values.
+    levels: Vec<(u32, u32, Vec<[f64; 3]>)>,
+}
+
+impl MaxPyramid {
+    fn new(img: &image::RgbaImage) -> MaxPyramid {
+        let (w, h) = (img.width(), img.height());
+        let base: Vec<[f64; 3]> = img
+            .pixels()
+            .map(|p| [0, 1, 2].map(|c| srgb_to_linear(p[c] as f64 / 255.0)))
+            .collect();
+        let mut levels = vec![(w, h, base)];
+        while let Some((w, h, v)) = levels.last().filter(|l| l.0 > 1 || l.1 > 1) {
+            let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
+            let mut next = vec![[0.0f64; 3]; (nw * nh) as usize];
+            for y in 0..*h {
+                for x in 0..*w {
+                    let (d, s) = (
+                        &mut next[((y / 2) * nw + x / 2) as usize],
+                        v[(y * w + x) as usize],
+                    );
+                    *d = [0, 1, 2].map(|k| d[k].max(s[k]));
+                }
+            }
+            levels.push((nw, nh, next));
+        }
+        MaxPyramid { levels }
+    }
+
+    /// The largest value of the bilinearly filtered texture over the uv rectangle [lo, hi]
+    /// (repeat addressing: a rectangle across the wrap, or wider than the texture, gets the
+    /// texture's maximum).
+    fn max_in(&self, lo: glam::DVec2, hi: glam::DVec2) -> [f64; 3] {
+        let (w, h, _) = &self.levels[0];
+        let whole = self.levels.last().map(|l| l.2[0]).unwrap_or([1.0; 3]);
+        let shift = lo.floor();
+        let (lo, hi) = (lo - shift, hi - shift);
+        if !(lo.is_finite() && hi.is_finite()) || hi.x >= 1.0 || hi.y >= 1.0 {
+            return whole;
+        }
+        // Pixels whose filter footprint meets the rectangle (one pixel of margin).
+        let x0 = ((lo.x * *w as f64).floor() as i64 - 1).max(0) as u32;
+        let y0 = ((lo.y * *h as f64).floor() as i64 - 1).max(0) as u32;
+        let x1 = ((hi.x * *w as f64).floor() as u32 + 1).min(w - 1);
+        let y1 = ((hi.y * *h as f64).floor() as u32 + 1).min(h - 1);
+        if x0 == 0 && y0 == 0 && x1 == w - 1 && y1 == h - 1 {
+            return whole;
+        }
+        let span = (x1 - x0 + 1).max(y1 - y0 + 1);
+        let level = (32 - span.leading_zeros()).saturating_sub(1) as usize;
+        let level = level.min(self.levels.len() - 1);
+        let (lw, lh, v) = &self.levels[level];
+        let mut m = [0.0f64; 3];
+        for y in (y0 >> level)..=((y1 >> level).min(lh - 1)) {
+            for x in (x0 >> level)..=((x1 >> level).min(lw - 1)) {
+                let s = v[(y * lw + x) as usize];
+                m = [0, 1, 2].map(|k| m[k].max(s[k]));
+            }
+        }
+        m
+    }
+}
+
+/// Texture means per texel and per node (all 1 without a texture): the mean of the texture
+/// over each texel's footprint (the atlas triangles rasterised at sub-texel samples, as many
+/// per texel edge as texture pixels fall across it, up to 16), raised to the largest texture
+/// value within one texel (the composite's bilinear reach; the maximum over the uv bounds of
+/// the triangles there) over [`MAX_TEXTURE_RATIO`]; a node's
+/// mean is its gather-weighted texel mean, raised the same way over its support.
 pub fn texture_means(scene: &Scene, pre: &Preprocessed) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    let texel: Vec<[f64; 3]> = match &scene.texture {
-        None => vec![[1.0; 3]; pre.atlas.texels.len()],
-        Some(img) => pre
-            .atlas
-            .texels
-            .iter()
-            .map(|t| {
-                let uv: glam::Vec2 = t
+    let Some(img) = &scene.texture else {
+        return (
+            vec![[1.0; 3]; pre.atlas.texels.len()],
+            vec![[1.0; 3]; pre.ops.gather.rows()],
+        );
+    };
+    let atlas = &pre.atlas;
+    let n = atlas.texels.len();
+    let mut sum = vec![[0.0f64; 3]; n];
+    let mut count = vec![0u32; n];
+    let mut peak = vec![[0.0f64; 3]; n];
+    let tex_size = img.width().max(img.height()) as f64;
+    let pyramid = MaxPyramid::new(img);
+    for tri in atlas.indices.chunks_exact(3) {
+        let tri = [tri[0], tri[1], tri[2]];
+        let a = tri.map(|i| atlas.vertex_uv[i as usize]);
+        let uv = tri.map(|i| scene.mesh.uvs[atlas.vertex_mesh[i as usize] as usize].as_dvec2());
+        let lo = a[0].min(a[1]).min(a[2]).floor();
+        let hi = a[0].max(a[1]).max(a[2]).ceil();
+        // The largest texture value anywhere in the triangle (its uv bounds), for every texel
+        // it may touch (degenerate ones included): the mean's samples below can miss a thin
+        // bright line.
+        let top = pyramid.max_in(uv[0].min(uv[1]).min(uv[2]), uv[0].max(uv[1]).max(uv[2]));
+        for y in lo.y as i64..(hi.y as i64).max(lo.y as i64 + 1) {
+            for x in lo.x as i64..(hi.x as i64).max(lo.x as i64 + 1) {
+                if let Some(t) = atlas.texel_at(x, y) {
+                    for k in 0..3 {
+                        peak[t][k] = peak[t][k].max(top[k]);
+                    }
+                }
+            }
+        }
+        let det = (a[1] - a[0]).perp_dot(a[2] - a[0]);
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        // Texture pixels across one texel: the uv map's largest stretch times the texture size.
+        let (du, dv) = (uv[1] - uv[0], uv[2] - uv[0]);
+        let (ea, eb) = (a[1] - a[0], a[2] - a[0]);
+        let jx = (du * eb.y - dv * ea.y) / det;
+        let jy = (dv * ea.x - du * eb.x) / det;
+        let stretch = jx.length().max(jy.length()) * tex_size;
+        let sub = (stretch.ceil() as u32).clamp(1, 16);
+        for y in lo.y as i64..hi.y as i64 {
+            for x in lo.x as i64..hi.x as i64 {
+                let Some(t) = atlas.texel_at(x, y) else {
+                    continue;
+                };
+                for j in 0..sub {
+                    for i in 0..sub {
+                        let p = glam::DVec2::new(
+                            x as f64 + (i as f64 + 0.5) / sub as f64,
+                            y as f64 + (j as f64 + 0.5) / sub as f64,
+                        );
+                        let w1 = (p - a[0]).perp_dot(eb) / det;
+                        let w2 = ea.perp_dot(p - a[0]) / det;
+                        let w0 = 1.0 - w1 - w2;
+                        if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+                            continue;
+                        }
+                        let at = uv[0] * w0 + uv[1] * w1 + uv[2] * w2;
+                        let c = sample(img, at.as_vec2());
+                        for k in 0..3 {
+                            sum[t][k] += c[k];
+                        }
+                        count[t] += 1;
+                    }
+                }
+            }
+        }
+    }
+    // The largest sample within the composite's reach of each texel (its 3 x 3 neighbours).
+    let reach: Vec<[f64; 3]> = atlas
+        .texels
+        .iter()
+        .map(|tx| {
+            let mut m = [0.0f64; 3];
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Some(s) = atlas.texel_at(tx.x as i64 + dx, tx.y as i64 + dy) {
+                        for k in 0..3 {
+                            m[k] = m[k].max(peak[s][k]);
+                        }
+                    }
+                }
+            }
+            m
+        })
+        .collect();
+    let texel: Vec<[f64; 3]> = (0..n)
+        .map(|t| {
+            let mean = if count[t] > 0 {
+                sum[t].map(|x| x / count[t] as f64)
+            } else {
+                let uv: glam::Vec2 = atlas.texels[t]
                     .vertices
                     .iter()
                     .map(|(v, w)| scene.mesh.uvs[*v as usize] * *w)
                     .sum();
-                sample(img, uv).map(|c| c.max(1e-3))
-            })
-            .collect(),
-    };
+                sample(img, uv)
+            };
+            [0, 1, 2].map(|k| mean[k].max(reach[t][k] / MAX_TEXTURE_RATIO).max(1e-3))
+        })
+        .collect();
     let node = (0..pre.ops.gather.rows())
         .map(|p| {
-            let m: crate::physics::Rgb = pre
-                .ops
-                .gather
-                .row(p)
-                .map(|(t, w)| crate::physics::Rgb(texel[t as usize]) * w as f64)
-                .sum();
-            m.map(|x| if x > 0.0 { x } else { 1.0 }).0
+            let mut mean = crate::physics::Rgb::ZERO;
+            let mut top = [0.0f64; 3];
+            for (t, w) in pre.ops.gather.row(p) {
+                mean += crate::physics::Rgb(texel[t as usize]) * w as f64;
+                for k in 0..3 {
+                    top[k] = top[k].max(reach[t as usize][k]);
+                }
+            }
+            [0, 1, 2].map(|k| mean.0[k].max(top[k] / MAX_TEXTURE_RATIO).max(1e-3))
         })
         .collect();
     (texel, node)
