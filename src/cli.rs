@@ -389,6 +389,15 @@ fn finite_image(path: &std::path::Path, rgba: &[f32]) -> Result<()> {
     Ok(())
 }
 
+/// The files `render` writes into its output folder (besides frame_NNNN.png).
+const RENDER_OUTPUTS: &[&str] = &[
+    "render.png",
+    "render.exr",
+    "timings.json",
+    "trace.json",
+    "scene.toml",
+];
+
 fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     frame_count("--frames", args.frames, 1)?;
     let scene = args.input.load()?;
@@ -396,6 +405,20 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
         scene.resolved.to_toml()
     );
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    let mut warnings = scene.warnings.clone();
+    let scene_warnings = warnings.len();
+    let inputs: Vec<PathBuf> = [
+        args.input.scene.clone(),
+        scene.resolved.mesh.obj.clone(),
+        scene.resolved.mesh.texture.clone(),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    output::refuse_overwriting(&args.out, RENDER_OUTPUTS, &inputs)?;
     output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
     let resolved = scene.resolved.to_toml();
@@ -429,12 +452,35 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         }
     }
     let result = renderer.output(timings)?;
-    let report = TimingReport::new(
+    let mut report = TimingReport::new(
         &gpu.info.name,
         &gpu.info.driver,
         &result.pass_names,
         &result.frames,
     );
+    let covered = result
+        .radiance
+        .chunks_exact(4)
+        .filter(|p| p[3] > 0.0)
+        .count();
+    let brightest = result
+        .radiance
+        .chunks_exact(4)
+        .flat_map(|p| &p[..3])
+        .fold(0.0f32, |a, &v| a.max(v));
+    if covered == 0 {
+        warnings.push(
+            "no pixel shows the object: the camera is too far or looks past it ([camera] position, target, fov_deg)".into(),
+        );
+    } else if brightest <= 0.0 {
+        warnings.push(format!(
+            "the object covers {covered} pixels, all black: no light reaches the part the camera sees"
+        ));
+    }
+    for w in warnings.iter().skip(scene_warnings) {
+        eprintln!("warning: {w}");
+    }
+    report.warnings = warnings;
     let out = &args.out;
     output::write_png(
         &out.join("render.png"),
@@ -742,6 +788,22 @@ fn compare(args: &CompareArgs) -> Result<()> {
     let (report, per_pixel) = metrics::compare(&a, &b, None);
     if report.pixels == 0 {
         bail!("no pixel is covered in both images");
+    }
+    // A relative error against a black reference channel is undefined (it once printed
+    // 1e152 %).
+    for (c, name) in ["red", "green", "blue"].iter().enumerate() {
+        let sum: f64 = b
+            .chunks_exact(4)
+            .zip(a.chunks_exact(4))
+            .filter(|(r, x)| r[3] > 0.0 && x[3] > 0.0)
+            .map(|(r, _)| r[c] as f64)
+            .sum();
+        if sum <= 0.0 {
+            bail!(
+                "the reference {} is black in {name} wherever both images are covered: no relative error can be measured against it",
+                args.reference.display()
+            );
+        }
     }
     output::create_dir(&args.out)?;
     let grey: Vec<f32> = per_pixel
@@ -1305,7 +1367,19 @@ fn bare_render_args() -> Result<RenderArgs> {
 
 /// Runs the command line; returns the process exit code.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    // Help and version exit 0; every refused argument exits 1 like any other bad input (clap's
+    // own exit code would be 2).
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+    };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()

@@ -146,7 +146,7 @@ fn bad_scene_files_are_refused_clearly() {
     let mut unknown = bin();
     unknown.args(["render", "--model", "multipole"]);
     let o = unknown.output().unwrap();
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("halfspace-single"), "{}", stderr(&o));
     let _ = std::fs::remove_dir_all(&dir);
 }

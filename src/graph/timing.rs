@@ -93,6 +93,9 @@ pub struct TimingReport {
     pub passes: Vec<PassStats>,
     /// Whole frame.
     pub frame: FrameStats,
+    /// Why the image may be black or nearly so, and what the scene loader corrected (see
+    /// `Scene::warnings`); empty when nothing needs saying.
+    pub warnings: Vec<String>,
 }
 
 impl TimingReport {
@@ -122,6 +125,7 @@ impl TimingReport {
             driver: driver.into(),
             frames: frames.len(),
             passes,
+            warnings: Vec::new(),
             frame: FrameStats {
                 gpu_median_ms: gpu.median_ms,
                 wall_median_ms: wall.median_ms,

@@ -128,6 +128,31 @@ pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
         .collect()
 }
 
+/// Refuses an output folder where writing `names` would replace one of `inputs` (the scene
+/// file, its mesh or texture): `--out` pointing at the scene's own folder once overwrote the
+/// user's scene.toml with the resolved one.
+pub fn refuse_overwriting(out: &Path, names: &[&str], inputs: &[std::path::PathBuf]) -> Result<()> {
+    let inputs: Vec<std::path::PathBuf> = inputs
+        .iter()
+        .filter_map(|p| std::fs::canonicalize(p).ok())
+        .collect();
+    let Ok(dir) = std::fs::canonicalize(out) else {
+        return Ok(()); // Not there yet: nothing in it can be an input.
+    };
+    for name in names {
+        let target = dir.join(name);
+        let target = std::fs::canonicalize(&target).unwrap_or(target);
+        if let Some(input) = inputs.iter().find(|i| **i == target) {
+            anyhow::bail!(
+                "--out {} would overwrite the input '{}' with its {name}: choose another output folder",
+                out.display(),
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Writes `timings.json`.
 pub fn write_timings(path: &Path, report: &TimingReport) -> Result<()> {
     write_atomic(path, |tmp| {

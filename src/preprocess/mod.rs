@@ -79,6 +79,11 @@ pub fn choose(
     overrides: &SettingsOverrides,
     target_error: f64,
 ) -> anyhow::Result<Choice> {
+    if !(target_error.is_finite() && target_error > 0.0 && target_error < 1.0) {
+        anyhow::bail!(
+            "--target-error = {target_error} must lie strictly between 0 and 1 (a fraction: 0.02 is 2 %)"
+        );
+    }
     settings::validate(overrides)?;
     let mut choice = settings::derive(
         &scene.material,

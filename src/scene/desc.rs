@@ -34,6 +34,15 @@
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
+/// Reads an optional RGB or XYZ triple, refusing any other number of components (serde's
+/// array reader took the first three of four and ignored the rest).
+fn triple<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<[f64; 3]>, D::Error> {
+    let v: Vec<f64> = Vec::deserialize(d)?;
+    <[f64; 3]>::try_from(v.as_slice()).map(Some).map_err(|_| {
+        serde::de::Error::custom(format!("expected 3 components, found {}: {v:?}", v.len()))
+    })
+}
+
 /// Length unit of an input mesh.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "lowercase")]
@@ -76,6 +85,7 @@ pub struct MeshDesc {
     /// Sphere radius in mm (builtin "sphere").
     pub radius: Option<f64>,
     /// Box edge lengths in mm (builtin "box").
+    #[serde(default, deserialize_with = "triple")]
     pub size: Option<[f64; 3]>,
     /// Subdivisions along the longest edge (sphere: along the equator), built-ins only.
     pub segments: Option<u32>,
@@ -88,8 +98,10 @@ pub struct MeshDesc {
 #[serde(deny_unknown_fields)]
 pub struct TransformDesc {
     /// Translation in mm.
+    #[serde(default, deserialize_with = "triple")]
     pub translate: Option<[f64; 3]>,
     /// Rotation, Euler X then Y then Z, degrees.
+    #[serde(default, deserialize_with = "triple")]
     pub rotate_deg: Option<[f64; 3]>,
     /// Uniform scale.
     pub scale: Option<f64>,
@@ -100,10 +112,13 @@ pub struct TransformDesc {
 #[serde(deny_unknown_fields)]
 pub struct CameraDesc {
     /// Eye position in mm.
+    #[serde(default, deserialize_with = "triple")]
     pub position: Option<[f64; 3]>,
     /// Point looked at, mm.
+    #[serde(default, deserialize_with = "triple")]
     pub target: Option<[f64; 3]>,
     /// Up direction.
+    #[serde(default, deserialize_with = "triple")]
     pub up: Option<[f64; 3]>,
     /// Vertical field of view in degrees.
     pub fov_deg: Option<f64>,
@@ -128,10 +143,13 @@ pub struct LightDesc {
     /// Directional, point or spot.
     pub kind: LightKind,
     /// Position in mm (point, spot).
+    #[serde(default, deserialize_with = "triple")]
     pub position: Option<[f64; 3]>,
     /// Direction the light travels (directional; spot axis).
+    #[serde(default, deserialize_with = "triple")]
     pub direction: Option<[f64; 3]>,
     /// Linear RGB colour.
+    #[serde(default, deserialize_with = "triple")]
     pub color: Option<[f64; 3]>,
     /// Scale of the colour: irradiance at normal incidence for directional lights, radiant
     /// intensity (irradiance at 1 mm) for point and spot lights.
@@ -147,8 +165,10 @@ pub struct MaterialDesc {
     /// A measured preset (Jensen 2001), e.g. "skimmilk", "marble", "ketchup".
     pub preset: Option<String>,
     /// Reduced scattering coefficient, 1/mm, RGB.
+    #[serde(default, deserialize_with = "triple")]
     pub sigma_s_prime: Option<[f64; 3]>,
     /// Absorption coefficient, 1/mm, RGB.
+    #[serde(default, deserialize_with = "triple")]
     pub sigma_a: Option<[f64; 3]>,
     /// Relative index of refraction.
     pub eta: Option<f64>,

@@ -42,6 +42,18 @@ pub enum MeshError {
         /// The coordinates.
         value: [f32; 3],
     },
+    /// A texture coordinate is NaN or infinite (non-finite normals are recomputed).
+    #[error("mesh '{name}': vertex {vertex} has a non-finite {what} {value:?}")]
+    NonFiniteAttribute {
+        /// Mesh.
+        name: String,
+        /// Vertex index (0-based).
+        vertex: usize,
+        /// What is not finite ("texture coordinate").
+        what: &'static str,
+        /// The values.
+        value: Vec<f32>,
+    },
     /// An index past the vertex list.
     #[error(
         "mesh '{name}': triangle {triangle} refers to vertex {index}, but there are only {count}"
@@ -155,6 +167,16 @@ impl Mesh {
                 });
             }
         }
+        for (vertex, uv) in self.uvs.iter().enumerate() {
+            if !uv.is_finite() {
+                return Err(MeshError::NonFiniteAttribute {
+                    name: name.into(),
+                    vertex,
+                    what: "texture coordinate",
+                    value: uv.to_array().to_vec(),
+                });
+            }
+        }
         let count = self.positions.len();
         for (t, tri) in self.indices.chunks(3).enumerate() {
             for &index in tri {
@@ -196,7 +218,42 @@ impl Mesh {
         self.indices.len() / 3
     }
 
-    /// Total surface area.
+    /// Signed volume enclosed, mm^3 (about the bounding sphere's centre): positive for a closed
+    /// mesh whose faces wind counter-clockwise seen from outside.
+    pub fn signed_volume(&self) -> f64 {
+        let c = self.bounding_sphere().0.as_dvec3();
+        self.indices
+            .chunks_exact(3)
+            .map(|t| {
+                let [a, b, d] =
+                    [t[0], t[1], t[2]].map(|i| self.positions[i as usize].as_dvec3() - c);
+                a.dot(b.cross(d)) / 6.0
+            })
+            .sum()
+    }
+
+    /// Reverses every triangle's winding, and the normals where they point inwards on the
+    /// whole (normals computed from the clockwise faces; normals given by the file that
+    /// already point outwards are kept).
+    pub fn flip_winding(&mut self) {
+        for t in self.indices.chunks_exact_mut(3) {
+            t.swap(1, 2);
+        }
+        let c = self.bounding_sphere().0;
+        let outward: f32 = self
+            .positions
+            .iter()
+            .zip(&self.normals)
+            .map(|(p, n)| n.dot(*p - c))
+            .sum();
+        if outward < 0.0 {
+            for n in &mut self.normals {
+                *n = -*n;
+            }
+        }
+    }
+
+    /// Total surface area, mm^2.
     pub fn surface_area(&self) -> f64 {
         self.indices
             .chunks(3)

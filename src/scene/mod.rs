@@ -142,6 +142,25 @@ pub struct Scene {
     pub shadow_map: Option<u32>,
     /// The description with every default made explicit (what `render` prints).
     pub resolved: SceneDesc,
+    /// Why the image may be black or nearly so, for a reason the user can fix (printed and
+    /// recorded in timings.json), and what was corrected (inverted winding).
+    pub warnings: Vec<String>,
+}
+
+/// Largest radius of the object after units and transform, mm (10 km): f32 positions keep
+/// better than 1 mm there, and products of coordinates stay far from overflow.
+pub const MAX_RADIUS_MM: f32 = 1e7;
+
+/// Largest colour x intensity of a light: irradiance in the passes is multiplied by kernel
+/// sums, profile values and the exposure in f32; 1e20 leaves eighteen decades of headroom
+/// below f32's 3.4e38 and is far beyond any physical light.
+pub const MAX_RADIANCE: f64 = 1e20;
+
+/// `p` made absolute (symbolic links resolved where it exists), for the resolved scene.
+pub fn absolute(p: &Path) -> std::path::PathBuf {
+    std::fs::canonicalize(p)
+        .or_else(|_| std::path::absolute(p))
+        .unwrap_or_else(|_| p.to_path_buf())
 }
 
 fn vec3(a: [f64; 3]) -> Vec3 {
@@ -183,8 +202,13 @@ impl Scene {
     /// Resolves a description; relative paths are taken from `base`.
     pub fn from_desc(mut desc: SceneDesc, base: &Path, overrides: &Overrides) -> Result<Scene> {
         if let Some(obj) = &overrides.mesh {
-            desc.mesh.obj = Some(obj.clone());
+            // From the command line: relative to the working folder, and the built-in mesh's
+            // sizes go with the built-in mesh.
+            desc.mesh.obj = Some(absolute(obj));
             desc.mesh.builtin = None;
+            desc.mesh.radius = None;
+            desc.mesh.size = None;
+            desc.mesh.segments = None;
         }
         if let Some(m) = &overrides.material {
             desc.material = desc::MaterialDesc {
@@ -207,6 +231,25 @@ impl Scene {
 
         // Mesh.
         let md = &mut desc.mesh;
+        // Keys that mean nothing for the chosen mesh are refused, not ignored.
+        let kind = match (&md.obj, md.builtin.as_deref()) {
+            (Some(_), _) => "obj",
+            (None, Some(b)) => b,
+            (None, None) => "bunny",
+        };
+        for (key, given, applies) in [
+            ("radius", md.radius.is_some(), kind == "sphere"),
+            ("size", md.size.is_some(), kind == "box"),
+            (
+                "segments",
+                md.segments.is_some(),
+                kind == "sphere" || kind == "box",
+            ),
+        ] {
+            if given && !applies {
+                bail!("[mesh] {key} does not apply to the {kind} mesh (radius: builtin sphere; size: builtin box; segments: both)");
+            }
+        }
         let units = *md.units.get_or_insert(Units::Mm);
         let mut mesh = match (&md.obj, &md.builtin) {
             (Some(_), Some(b)) => bail!("[mesh] gives both obj and builtin = {b:?}; choose one"),
@@ -215,7 +258,10 @@ impl Scene {
                 if !p.exists() {
                     bail!("mesh file '{}' does not exist", p.display());
                 }
-                Mesh::load_obj(&p)?
+                let mesh = Mesh::load_obj(&p)?;
+                // The resolved scene (saved beside the render) names it from anywhere.
+                md.obj = Some(absolute(&p));
+                mesh
             }
             (None, builtin) => {
                 let name = builtin.clone().unwrap_or_else(|| "bunny".into());
@@ -269,6 +315,7 @@ impl Scene {
                 let p = base.join(t);
                 let img = image::open(&p)
                     .with_context(|| format!("cannot read texture '{}'", p.display()))?;
+                md.texture = Some(absolute(&p));
                 Some(img.to_rgba8())
             }
             None => None,
@@ -297,6 +344,24 @@ impl Scene {
         );
         mesh.transform(m);
         let (center, radius) = mesh.bounding_sphere();
+        if !(center.is_finite() && radius.is_finite() && radius <= MAX_RADIUS_MM) {
+            bail!(
+                "the object, placed in the scene, has its centre at {:?} and a radius of {radius:e} mm: at most {MAX_RADIUS_MM:e} mm (f32 coordinates; check [mesh] units and [transform])",
+                center.to_array()
+            );
+        }
+        let mut warnings = Vec::new();
+        // Inverted winding: a closed mesh whose faces wind clockwise seen from outside has a
+        // negative signed volume; its normals point inwards, and the object renders black (a
+        // tetrahedron all zero, the bunny at 3e-4 of its brightness).
+        let volume = mesh.signed_volume();
+        let sphere_like = mesh.surface_area() * radius as f64 / 3.0;
+        if volume < -0.05 * sphere_like {
+            mesh.flip_winding();
+            warnings.push(format!(
+                "the mesh's faces wind clockwise seen from outside (signed volume {volume:.4e} mm^3): flipped to counter-clockwise, normals reversed"
+            ));
+        }
 
         // Camera: frame the bounding sphere from the front, slightly above.
         let cd = &mut desc.camera;
@@ -350,11 +415,40 @@ impl Scene {
         let mut lights = Vec::new();
         for (i, l) in light_descs.iter_mut().enumerate() {
             let name = |field: &str| format!("[[lights]] #{} {field}", i + 1);
+            for (key, given, applies) in [
+                (
+                    "position",
+                    l.position.is_some(),
+                    l.kind != LightKind::Directional,
+                ),
+                (
+                    "direction",
+                    l.direction.is_some(),
+                    l.kind != LightKind::Point,
+                ),
+                ("cone_deg", l.cone_deg.is_some(), l.kind == LightKind::Spot),
+            ] {
+                if given && !applies {
+                    bail!(
+                        "{} does not apply to a {} light (position: point and spot; direction: directional and spot; cone_deg: spot)",
+                        name(key),
+                        format!("{:?}", l.kind).to_lowercase()
+                    );
+                }
+            }
             let color = *l.color.get_or_insert([1.0; 3]);
             let intensity = *l.intensity.get_or_insert(1.0);
             finite(&name("color"), &color)?;
-            if color.iter().any(|c| *c < 0.0) || !(intensity.is_finite() && intensity >= 0.0) {
+            finite(&name("intensity"), &[intensity])?;
+            if color.iter().any(|c| *c < 0.0) || intensity < 0.0 {
                 bail!("{}: colour and intensity must be non-negative", name(""));
+            }
+            let peak = color.iter().fold(0.0f64, |a, &c| a.max(c)) * intensity;
+            if peak > MAX_RADIANCE {
+                bail!(
+                    "{}: colour x intensity = {peak:e} exceeds {MAX_RADIANCE:e}: the passes' f32 sums would overflow to infinity and NaN",
+                    name("")
+                );
             }
             let radiance = vec3(color) * intensity as f32;
             let light = match l.kind {
@@ -499,6 +593,39 @@ impl Scene {
             }
         }
 
+        if lights.iter().all(|l| l.radiance.max_element() <= 0.0) {
+            warnings
+                .push("every light has zero colour or intensity: the image is black".to_string());
+        }
+        for (i, l) in lights.iter().enumerate() {
+            if l.kind == LightKind::Spot {
+                let to = center - l.position;
+                let spread = (radius / to.length().max(1e-6)).clamp(0.0, 1.0).asin();
+                let off = to.normalize().dot(l.direction).clamp(-1.0, 1.0).acos();
+                if off - spread > l.cos_cone.acos() {
+                    warnings.push(format!(
+                        "[[lights]] #{} is a spot aimed {:.0} degrees away from the object, outside its cone: it lights nothing",
+                        i + 1,
+                        off.to_degrees()
+                    ));
+                }
+            }
+        }
+        // Units: an object smaller than the light's transport length inside the material (a
+        // mesh in metres read as millimetres) scatters as a thin film: nearly black.
+        let mfp = material
+            .sigma_s_prime
+            .iter()
+            .zip(&material.sigma_a)
+            .map(|(s, a)| 1.0 / (s + a))
+            .fold(f64::INFINITY, f64::min);
+        if (2.0 * radius as f64) < mfp {
+            warnings.push(format!(
+                "the object is {:.3e} mm across, less than the material's shortest mean free path ({mfp:.3} mm): nearly all light passes through; are its units right ([mesh] units = \"mm\", \"cm\", \"m\" or \"in\")?",
+                2.0 * radius
+            ));
+        }
+
         Ok(Scene {
             mesh,
             texture,
@@ -510,6 +637,7 @@ impl Scene {
             exposure: exposure as f32,
             shadow_map,
             resolved: desc,
+            warnings,
         })
     }
 

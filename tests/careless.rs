@@ -1,0 +1,296 @@
+//! Hostile and careless input, round two (see docs/robustness.md): values that once rendered
+//! NaN, were accepted silently or named the wrong problem are refused by name; images that
+//! would be black for a reason the user can fix come with a warning, printed and recorded in
+//! timings.json; outputs never overwrite inputs, and the saved scene re-runs from anywhere.
+
+mod common;
+
+use common::{bin, fails_with, stderr, temp_dir};
+use std::path::Path;
+
+const TETRA_CLOCKWISE: &str =
+    "v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 2 3\nf 1 4 2\nf 1 3 4\nf 2 4 3\n";
+
+fn scene_file(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn careless_values_are_refused_by_name() {
+    let dir = temp_dir("careless");
+    std::fs::write(
+        dir.join("far.obj"),
+        "v 1e30 0 0\nv 0 1e30 0\nv 0 0 1e30\nf 1 2 3\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("nanuv.obj"),
+        "v 0 0 0\nv 10 0 0\nv 0 10 0\nvt 0 0\nvt nan inf\nvt 0 1\nf 1/1 2/2 3/3\n",
+    )
+    .unwrap();
+    image::RgbImage::new(4, 4).save(dir.join("t.png")).unwrap();
+    let cases: [(&str, &str, &str); 9] = [
+        (
+            "huge.toml",
+            "[[lights]]\nkind = \"directional\"\nintensity = 1e38\n",
+            "exceeds 1e20",
+        ),
+        (
+            "colour.toml",
+            "[[lights]]\nkind = \"directional\"\ncolor = [1e39, 1, 1]\n",
+            "exceeds 1e20",
+        ),
+        (
+            "inf.toml",
+            "[[lights]]\nkind = \"directional\"\nintensity = inf\n",
+            "intensity = [inf] must be finite",
+        ),
+        (
+            "sigma4.toml",
+            "[material]\nsigma_s_prime = [1.0, 1.0, 1.0, 5.0]\nsigma_a = [0.1, 0.1, 0.1]\n",
+            "expected 3 components, found 4",
+        ),
+        (
+            "boxradius.toml",
+            "[mesh]\nbuiltin = \"box\"\nradius = 3.0\n",
+            "radius does not apply to the box mesh",
+        ),
+        (
+            "pointcone.toml",
+            "[[lights]]\nkind = \"point\"\nposition = [0, 100, 100]\ncone_deg = 20\n",
+            "cone_deg does not apply to a point light",
+        ),
+        ("far.toml", "[mesh]\nobj = \"far.obj\"\n", "at most 1e7 mm"),
+        (
+            "nanuv.toml",
+            "[mesh]\nobj = \"nanuv.obj\"\ntexture = \"t.png\"\n",
+            "non-finite texture coordinate",
+        ),
+        (
+            "dirpos.toml",
+            "[[lights]]\nkind = \"directional\"\nposition = [0, 1, 0]\n",
+            "position does not apply to a directional light",
+        ),
+    ];
+    for (name, text, needle) in cases {
+        let p = scene_file(&dir, name, text);
+        let mut c = bin();
+        c.args(["render", "--no-cache", "--frames", "1", "--out"])
+            .arg(dir.join("out"))
+            .arg(&p);
+        fails_with(c, needle);
+    }
+    for value in ["nan", "-0.5", "0", "1.5"] {
+        let mut c = bin();
+        c.args([
+            "render",
+            "--no-cache",
+            "--frames",
+            "1",
+            &format!("--target-error={value}"),
+        ]);
+        fails_with(c, "--target-error");
+    }
+    // The argument parser exits 1 like any other refusal (clap's own code is 2); help exits 0.
+    let mut c = bin();
+    c.args(["render", "--no-such-flag"]);
+    fails_with(c, "--no-such-flag");
+    assert!(bin()
+        .args(["render", "--help"])
+        .output()
+        .unwrap()
+        .status
+        .success());
+    // An output folder holding the scene file: refused before anything is written.
+    let own = dir.join("own");
+    std::fs::create_dir_all(&own).unwrap();
+    let scene = scene_file(
+        &own,
+        "scene.toml",
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\n",
+    );
+    let mut c = bin();
+    c.args(["render", "--no-cache", "--frames", "1", "--out"])
+        .arg(&own)
+        .arg(&scene);
+    fails_with(c, "would overwrite the input");
+    assert_eq!(
+        std::fs::read_to_string(&scene).unwrap(),
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\n"
+    );
+    assert!(!own.join("render.png").exists());
+    // A black reference channel has no relative error.
+    let black = [0.0f32, 0.0, 0.0, 1.0].repeat(16);
+    let grey = [0.5f32, 0.5, 0.5, 1.0].repeat(16);
+    translucent::output::write_exr(&dir.join("black.exr"), 4, 4, &black).unwrap();
+    translucent::output::write_exr(&dir.join("grey.exr"), 4, 4, &grey).unwrap();
+    let mut c = bin();
+    c.arg("compare")
+        .arg(dir.join("grey.exr"))
+        .arg(dir.join("black.exr"))
+        .arg("--out")
+        .arg(dir.join("cmp"));
+    fails_with(c, "is black in red");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Renders `scene` (32 x 32, one frame) and returns stderr, the image's largest value and
+/// timings.json's warnings.
+fn render_warned(dir: &Path, scene: &Path, extra: &[&str]) -> (String, f32, Vec<String>) {
+    let out = dir.join(format!(
+        "out-{}",
+        scene.file_stem().unwrap().to_string_lossy()
+    ));
+    let o = bin()
+        .args([
+            "--validate",
+            "render",
+            "--no-cache",
+            "--frames",
+            "1",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--out",
+        ])
+        .arg(&out)
+        .arg(scene)
+        .args(extra)
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    let (_, _, rgba) = translucent::output::read_exr(&out.join("render.exr")).unwrap();
+    let peak = rgba
+        .chunks_exact(4)
+        .flat_map(|p| &p[..3])
+        .fold(0.0f32, |a, &v| a.max(v));
+    assert!(rgba.iter().all(|v| v.is_finite() && *v >= 0.0));
+    let timings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("timings.json")).unwrap()).unwrap();
+    let warnings = timings["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap().to_string())
+        .collect();
+    (err, peak, warnings)
+}
+
+#[test]
+fn fixable_black_images_are_warned_of() {
+    let dir = temp_dir("warned");
+    std::fs::write(dir.join("cw.obj"), TETRA_CLOCKWISE).unwrap();
+    let cases: [(&str, &str, &str); 5] = [
+        (
+            "zero.toml",
+            "[[lights]]\nkind = \"directional\"\nintensity = 0.0\n",
+            "zero colour or intensity",
+        ),
+        (
+            "away.toml",
+            "[[lights]]\nkind = \"spot\"\nposition = [0, 30, 200]\ndirection = [0, 0, 1]\n",
+            "outside its cone",
+        ),
+        (
+            "far.toml",
+            "[camera]\nposition = [0, 0, 1e7]\ntarget = [0, 0, 0]\n",
+            "no pixel shows the object",
+        ),
+        (
+            "metres.toml",
+            "[mesh]\nbuiltin = \"sphere\"\nradius = 0.025\n[material]\npreset = \"ketchup\"\n",
+            "are its units right",
+        ),
+        ("cw.toml", "[mesh]\nobj = \"cw.obj\"\n", "wind clockwise"),
+    ];
+    for (name, text, needle) in cases {
+        let scene = scene_file(&dir, name, text);
+        let (err, peak, warnings) = render_warned(&dir, &scene, &[]);
+        assert!(
+            err.contains("warning: ") && err.contains(needle),
+            "{name}: {err}"
+        );
+        assert!(
+            warnings.iter().any(|w| w.contains(needle)),
+            "{name}: {warnings:?}"
+        );
+        if name == "cw.toml" {
+            // Fixed, not only warned of: the flipped tetrahedron is lit (it rendered all zero).
+            assert!(peak > 1e-3, "clockwise tetrahedron: peak {peak}");
+        }
+    }
+    // A clean scene has no warnings.
+    let clean = scene_file(
+        &dir,
+        "clean.toml",
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\n",
+    );
+    let (_, peak, warnings) = render_warned(&dir, &clean, &[]);
+    assert!(warnings.is_empty() && peak > 0.0, "{warnings:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The saved scene.toml names its mesh and texture absolutely: it re-runs from another folder
+/// (relative paths were resolved against the output folder).
+#[test]
+fn saved_scene_reruns_from_anywhere() {
+    let dir = temp_dir("rerun");
+    let src = dir.join("src");
+    std::fs::create_dir_all(&src).unwrap();
+    std::fs::write(
+        src.join("tri.obj"),
+        "v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nvt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\nf 1/1 3/3 2/2\nf 1/1 2/2 4/4\nf 1/1 4/4 3/3\nf 2/2 3/3 4/4\n",
+    )
+    .unwrap();
+    image::RgbImage::from_pixel(4, 4, image::Rgb([200, 180, 160]))
+        .save(src.join("t.png"))
+        .unwrap();
+    let scene = scene_file(
+        &src,
+        "scene.toml",
+        "[mesh]\nobj = \"tri.obj\"\ntexture = \"t.png\"\n",
+    );
+    let first = dir.join("first");
+    let o = bin()
+        .current_dir(&src)
+        .args([
+            "render",
+            "--no-cache",
+            "--frames",
+            "1",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--out",
+        ])
+        .arg(&first)
+        .arg("scene.toml")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = bin()
+        .current_dir("/")
+        .args([
+            "render",
+            "--no-cache",
+            "--frames",
+            "1",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--out",
+        ])
+        .arg(dir.join("second"))
+        .arg(first.join("scene.toml"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(scene.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
