@@ -16,6 +16,7 @@ pub mod cli;
 pub mod geometry;
 pub mod gpu;
 pub mod graph;
+pub mod input;
 pub mod layout;
 pub mod output;
 pub mod passes;

@@ -294,3 +294,85 @@ fn saved_scene_reruns_from_anywhere() {
     assert!(scene.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Faces listed twice (or four times) are removed with a warning: the image equals the one
+/// of the faces listed once (they doubled and quadrupled the brightness).
+#[test]
+fn duplicate_faces_do_not_add_light() {
+    let dir = temp_dir("duplicates");
+    let tetra = "v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+    let faces: String = tetra
+        .lines()
+        .filter(|l| l.starts_with('f'))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let mut peaks = Vec::new();
+    for (name, copies) in [("once", 0), ("twice", 1), ("four", 3)] {
+        std::fs::write(
+            dir.join(format!("{name}.obj")),
+            format!("{tetra}{}", faces.repeat(copies)),
+        )
+        .unwrap();
+        let scene = scene_file(
+            &dir,
+            &format!("{name}.toml"),
+            &format!("[mesh]\nobj = \"{name}.obj\"\n"),
+        );
+        let (err, peak, warnings) = render_warned(&dir, &scene, &[]);
+        if copies > 0 {
+            let needle = format!("{} face(s) repeat", 4 * copies);
+            assert!(
+                err.contains(&needle) && warnings.iter().any(|w| w.contains(&needle)),
+                "{err}"
+            );
+        }
+        peaks.push(peak);
+    }
+    assert!(peaks[0] > 0.0);
+    for p in &peaks[1..] {
+        assert!((p / peaks[0] - 1.0).abs() < 1e-3, "{peaks:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Inputs are read as regular files of bounded size: a device, a FIFO or a folder given as
+/// the scene or the mesh is refused by what it is (a mesh path of /dev/zero was read until
+/// the kernel killed the process; a FIFO blocked forever).
+#[test]
+fn devices_fifos_and_folders_are_not_read() {
+    let dir = temp_dir("special");
+    let fifo = dir.join("fifo.obj");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    for (flag, path, needle) in [
+        (
+            "--mesh",
+            "/dev/zero",
+            "is a character device, not a regular file",
+        ),
+        (
+            "--mesh",
+            fifo.to_str().unwrap(),
+            "is a FIFO (named pipe), not a regular file",
+        ),
+        ("--mesh", "/tmp", "is a folder, not a regular file"),
+        (
+            "",
+            "/dev/zero",
+            "scene file '/dev/zero' is a character device",
+        ),
+    ] {
+        let mut c = bin();
+        c.args(["render", "--no-cache", "--frames", "1", "--out"])
+            .arg(dir.join("out"));
+        if !flag.is_empty() {
+            c.arg(flag);
+        }
+        c.arg(path);
+        fails_with(c, needle);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

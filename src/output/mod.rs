@@ -76,6 +76,9 @@ pub fn write_radiance(
 /// Reads an RGBA EXR written by [`write_exr`] (for tests and comparisons).
 pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     use exr::prelude::*;
+    let meta =
+        std::fs::metadata(path).with_context(|| format!("cannot read '{}'", path.display()))?;
+    crate::input::check_regular(path, &meta, crate::input::MAX_DATA_BYTES, "image")?;
     let image = read_first_rgba_layer_from_file(
         path,
         |resolution, _| {

@@ -100,13 +100,11 @@ pub fn store(dir: &Path, key: u64, value: &Preprocessed) -> Result<PathBuf> {
 /// the file is stale or corrupt.
 pub fn load(dir: &Path, key: u64) -> Result<Option<Preprocessed>> {
     let p = path(dir, key);
-    let bytes = match std::fs::read(&p) {
-        Ok(b) => b,
+    match std::fs::metadata(&p) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => {
-            return Err(e).with_context(|| format!("cannot read cache file '{}'", p.display()))
-        }
-    };
+        _ => {}
+    }
+    let bytes = crate::input::read_regular(&p, crate::input::MAX_DATA_BYTES, "cache file")?;
     if bytes.len() < 36 || &bytes[..8] != MAGIC {
         bail!(
             "cache file '{}' is not a translucent cache file",

@@ -188,8 +188,11 @@ impl Scene {
     pub fn load(path: Option<&Path>, overrides: &Overrides) -> Result<Scene> {
         let (desc, base) = match path {
             Some(p) => {
-                let text = std::fs::read_to_string(p)
-                    .with_context(|| format!("cannot read scene file '{}'", p.display()))?;
+                let bytes =
+                    crate::input::read_regular(p, crate::input::MAX_SCENE_BYTES, "scene file")?;
+                let text = String::from_utf8(bytes).map_err(|e| {
+                    anyhow::anyhow!("scene file '{}' is not UTF-8 text: {e}", p.display())
+                })?;
                 let desc = SceneDesc::parse(&text)
                     .map_err(|e| anyhow::anyhow!("scene file '{}': {e}", p.display()))?;
                 (desc, p.parent().map(Path::to_path_buf).unwrap_or_default())
@@ -313,7 +316,10 @@ impl Scene {
                     bail!("a texture is given but the mesh has no texture coordinates");
                 }
                 let p = base.join(t);
-                let img = image::open(&p)
+                let bytes =
+                    crate::input::read_regular(&p, crate::input::MAX_TEXTURE_BYTES, "texture")
+                        .with_context(|| format!("cannot read texture '{}'", p.display()))?;
+                let img = image::load_from_memory(&bytes)
                     .with_context(|| format!("cannot read texture '{}'", p.display()))?;
                 md.texture = Some(absolute(&p));
                 Some(img.to_rgba8())
@@ -342,6 +348,7 @@ impl Scene {
             rotation,
             vec3(tr),
         );
+        let duplicates = mesh.remove_duplicate_faces();
         mesh.transform(m);
         let (center, radius) = mesh.bounding_sphere();
         if !(center.is_finite() && radius.is_finite() && radius <= MAX_RADIUS_MM) {
@@ -351,6 +358,11 @@ impl Scene {
             );
         }
         let mut warnings = Vec::new();
+        if duplicates > 0 {
+            warnings.push(format!(
+                "{duplicates} face(s) repeat another face's corners (listed twice, or once per side): removed, as each copy would receive and give light again"
+            ));
+        }
         // Inverted winding: a closed mesh whose faces wind clockwise seen from outside has a
         // negative signed volume; its normals point inwards, and the object renders black (a
         // tetrahedron all zero, the bunny at 3e-4 of its brightness).
