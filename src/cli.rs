@@ -696,13 +696,25 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// Most surface samples `reference --spacing-mm` may ask for (a few GiB of samples).
+const MAX_REFERENCE_SAMPLES: f64 = 5e7;
+
 fn reference(args: &ReferenceArgs) -> Result<()> {
     use crate::reference::{metrics, Reference, ReferenceSettings};
     let scene = args.input.load()?;
     let mut settings = ReferenceSettings::for_scene(&scene);
     if let Some(s) = args.spacing_mm {
         if !(s.is_finite() && s > 0.0) {
-            bail!("--spacing-mm {s} must be positive");
+            bail!("--spacing-mm {s} must be a finite positive length");
+        }
+        // Every sample is stored (position, normal, irradiance): bounded before allocating
+        // (0.0001 mm on the bunny once aborted allocating 960 GB).
+        let samples = scene.mesh.surface_area() / (s * s);
+        if samples > MAX_REFERENCE_SAMPLES {
+            bail!(
+                "--spacing-mm {s} gives {samples:.2e} surface samples, more than {MAX_REFERENCE_SAMPLES:.0e}: use at least {:.4} mm",
+                (scene.mesh.surface_area() / MAX_REFERENCE_SAMPLES).sqrt()
+            );
         }
         settings.spacing_mm = s;
     }

@@ -93,6 +93,9 @@ fn careless_values_are_refused_by_name() {
         ]);
         fails_with(c, "--target-error");
     }
+    let mut c = bin();
+    c.args(["reference", "--spacing-mm", "0.0001", "--out"]).arg(dir.join("ref"));
+    fails_with(c, "surface samples, more than");
     // The argument parser exits 1 like any other refusal (clap's own code is 2); help exits 0.
     let mut c = bin();
     c.args(["render", "--no-such-flag"]);
@@ -223,6 +226,18 @@ fn fixable_black_images_are_warned_of() {
             assert!(peak > 1e-3, "clockwise tetrahedron: peak {peak}");
         }
     }
+    // An open plane seen from below: rendered (it was refused as "inside the object").
+    std::fs::write(
+        dir.join("plane.obj"),
+        "v -10 0 -10\nv 10 0 -10\nv 10 0 10\nv -10 0 10\nf 1 4 3 2\n",
+    )
+    .unwrap();
+    let below = scene_file(
+        &dir,
+        "below.toml",
+        "[mesh]\nobj = \"plane.obj\"\n[camera]\nposition = [0, -50, 30]\ntarget = [0, 0, 0]\n",
+    );
+    render_warned(&dir, &below, &[]);
     // A clean scene has no warnings.
     let clean = scene_file(
         &dir,

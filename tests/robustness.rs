@@ -109,7 +109,7 @@ fn broken_inputs_are_refused() {
     let cases: [(&[&str], &str); 5] = [
         (&["--kernel", "33"], "between 1 and 31"),
         (&["--kernel", "6"], "must be odd"),
-        (&["--texel-mm=-1"], "must be positive"),
+        (&["--texel-mm=-1"], "must be a finite positive length"),
         (&["--width", "20000"], "exceeds 16384"),
         (&["--prune", "0.9"], "pruning tolerance"),
     ];
@@ -160,7 +160,14 @@ fn device_limits_are_refused_before_allocation() {
     .arg(dir.join("cache"))
     .arg("--out")
     .arg(dir.join("out"));
-    fails_with(c, "device-local memory");
+    // The message names the largest items (it said "see the memory report" and printed none).
+    let o = c.output().unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("device-local memory") && err.contains("largest: "),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

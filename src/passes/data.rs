@@ -549,8 +549,20 @@ impl Requirements {
         // Leave a tenth of the device's memory to the driver and other programs.
         let budget = info.device_local_bytes / 10 * 9;
         if self.total > budget {
+            let mut items: Vec<&(String, u64)> = self.items.iter().collect();
+            items.sort_by_key(|i| std::cmp::Reverse(i.1));
+            let largest: Vec<String> = items
+                .iter()
+                .take(4)
+                .map(|(name, bytes)| {
+                    format!("{name} {:.1} MiB", *bytes as f64 / (1u64 << 20) as f64)
+                })
+                .collect();
             return Err(GpuError::Limit {
-                what: "the scene's device data (see the memory report)".into(),
+                what: format!(
+                    "the scene's device data (largest: {}; a coarser --texel-mm or --node-spacing-mm, or a smaller output, shrinks it)",
+                    largest.join(", ")
+                ),
                 limit: "90 % of device-local memory (bytes)",
                 value: self.total,
                 max: budget,

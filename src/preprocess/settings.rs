@@ -80,7 +80,7 @@ pub fn validate(o: &SettingsOverrides) -> anyhow::Result<()> {
     if let Some(h) = o.texel_mm {
         anyhow::ensure!(
             h.is_finite() && h > 0.0,
-            "texel size {h} mm must be positive"
+            "texel size {h} mm must be a finite positive length"
         );
     }
     if let Some(k) = o.kernel_size {
@@ -92,7 +92,7 @@ pub fn validate(o: &SettingsOverrides) -> anyhow::Result<()> {
     if let Some(s) = o.node_spacing_mm {
         anyhow::ensure!(
             s.is_finite() && s > 0.0,
-            "node spacing {s} mm must be positive"
+            "node spacing {s} mm must be a finite positive length"
         );
     }
     if let Some(t) = o.prune_tolerance {

@@ -252,6 +252,35 @@ impl Mesh {
             .sum()
     }
 
+    /// Whether the surface is closed: every edge (vertices welded by position) is shared by
+    /// exactly two triangles. Inside and outside, and the signed volume, mean something only
+    /// then.
+    pub fn is_closed(&self) -> bool {
+        // Welded to a millionth of the object's size: seams of generated meshes repeat a
+        // vertex with rounding differences.
+        let cell = (self.bounding_sphere().1 * 1e-6).max(f32::MIN_POSITIVE);
+        let key = |i: u32| {
+            (self.positions[i as usize] / cell)
+                .round()
+                .as_i64vec3()
+                .to_array()
+        };
+        let mut edges: std::collections::HashMap<([i64; 3], [i64; 3]), u32> =
+            std::collections::HashMap::new();
+        for t in self.indices.chunks_exact(3) {
+            for k in 0..3 {
+                let (a, b) = (key(t[k]), key(t[(k + 1) % 3]));
+                if a == b {
+                    continue;
+                }
+                *edges
+                    .entry(if a < b { (a, b) } else { (b, a) })
+                    .or_default() += 1;
+            }
+        }
+        !edges.is_empty() && edges.values().all(|&n| n == 2)
+    }
+
     /// Removes every triangle whose three corners (by position, either winding) repeat an
     /// earlier one's; returns how many. A face listed twice receives and gives light twice:
     /// it doubled the brightness.
@@ -817,5 +846,28 @@ mod polygon_tests {
             e.contains("line 4") && e.contains("vertex index 9 with 3 read so far"),
             "{e}"
         );
+    }
+}
+
+#[cfg(test)]
+mod closed_tests {
+    use super::*;
+
+    #[test]
+    fn closed_meshes_are_told_from_open_ones() {
+        assert!(Mesh::sphere(10.0, 16).is_closed());
+        assert!(Mesh::cuboid(Vec3::splat(10.0), 4).is_closed());
+        assert!(Mesh::parse_obj("bunny", crate::scene::BUNNY_OBJ)
+            .unwrap()
+            .is_closed());
+        let plane =
+            Mesh::parse_obj("plane", "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 4 3 2\n").unwrap();
+        assert!(!plane.is_closed());
+        // A clockwise closed mesh has a negative signed volume.
+        let mut s = Mesh::sphere(10.0, 16);
+        let v = s.signed_volume();
+        assert!(v > 0.0);
+        s.flip_winding();
+        assert!((s.signed_volume() + v).abs() < 1e-6 * v);
     }
 }

@@ -278,7 +278,7 @@ impl Scene {
                             bail!("[mesh] segments = {s} must lie between 3 and {MAX_SEGMENTS}");
                         }
                         if !(r.is_finite() && r > 0.0) {
-                            bail!("[mesh] radius = {r} must be positive");
+                            bail!("[mesh] radius = {r} must be a finite positive length");
                         }
                         Mesh::sphere(r as f32, s)
                     }
@@ -335,7 +335,7 @@ impl Scene {
         finite("[transform] rotate_deg", &rot)?;
         finite("[transform] translate", &tr)?;
         if !(scale.is_finite() && scale > 0.0) {
-            bail!("[transform] scale = {scale} must be positive");
+            bail!("[transform] scale = {scale} must be a finite positive number");
         }
         let rotation = glam::Quat::from_euler(
             glam::EulerRot::XYZ,
@@ -366,9 +366,10 @@ impl Scene {
         // Inverted winding: a closed mesh whose faces wind clockwise seen from outside has a
         // negative signed volume; its normals point inwards, and the object renders black (a
         // tetrahedron all zero, the bunny at 3e-4 of its brightness).
+        let closed = mesh.is_closed();
         let volume = mesh.signed_volume();
         let sphere_like = mesh.surface_area() * radius as f64 / 3.0;
-        if volume < -0.05 * sphere_like {
+        if closed && volume < -0.05 * sphere_like {
             mesh.flip_winding();
             warnings.push(format!(
                 "the mesh's faces wind clockwise seen from outside (signed volume {volume:.4e} mm^3): flipped to counter-clockwise, normals reversed"
@@ -556,7 +557,7 @@ impl Scene {
         // centre) maps to 0.8 of full scale.
         let exposure = match od.exposure {
             Some(e) if e.is_finite() && e > 0.0 => e,
-            Some(e) => bail!("[output] exposure = {e} must be positive"),
+            Some(e) => bail!("[output] exposure = {e} must be a finite positive number"),
             None => {
                 let peak = lights
                     .iter()
@@ -580,7 +581,8 @@ impl Scene {
 
         // Where the camera and the lights stand relative to the object.
         let bvh = crate::geometry::bvh::Bvh::new(&mesh.positions, &mesh.indices);
-        if bvh.contains(camera.position.as_dvec3()) {
+        // An open surface has no inside (a plane seen from below was "inside the object").
+        if closed && bvh.contains(camera.position.as_dvec3()) {
             bail!("[camera] position {:?} lies inside the object", position);
         }
         let to_center = center - camera.position;
@@ -596,7 +598,7 @@ impl Scene {
             bail!("the object lies outside the camera's view ([camera] looks {:.0} degrees away from it)", off_axis.to_degrees());
         }
         for (i, l) in lights.iter().enumerate() {
-            if l.kind != LightKind::Directional && bvh.contains(l.position.as_dvec3()) {
+            if closed && l.kind != LightKind::Directional && bvh.contains(l.position.as_dvec3()) {
                 bail!(
                     "[[lights]] #{} at {:?} lies inside the object: it would light nothing",
                     i + 1,
