@@ -482,23 +482,25 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     }
     report.warnings = warnings;
     let out = &args.out;
+    let mut set = output::OutputSet::new(out)?;
     output::write_png(
-        &out.join("render.png"),
+        &set.path("render.png"),
         result.width,
         result.height,
         &result.display,
     )?;
     output::write_exr(
-        &out.join("render.exr"),
+        &set.path("render.exr"),
         result.width,
         result.height,
         &result.radiance,
     )?;
-    output::write_timings(&out.join("timings.json"), &report)?;
-    output::write_trace(&out.join("trace.json"), &result.pass_names, &result.frames)?;
-    output::write_atomic(&out.join("scene.toml"), |p| {
+    output::write_timings(&set.path("timings.json"), &report)?;
+    output::write_trace(&set.path("trace.json"), &result.pass_names, &result.frames)?;
+    output::write_atomic(&set.path("scene.toml"), |p| {
         Ok(std::fs::write(p, &resolved)?)
     })?;
+    set.commit()?;
     println!("device: {} ({})", report.device, report.driver);
     println!(
         "{:<12} {:>10} {:>10} {:>10}",

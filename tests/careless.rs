@@ -94,7 +94,8 @@ fn careless_values_are_refused_by_name() {
         fails_with(c, "--target-error");
     }
     let mut c = bin();
-    c.args(["reference", "--spacing-mm", "0.0001", "--out"]).arg(dir.join("ref"));
+    c.args(["reference", "--spacing-mm", "0.0001", "--out"])
+        .arg(dir.join("ref"));
     fails_with(c, "surface samples, more than");
     // The argument parser exits 1 like any other refusal (clap's own code is 2); help exits 0.
     let mut c = bin();
@@ -389,5 +390,68 @@ fn devices_fifos_and_folders_are_not_read() {
         c.arg(path);
         fails_with(c, needle);
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A render's files land as a set: when one cannot be written, none replaces what the folder
+/// held (a failed write once left new images beside an old scene.toml), and no temporary is
+/// left; temporaries of a killed run are removed by the next run.
+#[test]
+fn outputs_land_as_a_set() {
+    let dir = temp_dir("set");
+    let out = dir.join("out");
+    std::fs::create_dir_all(out.join("scene.toml")).unwrap();
+    std::fs::write(out.join("render.png"), b"old").unwrap();
+    let stale = out.join(".render.exr.4194999.tmp");
+    std::fs::write(&stale, b"left by a killed run").unwrap();
+    let mut c = bin();
+    c.args([
+        "render",
+        "--no-cache",
+        "--frames",
+        "1",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--out",
+    ])
+    .arg(&out);
+    fails_with(c, "a folder of that name is in the way");
+    assert_eq!(std::fs::read(out.join("render.png")).unwrap(), b"old");
+    assert!(!out.join("render.exr").exists() && !out.join("timings.json").exists());
+    let names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!names.iter().any(|n| n.ends_with(".tmp")), "{names:?}");
+    // Once the way is clear the whole set lands.
+    std::fs::remove_dir(out.join("scene.toml")).unwrap();
+    let o = bin()
+        .args([
+            "render",
+            "--no-cache",
+            "--frames",
+            "1",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "render.png",
+        "render.exr",
+        "timings.json",
+        "trace.json",
+        "scene.toml",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    assert_ne!(std::fs::read(out.join("render.png")).unwrap(), b"old");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -27,6 +27,90 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
     result.with_context(|| format!("cannot write '{}'", path.display()))
 }
 
+/// The files of one run, written as a set: each is written under a temporary name, and only
+/// when all are written are they renamed into place together. A failed write removes the
+/// temporaries and leaves whatever the folder held before, never a new image beside an old
+/// scene.toml. Temporaries that a killed run left behind (their process gone) are removed
+/// when the next set is opened in the folder.
+pub struct OutputSet {
+    dir: PathBuf,
+    /// (temporary, final) per file, in order.
+    files: Vec<(PathBuf, PathBuf)>,
+    committed: bool,
+}
+
+impl OutputSet {
+    /// Opens a set in `dir` (created if needed), removing stale temporaries there.
+    pub fn new(dir: &Path) -> Result<OutputSet> {
+        create_dir(dir)?;
+        remove_stale_temporaries(dir);
+        Ok(OutputSet {
+            dir: dir.to_path_buf(),
+            files: Vec::new(),
+            committed: false,
+        })
+    }
+
+    /// The path to write `name` to now (a temporary name in the folder).
+    pub fn path(&mut self, name: &str) -> PathBuf {
+        let target = self.dir.join(name);
+        let tmp = temporary(&target);
+        self.files.push((tmp.clone(), target));
+        tmp
+    }
+
+    /// Moves every file into place. Checks first that no final name is a folder (the one way
+    /// a rename in the same folder fails), so that the set lands whole or not at all.
+    pub fn commit(mut self) -> Result<()> {
+        for (tmp, target) in &self.files {
+            if !tmp.is_file() {
+                anyhow::bail!("'{}' was not written", target.display());
+            }
+            if target.is_dir() {
+                anyhow::bail!(
+                    "cannot write '{}': a folder of that name is in the way",
+                    target.display()
+                );
+            }
+        }
+        for (tmp, target) in &self.files {
+            std::fs::rename(tmp, target)
+                .with_context(|| format!("cannot move {} into place", target.display()))?;
+        }
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for OutputSet {
+    fn drop(&mut self) {
+        if !self.committed {
+            for (tmp, _) in &self.files {
+                let _ = std::fs::remove_file(tmp);
+            }
+        }
+    }
+}
+
+/// Removes `.NAME.PID.tmp` files in `dir` whose process no longer runs.
+pub fn remove_stale_temporaries(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(stem) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) else {
+            continue;
+        };
+        let Some(pid) = stem.rsplit('.').next().and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
 /// Writes tightly packed RGBA8 pixels as PNG.
 pub fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
     write_atomic(path, |tmp| {
