@@ -167,3 +167,129 @@ fn every_seed_is_valid_as_it_stands() {
         Scene::from_desc(desc, Path::new(""), &Overrides::default()).unwrap();
     }
 }
+
+/// Values of the command line, hostile ones among them, drawn per flag.
+const CLI_VALUES: &[(&str, &[&str])] = &[
+    (
+        "--texel-mm",
+        &["0.8", "2", "nan", "-1", "inf", "1e-9", "1e9"],
+    ),
+    ("--kernel", &["1", "3", "7", "31", "33", "0", "-3"]),
+    ("--prune", &["0", "0.01", "0.49", "0.5", "nan"]),
+    ("--target-error", &["0.02", "0.3", "nan", "-0.5", "1"]),
+    (
+        "--mode",
+        &["local", "global", "simple", "optimized", "bogus"],
+    ),
+    ("--eta", &["1", "1.3", "0", "nan", "3.5"]),
+    (
+        "--model",
+        &["dipole", "halfspace", "halfspace-single", "multipole"],
+    ),
+    ("--width", &["1", "16", "0", "24"]),
+    ("--node-spacing-mm", &["1", "5", "0", "nan"]),
+];
+
+/// Runs the renderer on `scene` with `args` (16 x 16 unless the values say otherwise, one
+/// frame, validated). Exit 0 must mean a finite, non-negative image; any other exit, a
+/// message naming the problem (an "error:" line, no panic); and no run may hang.
+fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(&scene_path, scene).unwrap();
+    let out = dir.join("out");
+    let _ = std::fs::remove_dir_all(&out);
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_translucent"));
+    cmd.env("RUST_LOG", "warn")
+        .args([
+            "--validate",
+            "render",
+            "--no-cache",
+            "--frames",
+            "1",
+            "--height",
+            "16",
+            "--out",
+        ])
+        .arg(&out)
+        .arg(&scene_path);
+    let mut flags = Vec::new();
+    for &(f, v) in args {
+        let (flag, values) = CLI_VALUES[f % CLI_VALUES.len()];
+        if flags.contains(&flag) {
+            continue;
+        }
+        flags.push(flag);
+        cmd.arg(format!("{flag}={}", values[v % values.len()]));
+    }
+    if !flags.contains(&"--width") {
+        cmd.args(["--width", "16"]);
+    }
+    let mut child = cmd
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed().as_secs() > 120 {
+            let _ = child.kill();
+            panic!(
+                "render {flags:?} ran past 120 s on {}",
+                String::from_utf8_lossy(scene)
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+    assert!(!err.contains("panicked"), "panic: {err}");
+    if std::env::var_os("FUZZ_VERBOSE").is_some() {
+        eprintln!(
+            "{flags:?} -> {status}: {}",
+            err.lines().find(|l| l.starts_with("error")).unwrap_or("")
+        );
+    }
+    if status.success() {
+        let (_, _, rgba) = translucent::output::read_exr(&out.join("render.exr")).unwrap();
+        let bad = rgba
+            .iter()
+            .filter(|v| !(v.is_finite() && **v >= 0.0))
+            .count();
+        assert_eq!(
+            bad,
+            0,
+            "{bad} negative or non-finite values with {:?}",
+            cmd.get_args().collect::<Vec<_>>()
+        );
+    } else {
+        assert_eq!(status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("error:"),
+            "exit {status} without a message: {err}"
+        );
+    }
+}
+
+proptest! {
+    // Each case is a whole run of the binary (about a second): few cases, mutations of the
+    // scene seeds that still parse often enough to reach the renderer.
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    #[test]
+    fn command_line_gives_a_clean_image_or_a_message(
+        seed in 0usize..16,
+        mutated in prop::bool::weighted(0.25),
+        edits in prop::collection::vec(edit(), 1..3),
+        args in prop::collection::vec((0usize..64, 0usize..64), 0..4),
+    ) {
+        let dir = std::env::temp_dir().join(format!("translucent-fuzz-cli-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let seeds = seeds("toml");
+        let seed = &seeds[seed % seeds.len()];
+        let scene = if mutated { mutate(seed, &edits) } else { seed.clone() };
+        check_cli(&dir, &scene, &args);
+    }
+}

@@ -134,7 +134,9 @@ pub struct Estimate {
 /// Estimates a preprocessing run (see [`Estimate`]).
 pub fn estimate(mesh: &Mesh, s: &Settings) -> Estimate {
     let area = mesh.surface_area();
-    let texels = (area / (s.texel_mm * s.texel_mm)).ceil() as u64;
+    // Bounded so that every product below stays within u64 (a 1e-9 mm texel once wrapped to
+    // 1.8e19 kernel elements); far beyond any device limit either way.
+    let texels = (area / (s.texel_mm * s.texel_mm)).ceil().min(1e12) as u64;
     let by_spacing = (area / (0.866 * s.node_spacing_mm * s.node_spacing_mm)).ceil() as u64;
     let nodes = (mesh.positions.len() as u64).min(by_spacing.max(4));
     let kk = (s.kernel_size * s.kernel_size) as u64;
