@@ -232,7 +232,9 @@ fn shadow_case(light: &str) {
     );
     assert!(
         shadowed.radiance[under] < 0.05 * lit.radiance[under],
-        "plate casts a shadow"
+        "plate casts a shadow: {} in its shadow, {} without the plate",
+        shadowed.radiance[under],
+        lit.radiance[under]
     );
 }
 
