@@ -270,43 +270,34 @@ fn saved_scene_reruns_from_anywhere() {
         "scene.toml",
         "[mesh]\nobj = \"tri.obj\"\ntexture = \"t.png\"\n",
     );
+    // Rendered from the scene's folder, then its saved scene from the root folder.
+    let run = |cwd: &Path, out: &Path, scene: &Path| {
+        let o = bin()
+            .current_dir(cwd)
+            .args([
+                "render",
+                "--no-cache",
+                "--frames",
+                "1",
+                "--width",
+                "32",
+                "--height",
+                "32",
+                "--out",
+            ])
+            .arg(out)
+            .arg(scene)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
     let first = dir.join("first");
-    let o = bin()
-        .current_dir(&src)
-        .args([
-            "render",
-            "--no-cache",
-            "--frames",
-            "1",
-            "--width",
-            "32",
-            "--height",
-            "32",
-            "--out",
-        ])
-        .arg(&first)
-        .arg("scene.toml")
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = bin()
-        .current_dir("/")
-        .args([
-            "render",
-            "--no-cache",
-            "--frames",
-            "1",
-            "--width",
-            "32",
-            "--height",
-            "32",
-            "--out",
-        ])
-        .arg(dir.join("second"))
-        .arg(first.join("scene.toml"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    run(&src, &first, Path::new("scene.toml"));
+    run(
+        Path::new("/"),
+        &dir.join("second"),
+        &first.join("scene.toml"),
+    );
     assert!(scene.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

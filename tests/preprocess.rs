@@ -26,20 +26,26 @@ fn slab(
     node_spacing_mm: f64,
 ) -> Preprocessed {
     let mesh = Mesh::cuboid(Vec3::from_array(size), segments);
-    let scale = ObjectScale {
-        area_mm2: mesh.surface_area(),
-        pixel_mm: 0.1,
-        max_texels: 1e6,
-        target_error: 0.02,
-    };
     let o = SettingsOverrides {
         texel_mm: Some(texel_mm),
         node_spacing_mm: Some(node_spacing_mm),
         kernel_size: Some(7),
         ..Default::default()
     };
-    let choice = settings::derive(material, &scale, &o);
-    Preprocessed::build(&mesh, material, &choice, &quiet)
+    build(&mesh, material, &o)
+}
+
+/// Preprocesses `mesh` with the settings rule (0.1 mm pixels, at most 1e6 texels, 2 % target)
+/// and `o` over it.
+fn build(mesh: &Mesh, material: &Material, o: &SettingsOverrides) -> Preprocessed {
+    let scale = ObjectScale {
+        area_mm2: mesh.surface_area(),
+        pixel_mm: 0.1,
+        max_texels: 1e6,
+        target_error: 0.02,
+    };
+    let choice = settings::derive(material, &scale, o);
+    Preprocessed::build(mesh, material, &choice, &quiet)
 }
 
 /// A slab that is semi-infinite for `material`: the lit top face reaches 8 diffusion lengths
@@ -434,20 +440,32 @@ fn estimate_bounds_the_requirements() {
         let choice =
             translucent::preprocess::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
         let e = translucent::preprocess::estimate(&scene.mesh, &choice.settings);
+        let start = std::time::Instant::now();
         let pre = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
+        // Time is reported, not asserted (speed belongs to benchmarks; this machine is shared).
+        println!(
+            "{what}: time estimated {:.2} s, took {:.2} s ({:.2}x; fit {:.2} s)",
+            e.seconds,
+            start.elapsed().as_secs_f64(),
+            e.seconds / start.elapsed().as_secs_f64(),
+            pre.ops.seconds[2]
+        );
         let r = Requirements::of(&scene, &pre, Blend::Optimized);
         let item = |name: &str| r.items.iter().find(|i| i.0 == name).unwrap().1;
         let kernel_elements = pre.atlas.texels.len() as u64
             * translucent::layout::kernel_pairs(pre.settings.kernel_size) as u64;
         let bytes = item("kernels") + item("illumination map") + item("local response") + item("chart ids");
-        for (name, estimated, real) in [
-            ("kernel elements", e.kernel_elements, kernel_elements),
-            ("device bytes", e.device_bytes_min, bytes),
+        for (name, estimated, real, within) in [
+            ("kernel elements", e.kernel_elements, kernel_elements, 0.7..=1.4),
+            ("device bytes", e.device_bytes_min, bytes, 0.7..=1.4),
+            // The estimate's nodes (the vertex count, or the area over the spacing's cell)
+            // against the node set built (welded vertices, or meshopt's proxy).
+            ("nodes", e.nodes, pre.nodes.positions.len() as u64, 0.5..=2.0),
         ] {
             let ratio = estimated as f64 / real as f64;
             println!("{what}: {name} estimated {estimated}, needed {real} ({ratio:.2}x)");
             assert!(
-                (0.7..=1.4).contains(&ratio),
+                within.contains(&ratio),
                 "{what}: {name} estimated {estimated}, needed {real}"
             );
         }
@@ -535,18 +553,11 @@ fn light_is_never_negative() {
         ("huge sigma", Mesh::sphere(20.0, 12), &dense, 2.0, 7),
     ];
     for (name, mesh, material, texel_mm, stride) in cases {
-        let scale = ObjectScale {
-            area_mm2: mesh.surface_area(),
-            pixel_mm: 0.1,
-            max_texels: 1e6,
-            target_error: 0.02,
-        };
         let o = SettingsOverrides {
             texel_mm: Some(texel_mm),
             ..Default::default()
         };
-        let choice = settings::derive(material, &scale, &o);
-        let p = Preprocessed::build(&mesh, material, &choice, &quiet);
+        let p = build(&mesh, material, &o);
         let worst = worst_negative_response(&p, Blend::Optimized, stride);
         assert!(
             worst > -1e-5,
