@@ -177,8 +177,9 @@ pub fn estimate(mesh: &Mesh, s: &Settings) -> Estimate {
         device_bytes_max: device_bytes_min + counts.bytes(Item::GlobalEntries),
         kernel_elements,
         // Calibrated on the bunny, a ketchup sphere and a skin1 box (tests/preprocess.rs
-        // estimate_bounds_the_requirements prints the factor; 0.4-0.9x of the measured time
-        // there, which is reported, not asserted).
+        // estimate_bounds_the_requirements prints the factor: 0.66x / 0.17x / 0.64x of the
+        // measured time there, reported, not asserted; the ketchup sphere's constrained fit
+        // needs many more dual sweeps than the estimate knows of).
         seconds: (2.5e-7 * (texels * kk) as f64
             + 3.0e-7 * (nodes * nodes) as f64
             + 1.5e-8 * fit_work)
