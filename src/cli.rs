@@ -398,6 +398,24 @@ const RENDER_OUTPUTS: &[&str] = &[
     "scene.toml",
 ];
 
+/// Why a rendered image (linear RGBA) is black for a reason the user can fix, if it is.
+fn image_warnings(radiance: &[f32]) -> Vec<String> {
+    let covered = radiance.chunks_exact(4).filter(|p| p[3] > 0.0).count();
+    let brightest = radiance
+        .chunks_exact(4)
+        .flat_map(|p| &p[..3])
+        .fold(0.0f32, |a, &v| a.max(v));
+    if covered == 0 {
+        vec!["no pixel shows the object: the camera is too far or looks past it ([camera] position, target, fov_deg)".into()]
+    } else if brightest <= 0.0 {
+        vec![format!(
+            "the object covers {covered} pixels, all black: no light reaches the part the camera sees"
+        )]
+    } else {
+        Vec::new()
+    }
+}
+
 fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     frame_count("--frames", args.frames, 1)?;
     let scene = args.input.load()?;
@@ -408,8 +426,6 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
-    let mut warnings = scene.warnings.clone();
-    let scene_warnings = warnings.len();
     let inputs: Vec<PathBuf> = [
         args.input.scene.clone(),
         scene.resolved.mesh.obj.clone(),
@@ -418,10 +434,10 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     .into_iter()
     .flatten()
     .collect();
-    output::refuse_overwriting(&args.out, RENDER_OUTPUTS, &inputs)?;
-    output::create_dir(&args.out)?;
+    let mut set = output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
     let resolved = scene.resolved.to_toml();
+    let scene_warnings = scene.warnings.clone();
     let mode = args.mode;
     let mut renderer = Renderer::new(
         &gpu,
@@ -458,31 +474,12 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         &result.pass_names,
         &result.frames,
     );
-    let covered = result
-        .radiance
-        .chunks_exact(4)
-        .filter(|p| p[3] > 0.0)
-        .count();
-    let brightest = result
-        .radiance
-        .chunks_exact(4)
-        .flat_map(|p| &p[..3])
-        .fold(0.0f32, |a, &v| a.max(v));
-    if covered == 0 {
-        warnings.push(
-            "no pixel shows the object: the camera is too far or looks past it ([camera] position, target, fov_deg)".into(),
-        );
-    } else if brightest <= 0.0 {
-        warnings.push(format!(
-            "the object covers {covered} pixels, all black: no light reaches the part the camera sees"
-        ));
-    }
-    for w in warnings.iter().skip(scene_warnings) {
+    let seen = image_warnings(&result.radiance);
+    for w in &seen {
         eprintln!("warning: {w}");
     }
-    report.warnings = warnings;
+    report.warnings = [scene_warnings, seen].concat();
     let out = &args.out;
-    let mut set = output::OutputSet::new(out)?;
     output::write_png(
         &set.path("render.png"),
         result.width,

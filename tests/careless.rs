@@ -5,13 +5,14 @@
 
 mod common;
 
-use common::{bin, fails_with, stderr, temp_dir};
+use common::{bin, fails_with, render_cmd, stderr, temp_dir};
 use std::path::Path;
 
 const TETRA_CLOCKWISE: &str =
     "v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 2 3\nf 1 4 2\nf 1 3 4\nf 2 4 3\n";
 
-fn scene_file(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+/// Writes `text` to `dir/name` and returns the path.
+fn write_file(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
     p
@@ -20,16 +21,16 @@ fn scene_file(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
 #[test]
 fn careless_values_are_refused_by_name() {
     let dir = temp_dir("careless");
-    std::fs::write(
-        dir.join("far.obj"),
+    write_file(
+        &dir,
+        "far.obj",
         "v 1e30 0 0\nv 0 1e30 0\nv 0 0 1e30\nf 1 2 3\n",
-    )
-    .unwrap();
-    std::fs::write(
-        dir.join("nanuv.obj"),
+    );
+    write_file(
+        &dir,
+        "nanuv.obj",
         "v 0 0 0\nv 10 0 0\nv 0 10 0\nvt 0 0\nvt nan inf\nvt 0 1\nf 1/1 2/2 3/3\n",
-    )
-    .unwrap();
+    );
     image::RgbImage::new(4, 4).save(dir.join("t.png")).unwrap();
     let cases: [(&str, &str, &str); 9] = [
         (
@@ -75,7 +76,7 @@ fn careless_values_are_refused_by_name() {
         ),
     ];
     for (name, text, needle) in cases {
-        let p = scene_file(&dir, name, text);
+        let p = write_file(&dir, name, text);
         let mut c = bin();
         c.args(["render", "--no-cache", "--frames", "1", "--out"])
             .arg(dir.join("out"))
@@ -110,7 +111,7 @@ fn careless_values_are_refused_by_name() {
     // An output folder holding the scene file: refused before anything is written.
     let own = dir.join("own");
     std::fs::create_dir_all(&own).unwrap();
-    let scene = scene_file(
+    let scene = write_file(
         &own,
         "scene.toml",
         "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\n",
@@ -147,20 +148,7 @@ fn render_warned(dir: &Path, scene: &Path, extra: &[&str]) -> (String, f32, Vec<
         "out-{}",
         scene.file_stem().unwrap().to_string_lossy()
     ));
-    let o = bin()
-        .args([
-            "--validate",
-            "render",
-            "--no-cache",
-            "--frames",
-            "1",
-            "--width",
-            "32",
-            "--height",
-            "32",
-            "--out",
-        ])
-        .arg(&out)
+    let o = render_cmd(&out, 32)
         .arg(scene)
         .args(extra)
         .output()
@@ -187,7 +175,7 @@ fn render_warned(dir: &Path, scene: &Path, extra: &[&str]) -> (String, f32, Vec<
 #[test]
 fn fixable_black_images_are_warned_of() {
     let dir = temp_dir("warned");
-    std::fs::write(dir.join("cw.obj"), TETRA_CLOCKWISE).unwrap();
+    write_file(&dir, "cw.obj", TETRA_CLOCKWISE);
     let cases: [(&str, &str, &str); 5] = [
         (
             "zero.toml",
@@ -212,7 +200,7 @@ fn fixable_black_images_are_warned_of() {
         ("cw.toml", "[mesh]\nobj = \"cw.obj\"\n", "wind clockwise"),
     ];
     for (name, text, needle) in cases {
-        let scene = scene_file(&dir, name, text);
+        let scene = write_file(&dir, name, text);
         let (err, peak, warnings) = render_warned(&dir, &scene, &[]);
         assert!(
             err.contains("warning: ") && err.contains(needle),
@@ -228,19 +216,19 @@ fn fixable_black_images_are_warned_of() {
         }
     }
     // An open plane seen from below: rendered (it was refused as "inside the object").
-    std::fs::write(
-        dir.join("plane.obj"),
+    write_file(
+        &dir,
+        "plane.obj",
         "v -10 0 -10\nv 10 0 -10\nv 10 0 10\nv -10 0 10\nf 1 4 3 2\n",
-    )
-    .unwrap();
-    let below = scene_file(
+    );
+    let below = write_file(
         &dir,
         "below.toml",
         "[mesh]\nobj = \"plane.obj\"\n[camera]\nposition = [0, -50, 30]\ntarget = [0, 0, 0]\n",
     );
     render_warned(&dir, &below, &[]);
     // A clean scene has no warnings.
-    let clean = scene_file(
+    let clean = write_file(
         &dir,
         "clean.toml",
         "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\n",
@@ -265,27 +253,15 @@ fn saved_scene_reruns_from_anywhere() {
     image::RgbImage::from_pixel(4, 4, image::Rgb([200, 180, 160]))
         .save(src.join("t.png"))
         .unwrap();
-    let scene = scene_file(
+    let scene = write_file(
         &src,
         "scene.toml",
         "[mesh]\nobj = \"tri.obj\"\ntexture = \"t.png\"\n",
     );
     // Rendered from the scene's folder, then its saved scene from the root folder.
     let run = |cwd: &Path, out: &Path, scene: &Path| {
-        let o = bin()
+        let o = render_cmd(out, 32)
             .current_dir(cwd)
-            .args([
-                "render",
-                "--no-cache",
-                "--frames",
-                "1",
-                "--width",
-                "32",
-                "--height",
-                "32",
-                "--out",
-            ])
-            .arg(out)
             .arg(scene)
             .output()
             .unwrap();
@@ -320,7 +296,7 @@ fn duplicate_faces_do_not_add_light() {
             format!("{tetra}{}", faces.repeat(copies)),
         )
         .unwrap();
-        let scene = scene_file(
+        let scene = write_file(
             &dir,
             &format!("{name}.toml"),
             &format!("[mesh]\nobj = \"{name}.obj\"\n"),
@@ -395,20 +371,7 @@ fn outputs_land_as_a_set() {
     std::fs::write(out.join("render.png"), b"old").unwrap();
     let stale = out.join(".render.exr.4194999.tmp");
     std::fs::write(&stale, b"left by a killed run").unwrap();
-    let mut c = bin();
-    c.args([
-        "render",
-        "--no-cache",
-        "--frames",
-        "1",
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--out",
-    ])
-    .arg(&out);
-    fails_with(c, "a folder of that name is in the way");
+    fails_with(render_cmd(&out, 16), "a folder of that name is in the way");
     assert_eq!(std::fs::read(out.join("render.png")).unwrap(), b"old");
     assert!(!out.join("render.exr").exists() && !out.join("timings.json").exists());
     let names: Vec<String> = std::fs::read_dir(&out)
@@ -418,21 +381,7 @@ fn outputs_land_as_a_set() {
     assert!(!names.iter().any(|n| n.ends_with(".tmp")), "{names:?}");
     // Once the way is clear the whole set lands.
     std::fs::remove_dir(out.join("scene.toml")).unwrap();
-    let o = bin()
-        .args([
-            "render",
-            "--no-cache",
-            "--frames",
-            "1",
-            "--width",
-            "16",
-            "--height",
-            "16",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = render_cmd(&out, 16).output().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     for f in [
         "render.png",

@@ -176,21 +176,8 @@ fn output_faults_leave_no_partial_files() {
     let dir = temp_dir("faults");
     // The output folder is a file.
     std::fs::write(dir.join("occupied"), b"x").unwrap();
-    let mut c = bin();
-    c.args([
-        "render",
-        "--no-cache",
-        "--frames",
-        "1",
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--texel-mm",
-        "1.5",
-        "--out",
-    ])
-    .arg(dir.join("occupied"));
+    let mut c = common::render_cmd(&dir.join("occupied"), 16);
+    c.args(["--texel-mm", "1.5"]);
     fails_with(c, "cannot create output folder");
     // Interrupted preprocessing leaves no cache file a later run would trust.
     let cache = dir.join("cache");

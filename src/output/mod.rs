@@ -34,25 +34,59 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
 /// when the next set is opened in the folder.
 pub struct OutputSet {
     dir: PathBuf,
+    /// The names the set may write (checked against the inputs when it is opened).
+    names: &'static [&'static str],
     /// (temporary, final) per file, in order.
     files: Vec<(PathBuf, PathBuf)>,
     committed: bool,
 }
 
 impl OutputSet {
-    /// Opens a set in `dir` (created if needed), removing stale temporaries there.
-    pub fn new(dir: &Path) -> Result<OutputSet> {
+    /// Opens a set of `names` in `dir` (created if needed), removing stale temporaries there.
+    /// Refuses, before anything is written, a folder where one of `names` would replace one of
+    /// `inputs` (the scene file, its mesh or texture): `--out` pointing at the scene's own
+    /// folder once overwrote the user's scene.toml with the resolved one.
+    pub fn new(
+        dir: &Path,
+        names: &'static [&'static str],
+        inputs: &[PathBuf],
+    ) -> Result<OutputSet> {
+        let inputs: Vec<PathBuf> = inputs
+            .iter()
+            .filter_map(|p| std::fs::canonicalize(p).ok())
+            .collect();
+        // A folder that is not there yet holds no input.
+        if let Ok(canonical) = std::fs::canonicalize(dir) {
+            for name in names {
+                let target = canonical.join(name);
+                let target = std::fs::canonicalize(&target).unwrap_or(target);
+                if let Some(input) = inputs.iter().find(|i| **i == target) {
+                    anyhow::bail!(
+                        "--out {} would overwrite the input '{}' with its {name}: choose another output folder",
+                        dir.display(),
+                        input.display()
+                    );
+                }
+            }
+        }
         create_dir(dir)?;
         remove_stale_temporaries(dir);
         Ok(OutputSet {
             dir: dir.to_path_buf(),
+            names,
             files: Vec::new(),
             committed: false,
         })
     }
 
-    /// The path to write `name` to now (a temporary name in the folder).
+    /// The path to write `name` (one of the set's names) to now: a temporary name in the
+    /// folder.
     pub fn path(&mut self, name: &str) -> PathBuf {
+        assert!(
+            self.names.contains(&name),
+            "'{name}' is not among the output set's names {:?}",
+            self.names
+        );
         let target = self.dir.join(name);
         let tmp = temporary(&target);
         self.files.push((tmp.clone(), target));
@@ -213,31 +247,6 @@ pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
             ]
         })
         .collect()
-}
-
-/// Refuses an output folder where writing `names` would replace one of `inputs` (the scene
-/// file, its mesh or texture): `--out` pointing at the scene's own folder once overwrote the
-/// user's scene.toml with the resolved one.
-pub fn refuse_overwriting(out: &Path, names: &[&str], inputs: &[std::path::PathBuf]) -> Result<()> {
-    let inputs: Vec<std::path::PathBuf> = inputs
-        .iter()
-        .filter_map(|p| std::fs::canonicalize(p).ok())
-        .collect();
-    let Ok(dir) = std::fs::canonicalize(out) else {
-        return Ok(()); // Not there yet: nothing in it can be an input.
-    };
-    for name in names {
-        let target = dir.join(name);
-        let target = std::fs::canonicalize(&target).unwrap_or(target);
-        if let Some(input) = inputs.iter().find(|i| **i == target) {
-            anyhow::bail!(
-                "--out {} would overwrite the input '{}' with its {name}: choose another output folder",
-                out.display(),
-                input.display()
-            );
-        }
-    }
-    Ok(())
 }
 
 /// Writes `timings.json`.

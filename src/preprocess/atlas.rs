@@ -83,18 +83,6 @@ pub struct Atlas {
     pub indices: Vec<u32>,
 }
 
-fn weld(mesh: &Mesh) -> Vec<u32> {
-    let mut map: HashMap<[u32; 3], u32> = HashMap::new();
-    mesh.positions
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            *map.entry(p.to_array().map(f32::to_bits))
-                .or_insert(i as u32)
-        })
-        .collect()
-}
-
 fn face_normals(mesh: &Mesh) -> (Vec<DVec3>, Vec<f64>) {
     mesh.indices
         .chunks(3)
@@ -377,7 +365,7 @@ impl Atlas {
     /// Builds the atlas of `mesh` at `texel_mm` per texel with a `gutter`-texel border
     /// around each chart and charts bounded by `max_angle_deg`.
     pub fn build(mesh: &Mesh, texel_mm: f64, gutter: u32, max_angle_deg: f64) -> Atlas {
-        let welded = weld(mesh);
+        let welded = mesh.welded();
         let (normals, areas) = face_normals(mesh);
         let adj = adjacency(mesh, &welded);
         let all: Vec<u32> = (0..mesh.triangle_count() as u32).collect();

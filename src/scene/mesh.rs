@@ -43,16 +43,14 @@ pub enum MeshError {
         value: [f32; 3],
     },
     /// A texture coordinate is NaN or infinite (non-finite normals are recomputed).
-    #[error("mesh '{name}': vertex {vertex} has a non-finite {what} {value:?}")]
-    NonFiniteAttribute {
+    #[error("mesh '{name}': vertex {vertex} has a non-finite texture coordinate {value:?}")]
+    NonFiniteUv {
         /// Mesh.
         name: String,
         /// Vertex index (0-based).
         vertex: usize,
-        /// What is not finite ("texture coordinate").
-        what: &'static str,
-        /// The values.
-        value: Vec<f32>,
+        /// The coordinates.
+        value: [f32; 2],
     },
     /// An index past the vertex list.
     #[error(
@@ -189,11 +187,10 @@ impl Mesh {
         }
         for (vertex, uv) in self.uvs.iter().enumerate() {
             if !uv.is_finite() {
-                return Err(MeshError::NonFiniteAttribute {
+                return Err(MeshError::NonFiniteUv {
                     name: name.into(),
                     vertex,
-                    what: "texture coordinate",
-                    value: uv.to_array().to_vec(),
+                    value: uv.to_array(),
                 });
             }
         }
@@ -281,15 +278,30 @@ impl Mesh {
         !edges.is_empty() && edges.values().all(|&n| n == 2)
     }
 
+    /// Per vertex, the first vertex at exactly the same position (seams of normals or texture
+    /// coordinates split vertices that are one point of the surface).
+    pub fn welded(&self) -> Vec<u32> {
+        let mut first: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
+        self.positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                *first
+                    .entry(p.to_array().map(f32::to_bits))
+                    .or_insert(i as u32)
+            })
+            .collect()
+    }
+
     /// Removes every triangle whose three corners (by position, either winding) repeat an
     /// earlier one's; returns how many. A face listed twice receives and gives light twice:
     /// it doubled the brightness.
     pub fn remove_duplicate_faces(&mut self) -> usize {
-        let key = |i: u32| self.positions[i as usize].to_array().map(f32::to_bits);
+        let welded = self.welded();
         let mut seen = std::collections::HashSet::new();
         let mut kept = Vec::with_capacity(self.indices.len());
         for t in self.indices.chunks_exact(3) {
-            let mut k = [key(t[0]), key(t[1]), key(t[2])];
+            let mut k = [t[0], t[1], t[2]].map(|i| welded[i as usize]);
             k.sort_unstable();
             if seen.insert(k) {
                 kept.extend_from_slice(t);
@@ -706,24 +718,14 @@ fn load_options() -> tobj::LoadOptions {
 mod tests {
     use super::*;
 
-    fn signed_volume(m: &Mesh) -> f64 {
-        m.indices
-            .chunks(3)
-            .map(|t| {
-                let [a, b, c] = [t[0], t[1], t[2]].map(|i| m.positions[i as usize]);
-                a.dot(b.cross(c)) as f64 / 6.0
-            })
-            .sum()
-    }
-
     #[test]
     fn procedural_shapes_are_closed_outward_and_measure_right() {
         let s = Mesh::sphere(10.0, 64);
-        let v = signed_volume(&s);
+        let v = s.signed_volume();
         let exact = 4.0 / 3.0 * std::f64::consts::PI * 1000.0;
         assert!((v - exact).abs() / exact < 0.01, "{v} vs {exact}");
         let b = Mesh::cuboid(Vec3::new(40.0, 40.0, 10.0), 8);
-        assert!((signed_volume(&b) - 16000.0).abs() < 1e-2);
+        assert!((b.signed_volume() - 16000.0).abs() < 1e-2);
         assert!((b.surface_area() - 2.0 * (1600.0 + 400.0 + 400.0)).abs() < 1e-2);
         for (p, n) in b.positions.iter().zip(&b.normals) {
             // Every vertex lies on the face its normal points out of.
@@ -739,7 +741,7 @@ mod tests {
         let s = b.subdivide();
         assert_eq!(s.triangle_count(), 4 * b.triangle_count());
         assert!((s.surface_area() - b.surface_area()).abs() < 1e-3);
-        assert!((signed_volume(&s) - signed_volume(&b)).abs() < 1e-2);
+        assert!((s.signed_volume() - b.signed_volume()).abs() < 1e-2);
     }
 
     #[test]
@@ -772,11 +774,6 @@ mod tests {
             assert!(e.contains("bad"), "{e}");
         }
     }
-}
-
-#[cfg(test)]
-mod polygon_tests {
-    use super::*;
 
     fn area(m: &Mesh) -> f64 {
         m.surface_area()
@@ -847,11 +844,6 @@ mod polygon_tests {
             "{e}"
         );
     }
-}
-
-#[cfg(test)]
-mod closed_tests {
-    use super::*;
 
     #[test]
     fn closed_meshes_are_told_from_open_ones() {

@@ -163,6 +163,16 @@ pub fn absolute(p: &Path) -> std::path::PathBuf {
         .unwrap_or_else(|_| p.to_path_buf())
 }
 
+/// Whether a cone (apex, unit axis, half-angle in radians) misses the sphere (center,
+/// radius) entirely: then the angle between the axis and the sphere's centre, else None. The
+/// camera's view and a spot light's cone are both such cones.
+fn cone_misses(apex: Vec3, axis: Vec3, half_angle: f32, center: Vec3, radius: f32) -> Option<f32> {
+    let to = center - apex;
+    let off = to.normalize().dot(axis).clamp(-1.0, 1.0).acos();
+    let spread = (radius / to.length().max(1e-6)).clamp(0.0, 1.0).asin();
+    (off - spread > half_angle).then_some(off)
+}
+
 fn vec3(a: [f64; 3]) -> Vec3 {
     Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)
 }
@@ -585,16 +595,11 @@ impl Scene {
         if closed && bvh.contains(camera.position.as_dvec3()) {
             bail!("[camera] position {:?} lies inside the object", position);
         }
-        let to_center = center - camera.position;
         let view = (camera.target - camera.position).normalize();
-        let off_axis = to_center.normalize().dot(view).clamp(-1.0, 1.0).acos();
-        let reach = (radius / to_center.length().max(1e-6))
-            .clamp(0.0, 1.0)
-            .asin();
         // Half the diagonal field of view.
         let aspect = width as f32 / height as f32;
         let half_fov = ((0.5 * camera.fov_y).tan() * (1.0 + aspect * aspect).sqrt()).atan();
-        if off_axis - reach > half_fov {
+        if let Some(off_axis) = cone_misses(camera.position, view, half_fov, center, radius) {
             bail!("the object lies outside the camera's view ([camera] looks {:.0} degrees away from it)", off_axis.to_degrees());
         }
         for (i, l) in lights.iter().enumerate() {
@@ -612,17 +617,16 @@ impl Scene {
                 .push("every light has zero colour or intensity: the image is black".to_string());
         }
         for (i, l) in lights.iter().enumerate() {
-            if l.kind == LightKind::Spot {
-                let to = center - l.position;
-                let spread = (radius / to.length().max(1e-6)).clamp(0.0, 1.0).asin();
-                let off = to.normalize().dot(l.direction).clamp(-1.0, 1.0).acos();
-                if off - spread > l.cos_cone.acos() {
-                    warnings.push(format!(
+            if l.kind != LightKind::Spot {
+                continue;
+            }
+            let cone = l.cos_cone.acos();
+            if let Some(off) = cone_misses(l.position, l.direction, cone, center, radius) {
+                warnings.push(format!(
                         "[[lights]] #{} is a spot aimed {:.0} degrees away from the object, outside its cone: it lights nothing",
                         i + 1,
-                        off.to_degrees()
-                    ));
-                }
+                    off.to_degrees()
+                ));
             }
         }
         // Units: an object smaller than the light's transport length inside the material (a

@@ -69,6 +69,17 @@ pub fn bin() -> Command {
     c
 }
 
+/// `translucent --validate render` of one `size` x `size` frame into `out`, without the cache
+/// (add the scene and further flags).
+pub fn render_cmd(out: &std::path::Path, size: u32) -> Command {
+    let mut c = bin();
+    let size = size.to_string();
+    c.args(["--validate", "render", "--no-cache", "--frames", "1"])
+        .args(["--width", &size, "--height", &size, "--out"])
+        .arg(out);
+    c
+}
+
 /// A fresh, empty temporary folder for one test.
 pub fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("translucent-test-{name}-{}", std::process::id()));
