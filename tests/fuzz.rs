@@ -246,12 +246,6 @@ fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
     let mut err = String::new();
     std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
     assert!(!err.contains("panicked"), "panic: {err}");
-    if std::env::var_os("FUZZ_VERBOSE").is_some() {
-        eprintln!(
-            "{flags:?} -> {status}: {}",
-            err.lines().find(|l| l.starts_with("error")).unwrap_or("")
-        );
-    }
     if status.success() {
         let (_, _, rgba) = translucent::output::read_exr(&out.join("render.exr")).unwrap();
         let bad = rgba
