@@ -270,7 +270,14 @@ pub struct SceneArgs {
 impl SceneArgs {
     /// The scene file (or the default scene) with the command-line replacements applied.
     fn load(&self) -> Result<Scene> {
-        Scene::load(self.scene.as_deref(), &self.overrides())
+        let scene = Scene::load(self.scene.as_deref(), &self.overrides())?;
+        for w in &scene.warnings {
+            eprintln!("warning: {w}");
+        }
+        for n in &scene.notes {
+            eprintln!("note: {n}");
+        }
+        Ok(scene)
     }
 
     fn overrides(&self) -> Overrides {
@@ -423,9 +430,6 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
         scene.resolved.to_toml()
     );
-    for w in &scene.warnings {
-        eprintln!("warning: {w}");
-    }
     let inputs: Vec<PathBuf> = [
         args.input.scene.clone(),
         scene.resolved.mesh.obj.clone(),
@@ -574,6 +578,10 @@ fn precompute(args: &PrecomputeArgs) -> Result<()> {
     for r in &choice.reasons {
         println!("  {r}");
     }
+    println!(
+        "{}",
+        preprocess::estimate(&scene.mesh, &choice.settings).describe()
+    );
     let bars = Bars::new();
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
     let (pre, outcome) =

@@ -16,6 +16,9 @@ pub struct Mesh {
     pub indices: Vec<u32>,
     /// Whether the source provided texture coordinates.
     pub has_uvs: bool,
+    /// Whether the normals were computed from the faces (the source gave none): they follow
+    /// the faces when these are turned.
+    pub normals_from_faces: bool,
 }
 
 /// Why a mesh was refused.
@@ -163,6 +166,7 @@ impl Mesh {
                 .any(|n| !n.is_finite() || n.length() <= 1e-6)
         {
             mesh.compute_normals();
+            mesh.normals_from_faces = true;
         } else {
             for n in &mut mesh.normals {
                 *n = n.normalize();
@@ -312,6 +316,75 @@ impl Mesh {
         removed
     }
 
+    /// Turns faces wound against their neighbours so that every edge shared by two triangles
+    /// is traversed in opposite directions by them (a mesh exported with some faces flipped:
+    /// a cylinder whose sides wind inwards and caps outwards). Per connected part (across
+    /// edges of exactly two triangles, vertices welded by position), the majority's winding is
+    /// kept; whether that is outward is [`Mesh::flip_winding`]'s question. Normals computed
+    /// from the faces are recomputed. Returns how many faces were turned.
+    pub fn orient_consistently(&mut self) -> usize {
+        let weld = self.welded();
+        let tris = self.triangle_count();
+        let mut edges: std::collections::HashMap<(u32, u32), Vec<(u32, bool)>> =
+            std::collections::HashMap::with_capacity(3 * tris / 2);
+        for (t, tri) in self.indices.chunks_exact(3).enumerate() {
+            for k in 0..3 {
+                let (a, b) = (weld[tri[k] as usize], weld[tri[(k + 1) % 3] as usize]);
+                if a != b {
+                    edges
+                        .entry((a.min(b), a.max(b)))
+                        .or_default()
+                        .push((t as u32, a < b));
+                }
+            }
+        }
+        // Per triangle: whether to turn it, once its part has been reached.
+        let mut turn: Vec<Option<bool>> = vec![None; tris];
+        let mut turned = 0;
+        for seed in 0..tris {
+            if turn[seed].is_some() {
+                continue;
+            }
+            turn[seed] = Some(false);
+            let (mut part, mut queue) = (vec![seed], std::collections::VecDeque::from([seed]));
+            while let Some(t) = queue.pop_front() {
+                let tri = &self.indices[3 * t..3 * t + 3];
+                for k in 0..3 {
+                    let (a, b) = (weld[tri[k] as usize], weld[tri[(k + 1) % 3] as usize]);
+                    let Some(sharing) = edges.get(&(a.min(b), a.max(b))) else {
+                        continue;
+                    };
+                    if sharing.len() != 2 {
+                        continue;
+                    }
+                    let forward = a < b;
+                    for &(n, n_forward) in sharing {
+                        let n = n as usize;
+                        if n != t && turn[n].is_none() {
+                            // Same direction as t's edge: n winds against t.
+                            turn[n] = Some(turn[t].unwrap() ^ (n_forward == forward));
+                            part.push(n);
+                            queue.push_back(n);
+                        }
+                    }
+                }
+            }
+            let against = part.iter().filter(|&&t| turn[t] == Some(true)).count();
+            let keep_seed = 2 * against <= part.len();
+            for &t in &part {
+                if turn[t] != Some(keep_seed) {
+                    continue;
+                }
+                self.indices.swap(3 * t + 1, 3 * t + 2);
+                turned += 1;
+            }
+        }
+        if turned > 0 && self.normals_from_faces {
+            self.compute_normals();
+        }
+        turned
+    }
+
     /// Reverses every triangle's winding, and the normals where they point inwards on the
     /// whole (normals computed from the clockwise faces; normals given by the file that
     /// already point outwards are kept).
@@ -408,6 +481,122 @@ impl Mesh {
         }
         m.indices = indices;
         m
+    }
+
+    /// The mesh's vertex spacing: the edge of an equilateral triangle mesh with as many
+    /// (welded) vertices over the same area, mm (area per vertex 0.866 e^2).
+    pub fn vertex_spacing(&self) -> f64 {
+        let welded = self.welded();
+        let count = welded
+            .iter()
+            .enumerate()
+            .filter(|(i, w)| **w as usize == *i)
+            .count();
+        (self.surface_area() / (0.866 * count.max(1) as f64)).sqrt()
+    }
+
+    /// Splits every edge longer than `max_len` (mm) by longest-edge bisection until none is
+    /// (Rivara's refinement: each round a triangle whose longest edge is too long has that edge
+    /// marked; every triangle is split at all its marked edges, so the mesh stays conforming:
+    /// a split edge is split in both its triangles, seams of normals and texture coordinates
+    /// included). The surface is unchanged; angles are at least half the smallest angle of
+    /// the input. Stops after 64 rounds. Returns the triangles added.
+    pub fn refine_long_edges(&mut self, max_len: f32) -> usize {
+        let before = self.triangle_count();
+        if !(max_len.is_finite() && max_len > 0.0) {
+            return 0;
+        }
+        let mut weld = self.welded();
+        // Midpoints per vertex pair (attributes differ across seams), and per welded pair
+        // (the position every copy shares, and the decision to split).
+        let mut mid_of: std::collections::HashMap<(u32, u32), u32> = Default::default();
+        let mut welded_mid: std::collections::HashMap<(u32, u32), u32> = Default::default();
+        let sorted = |a: u32, b: u32| (a.min(b), a.max(b));
+        for _round in 0..64 {
+            let mut marked: std::collections::HashSet<(u32, u32)> = Default::default();
+            for t in self.indices.chunks_exact(3) {
+                let (k, len) = (0..3)
+                    .map(|k| {
+                        let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
+                        (k, self.positions[a].distance(self.positions[b]))
+                    })
+                    .fold((0, f32::NEG_INFINITY), |m, e| if e.1 > m.1 { e } else { m });
+                if len > max_len {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    marked.insert(sorted(weld[a as usize], weld[b as usize]));
+                }
+            }
+            if marked.is_empty() {
+                break;
+            }
+            let mut indices = Vec::with_capacity(self.indices.len() * 2);
+            for ti in 0..self.triangle_count() {
+                let t = [0, 1, 2].map(|k| self.indices[3 * ti + k]);
+                let is_marked = |k: usize| {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    marked.contains(&sorted(weld[a as usize], weld[b as usize]))
+                };
+                let split = [0, 1, 2].map(is_marked);
+                // Rotate so that the first edge (t0, t1) is a marked one.
+                let Some(r) = (0..3).find(|&k| split[k]) else {
+                    indices.extend_from_slice(&t);
+                    continue;
+                };
+                let v = [t[r], t[(r + 1) % 3], t[(r + 2) % 3]];
+                let s = [split[r], split[(r + 1) % 3], split[(r + 2) % 3]];
+                let mut mid = |a: u32, b: u32| -> u32 {
+                    if let Some(&m) = mid_of.get(&sorted(a, b)) {
+                        return m;
+                    }
+                    let (ia, ib) = (a.min(b) as usize, a.max(b) as usize);
+                    let m = self.positions.len() as u32;
+                    self.positions
+                        .push(0.5 * (self.positions[ia] + self.positions[ib]));
+                    let n = (self.normals[ia] + self.normals[ib]).normalize_or_zero();
+                    self.normals
+                        .push(if n == Vec3::ZERO { self.normals[ia] } else { n });
+                    self.uvs.push(0.5 * (self.uvs[ia] + self.uvs[ib]));
+                    let key = sorted(weld[ia], weld[ib]);
+                    weld.push(*welded_mid.entry(key).or_insert(m));
+                    mid_of.insert(sorted(a, b), m);
+                    m
+                };
+                let m01 = mid(v[0], v[1]);
+                match (s[1], s[2]) {
+                    (false, false) => indices.extend([v[0], m01, v[2], m01, v[1], v[2]]),
+                    (true, true) => {
+                        let (m12, m20) = (mid(v[1], v[2]), mid(v[2], v[0]));
+                        indices.extend([v[0], m01, m20, m01, v[1], m12, m20, m12, v[2]]);
+                        indices.extend([m01, m12, m20]);
+                    }
+                    (true, false) => {
+                        // Corner v1 cut off; the quad v0 m01 m12 v2 split along its shorter
+                        // diagonal.
+                        let m12 = mid(v[1], v[2]);
+                        indices.extend([m01, v[1], m12]);
+                        let p = |i: u32| self.positions[i as usize];
+                        if p(v[0]).distance(p(m12)) <= p(m01).distance(p(v[2])) {
+                            indices.extend([v[0], m01, m12, v[0], m12, v[2]]);
+                        } else {
+                            indices.extend([v[0], m01, v[2], m01, m12, v[2]]);
+                        }
+                    }
+                    (false, true) => {
+                        // Corner v0 cut off; the quad m01 v1 v2 m20 likewise.
+                        let m20 = mid(v[2], v[0]);
+                        indices.extend([v[0], m01, m20]);
+                        let p = |i: u32| self.positions[i as usize];
+                        if p(m01).distance(p(v[2])) <= p(v[1]).distance(p(m20)) {
+                            indices.extend([m01, v[1], v[2], m01, v[2], m20]);
+                        } else {
+                            indices.extend([m01, v[1], m20, v[1], v[2], m20]);
+                        }
+                    }
+                }
+            }
+            self.indices = indices;
+        }
+        self.triangle_count() - before
     }
 
     /// A UV sphere of `radius` around the origin with `segments` around the equator.
@@ -715,7 +904,7 @@ fn load_options() -> tobj::LoadOptions {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -813,6 +1002,97 @@ mod tests {
         let m = Mesh::parse_obj("disc", &text).unwrap();
         assert_eq!(m.triangle_count(), n - 2);
         assert!((area(&m) - std::f64::consts::PI).abs() < 1e-3);
+    }
+
+    /// A closed cylinder of `n` segments whose caps are n-gons (ear-clipped into long slivers).
+    pub(crate) fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
+        let mut text = String::new();
+        for y in [-0.5 * height, 0.5 * height] {
+            for k in 0..n {
+                let a = std::f32::consts::TAU * k as f32 / n as f32;
+                text += &format!("v {} {y} {}\n", radius * a.cos(), radius * a.sin());
+            }
+        }
+        for k in 0..n {
+            let (a, b) = (k + 1, (k + 1) % n + 1);
+            text += &format!("f {a} {} {} {b}\n", a + n, b + n);
+        }
+        text += "f";
+        for k in 1..=n {
+            text += &format!(" {k}");
+        }
+        text += "\nf";
+        for k in (n + 1..=2 * n).rev() {
+            text += &format!(" {k}");
+        }
+        text + "\n"
+    }
+
+    fn longest_edge(m: &Mesh) -> f32 {
+        m.indices
+            .chunks_exact(3)
+            .flat_map(|t| {
+                (0..3).map(|k| {
+                    m.positions[t[k] as usize].distance(m.positions[t[(k + 1) % 3] as usize])
+                })
+            })
+            .fold(0.0, f32::max)
+    }
+
+    #[test]
+    fn long_edges_are_split_and_the_surface_kept() {
+        let mut m = Mesh::parse_obj("cylinder", &cylinder_obj(400, 10.0, 40.0)).unwrap();
+        assert!(m.is_closed());
+        assert!(m.signed_volume() > 0.0, "the test cylinder winds outwards");
+        let (area, volume) = (m.surface_area(), m.signed_volume());
+        assert!(longest_edge(&m) > 20.0);
+        let added = m.refine_long_edges(2.0);
+        assert!(added > 0);
+        m.validate("refined").unwrap();
+        assert!(longest_edge(&m) <= 2.0, "{}", longest_edge(&m));
+        // Conforming: still closed (a T-junction would leave edges with one triangle), same
+        // surface and volume, every triangle facing as before.
+        assert!(m.is_closed());
+        assert!((m.surface_area() - area).abs() < 1e-4 * area);
+        assert!((m.signed_volume() - volume).abs() < 1e-4 * volume);
+        assert_eq!(m.positions.len(), m.normals.len());
+        assert_eq!(m.positions.len(), m.uvs.len());
+        // Seams of normals (a cube's corners are three vertices) are split alike.
+        let mut c = Mesh::cuboid(Vec3::new(10.0, 10.0, 10.0), 1);
+        c.refine_long_edges(1.0);
+        assert!(c.is_closed() && longest_edge(&c) <= 1.0);
+        assert!((c.surface_area() - 600.0).abs() < 1e-2);
+        // Nothing to do: nothing added, the mesh unchanged.
+        let s = Mesh::sphere(10.0, 32);
+        let mut t = s.clone();
+        assert_eq!(t.refine_long_edges(100.0), 0);
+        assert_eq!(s, t);
+    }
+
+    #[test]
+    fn faces_wound_against_their_neighbours_are_turned() {
+        // Half the cylinder's sides wound inwards: closed, but its signed volume means little
+        // and the simplifier locks every vertex on an edge walked one way twice.
+        let good = Mesh::parse_obj("cylinder", &cylinder_obj(64, 10.0, 40.0)).unwrap();
+        let mut bad = good.clone();
+        for t in bad.indices.chunks_exact_mut(3).take(64) {
+            t.swap(1, 2);
+        }
+        bad.compute_normals();
+        assert_eq!(bad.orient_consistently(), 64);
+        assert_eq!(bad.indices, good.indices);
+        assert!(bad
+            .normals
+            .iter()
+            .zip(&good.normals)
+            .all(|(a, b)| a.distance(*b) < 1e-5));
+        // Consistent meshes are left alone, whatever their winding (outward is decided by
+        // the signed volume, later).
+        let mut inward = good.clone();
+        inward.flip_winding();
+        let before = inward.clone();
+        assert_eq!(inward.orient_consistently(), 0);
+        assert_eq!(inward, before);
     }
 
     #[test]
