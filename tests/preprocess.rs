@@ -412,66 +412,6 @@ fn shadow_traffic_counts_every_layer() {
     }
 }
 
-/// The estimate made before preprocessing (from the mesh area and the settings) bounds what the
-/// upload then needs: kernel texel-buffer elements and the device bytes that do not depend on
-/// pruning (kernels, illumination map, local response, chart ids) within 0.7x to 1.4x, on
-/// several meshes, materials and lights. (It once counted k*k + 1 kernel elements per texel
-/// where the upload packs two taps to an element, and refused scenes that fit by about 2x.)
-#[test]
-fn estimate_bounds_the_requirements() {
-    use translucent::passes::data::Requirements;
-    for (text, what) in [
-        ("[output]\nwidth = 128\nheight = 128\n", "bunny"),
-        (
-            "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n[material]\npreset = \"ketchup\"\n[output]\nwidth = 64\nheight = 64\n",
-            "ketchup sphere",
-        ),
-        (
-            "[mesh]\nbuiltin = \"box\"\nsize = [30.0, 10.0, 20.0]\nsegments = 12\n[[lights]]\nkind = \"point\"\nposition = [0.0, 40.0, 10.0]\n[material]\npreset = \"skin1\"\n[output]\nwidth = 64\nheight = 64\n",
-            "skin1 box, point light",
-        ),
-    ] {
-        let scene = Scene::from_desc(
-            translucent::scene::desc::SceneDesc::parse(text).unwrap(),
-            std::path::Path::new(""),
-            &Overrides::default(),
-        )
-        .unwrap();
-        let choice =
-            translucent::preprocess::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
-        let e = translucent::preprocess::estimate(&scene.mesh, &choice.settings);
-        let start = std::time::Instant::now();
-        let pre = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
-        // Time is reported, not asserted (speed belongs to benchmarks; this machine is shared).
-        println!(
-            "{what}: time estimated {:.2} s, took {:.2} s ({:.2}x; fit {:.2} s)",
-            e.seconds,
-            start.elapsed().as_secs_f64(),
-            e.seconds / start.elapsed().as_secs_f64(),
-            pre.ops.seconds[2]
-        );
-        let r = Requirements::of(&scene, &pre, Blend::Optimized);
-        let item = |name: &str| r.items.iter().find(|i| i.0 == name).unwrap().1;
-        let kernel_elements = pre.atlas.texels.len() as u64
-            * translucent::layout::kernel_pairs(pre.settings.kernel_size) as u64;
-        let bytes = item("kernels") + item("illumination map") + item("local response") + item("chart ids");
-        for (name, estimated, real, within) in [
-            ("kernel elements", e.kernel_elements, kernel_elements, 0.7..=1.4),
-            ("device bytes", e.device_bytes_min, bytes, 0.7..=1.4),
-            // The estimate's nodes (the vertex count, or the area over the spacing's cell)
-            // against the node set built (welded vertices, or meshopt's proxy).
-            ("nodes", e.nodes, pre.nodes.positions.len() as u64, 0.5..=2.0),
-        ] {
-            let ratio = estimated as f64 / real as f64;
-            println!("{what}: {name} estimated {estimated}, needed {real} ({ratio:.2}x)");
-            assert!(
-                within.contains(&ratio),
-                "{what}: {name} estimated {estimated}, needed {real}"
-            );
-        }
-    }
-}
-
 /// Preprocessing is a function of its inputs: the same scene and settings give the same atlas,
 /// nodes and operators, bit for bit, whatever the threads' timing and hash-map order (the
 /// atlas, the nodes and the operators are built in parallel and through hash maps; the cache

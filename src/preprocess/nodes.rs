@@ -10,6 +10,7 @@
 
 use crate::scene::mesh::Mesh;
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// The node set and the map from render vertices to nodes.
@@ -197,6 +198,7 @@ impl Nodes {
             .collect();
         let welded_normals = normals_of(&(0..welded_positions.len() as u32).collect::<Vec<_>>());
         let weights_of_welded: Vec<Vec<(u32, f32)>> = (0..welded_positions.len())
+            .into_par_iter()
             .map(|w| {
                 if let Some(&n) = node_of.get(&(w as u32)) {
                     return vec![(n, 1.0)];

@@ -1,0 +1,138 @@
+//! The preprocessing estimate (printed before `precompute` and `render` start) against the
+//! preprocessing it estimates, on meshes from a 704-triangle box to a 235 000-triangle bunny,
+//! meshes of long polygons included.
+//!
+//! One test in its own binary: its time is measured with nothing else of the suite running
+//! beside it (cargo runs test binaries one after another), on the machine's threads.
+
+mod common;
+
+use translucent::passes::data::Requirements;
+use translucent::preprocess::{
+    operators::Blend, settings::SettingsOverrides, Preprocessed, ESTIMATE_TIME_FACTOR,
+};
+
+fn quiet(_: &str, _: u64, _: u64) {}
+
+/// A closed cylinder of `n` segments whose caps are n-gons (ear-clipped into long slivers),
+/// winding outwards.
+fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
+    let mut text = String::new();
+    for y in [-0.5 * height, 0.5 * height] {
+        for k in 0..n {
+            let a = std::f32::consts::TAU * k as f32 / n as f32;
+            text += &format!("v {} {y} {}\n", radius * a.cos(), radius * a.sin());
+        }
+    }
+    for k in 0..n {
+        let (a, b) = (k + 1, (k + 1) % n + 1);
+        text += &format!("f {a} {} {} {b}\n", a + n, b + n);
+    }
+    text += "f";
+    for k in 1..=n {
+        text += &format!(" {k}");
+    }
+    text += "\nf";
+    for k in (n + 1..=2 * n).rev() {
+        text += &format!(" {k}");
+    }
+    text + "\n"
+}
+
+/// The estimate bounds what the upload needs (kernel texel-buffer elements and the device
+/// bytes that do not depend on pruning, within 0.7x to 1.4x), the node count (0.5x to 2x) and
+/// the preprocessing time (within [`ESTIMATE_TIME_FACTOR`] either way). It once counted
+/// k*k + 1 kernel elements per texel where the upload packs two taps to an element (scenes
+/// that fit were refused); it said 0.8 s for a 2000-gon coin that took 26 s and 1.0 s for a
+/// 1000-segment cylinder that ran past five minutes (every rim vertex a node, on node supports
+/// as long as the object); it knew nothing of the triangle count (a 4 M-triangle mesh: 0.2 s
+/// said, about 50 s taken).
+#[test]
+fn estimate_bounds_the_requirements() {
+    let dir = common::temp_dir("estimate");
+    let coin = dir.join("coin.obj");
+    std::fs::write(&coin, cylinder_obj(2000, 20.0, 2.0)).unwrap();
+    let cylinder = dir.join("cylinder.obj");
+    std::fs::write(&cylinder, cylinder_obj(1000, 10.0, 40.0)).unwrap();
+    let cases = [
+        ("[output]\nwidth = 128\nheight = 128\n".to_string(), "bunny"),
+        (
+            "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n[material]\npreset = \"ketchup\"\n[output]\nwidth = 64\nheight = 64\n".into(),
+            "ketchup sphere",
+        ),
+        (
+            "[mesh]\nbuiltin = \"box\"\nsize = [30.0, 10.0, 20.0]\nsegments = 12\n[[lights]]\nkind = \"point\"\nposition = [0.0, 40.0, 10.0]\n[material]\npreset = \"skin1\"\n[output]\nwidth = 64\nheight = 64\n".into(),
+            "skin1 box, point light",
+        ),
+        (
+            "[mesh]\nbuiltin = \"bunny\"\nsubdivide = 3\n[output]\nwidth = 128\nheight = 128\n".into(),
+            "bunny subdivided 3 times",
+        ),
+        (
+            format!("[mesh]\nobj = {:?}\n[output]\nwidth = 64\nheight = 64\n", coin.to_str().unwrap()),
+            "2000-gon coin",
+        ),
+        (
+            format!("[mesh]\nobj = {:?}\n[output]\nwidth = 64\nheight = 64\n", cylinder.to_str().unwrap()),
+            "1000-segment cylinder",
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (text, what) in &cases {
+        let scene = common::scene(text);
+        let choice =
+            translucent::preprocess::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
+        let e = translucent::preprocess::estimate(&scene.mesh, &choice.settings);
+        let start = std::time::Instant::now();
+        let pre = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
+        let took = start.elapsed().as_secs_f64();
+        let r = Requirements::of(&scene, &pre, Blend::Optimized);
+        let item = |name: &str| r.items.iter().find(|i| i.0 == name).unwrap().1;
+        let kernel_elements = pre.atlas.texels.len() as u64
+            * translucent::layout::kernel_pairs(pre.settings.kernel_size) as u64;
+        let bytes =
+            item("kernels") + item("illumination map") + item("local response") + item("chart ids");
+        let time = 1.0 / ESTIMATE_TIME_FACTOR..=ESTIMATE_TIME_FACTOR;
+        println!(
+            "{what}: {} triangles, {} texels, fit {:.2} s",
+            scene.mesh.triangle_count(),
+            pre.atlas.texels.len(),
+            pre.ops.seconds[2]
+        );
+        for (name, estimated, real, within) in [
+            (
+                "kernel elements",
+                e.kernel_elements as f64,
+                kernel_elements as f64,
+                0.7..=1.4,
+            ),
+            (
+                "device bytes",
+                e.device_bytes_min as f64,
+                bytes as f64,
+                0.7..=1.4,
+            ),
+            // The estimate's nodes (the vertex count, or the area over the spacing's cell)
+            // against the node set built (welded vertices, or meshopt's proxy).
+            (
+                "nodes",
+                e.nodes as f64,
+                pre.nodes.positions.len() as f64,
+                0.5..=2.0,
+            ),
+            ("seconds", e.seconds, took, time.clone()),
+        ] {
+            let ratio = estimated / real;
+            println!(
+                "{what}: {name} estimated {estimated:.2}, took or needed {real:.2} ({ratio:.2}x)"
+            );
+            if !within.contains(&ratio) {
+                failures.push(format!(
+                    "{what}: {name} estimated {estimated:.2}, took or needed {real:.2} ({ratio:.2}x, allowed {within:?})"
+                ));
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
