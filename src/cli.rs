@@ -617,7 +617,6 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
     let mode = args.mode;
-    let nonzeros = pre.ops.global_nonzeros(mode);
     let mut renderer = Renderer::new(
         &gpu,
         scene.clone(),
@@ -643,9 +642,13 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     check_validation(&gpu)?;
     let report = TimingReport::new(&gpu.info.name, &gpu.info.driver, &names, &timings);
     let bandwidth = crate::bench::measure_bandwidth(256 << 20);
+    // Two buffers of up to 256 MiB each (far beyond any cache), within an eighth of the
+    // device's memory.
+    let largest = (256u64 << 20).min(gpu.info.device_local_bytes / 16);
+    let copies = crate::bench::measure_device_copy(&gpu, largest, 7)?;
+    check_validation(&gpu)?;
     let memory = crate::passes::data::Requirements::of(&scene, &pre, mode);
-    let b =
-        crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, nonzeros, memory, mode);
+    let b = crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, copies, memory, mode);
     output::write_atomic(&args.out.join("bench.json"), |p| {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&b)?)?)
     })?;
@@ -663,24 +666,46 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
         k = b.scene.kernel_size
     );
     println!(
-        "memory bandwidth (this run): read {:.1} GB/s, copy {:.1} GB/s",
+        "device bandwidth (this run): {:.1} GB/s ({})",
+        b.device_gbps, b.device_bandwidth_source
+    );
+    for c in &b.device_copies {
+        println!(
+            "  copy {:>9.3} MiB: {:>8.4} ms, {:>7.1} GB/s",
+            c.bytes as f64 / (1u64 << 20) as f64,
+            c.median_ms,
+            c.gbps
+        );
+    }
+    println!(
+        "host bandwidth (this run): read {:.1} GB/s, copy {:.1} GB/s",
         bandwidth.read_gbps, bandwidth.copy_gbps
     );
     println!(
-        "{:<10} {:>9} {:>9} {:>9} {:>10} {:>8} {:>9} {:>7}",
-        "pass", "min ms", "median ms", "max ms", "MB read", "GB/s", "bound ms", "ratio"
+        "{:<10} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>9} {:>7}  bound from",
+        "pass",
+        "min ms",
+        "median ms",
+        "max ms",
+        "MB read",
+        "MB written",
+        "GB/s",
+        "bound ms",
+        "ratio"
     );
     for p in &b.passes {
         println!(
-            "{:<10} {:>9.3} {:>9.3} {:>9.3} {:>10.2} {:>8.2} {:>9.3} {:>7.1}",
+            "{:<10} {:>9.3} {:>9.3} {:>9.3} {:>10.2} {:>10.2} {:>8.2} {:>9.4} {:>7.1}  {}",
             p.name,
             p.stats.min_ms,
             p.stats.median_ms,
             p.stats.max_ms,
             p.bytes_read as f64 / 1e6,
+            p.bytes_written as f64 / 1e6,
             p.achieved_gbps,
             p.bound_ms,
-            p.ratio
+            p.ratio,
+            p.bound_source
         );
     }
     println!(

@@ -296,6 +296,15 @@ fn bench_writes_per_pass_bounds() {
     assert_eq!(b["frames"], 2);
     assert!(b["frame"]["gpu_median_ms"].as_f64().unwrap() > 0.0);
     assert!(b["bandwidth"]["read_gbps"].as_f64().unwrap() > 0.1);
+    // The device's own copies, by size, and the bandwidth they give.
+    let copies = b["device_copies"].as_array().unwrap();
+    assert!(copies.len() >= 5, "{copies:?}");
+    assert!(copies.iter().all(|c| c["gbps"].as_f64().unwrap() > 0.0));
+    assert!(b["device_gbps"].as_f64().unwrap() > 0.1);
+    assert!(b["device_bandwidth_source"]
+        .as_str()
+        .unwrap()
+        .contains("vkCmdCopyBuffer"));
     let passes = b["passes"].as_array().unwrap();
     assert_eq!(passes.len(), 8);
     for p in passes {
@@ -318,10 +327,19 @@ fn bench_writes_per_pass_bounds() {
             "bytes_written",
             "achieved_gbps",
             "bound_ms",
+            "bound_source",
             "ratio",
+            "host_read_ratio",
         ] {
             assert!(p.get(key).is_some(), "{key} missing in {p}");
         }
+        // No pass is faster than the least time its bytes can move in (the bound counted
+        // every re-read of a map texel once: a GPU beat it by 12x).
+        let ratio = p["ratio"].as_f64().unwrap();
+        assert!(
+            ratio >= 1.0,
+            "{name} is reported faster than its bound: {p}"
+        );
     }
     assert!(b["memory"]["total"].as_u64().unwrap() > 0);
     assert!(b["memory"]["items"].as_array().unwrap().len() > 5);
