@@ -266,7 +266,9 @@ impl MaxPyramid {
 
     /// The largest value of the bilinearly filtered texture over the uv rectangle [lo, hi]
     /// (repeat addressing: a rectangle across the wrap, or wider than the texture, gets the
-    /// texture's maximum).
+    /// texture's maximum; the filter's one-pixel margin wraps too: a sample at u = 0 blends
+    /// the last column, which the margin once clamped away, and a sphere's seam column,
+    /// taken for black next to white, gave a silhouette pixel 42x its untextured value).
     fn max_in(&self, lo: glam::DVec2, hi: glam::DVec2) -> [f64; 3] {
         let (w, h, _) = &self.levels[0];
         let whole = self.levels.last().map(|l| l.2[0]).unwrap_or([1.0; 3]);
@@ -275,23 +277,41 @@ impl MaxPyramid {
         if !(lo.is_finite() && hi.is_finite()) || hi.x >= 1.0 || hi.y >= 1.0 {
             return whole;
         }
-        // Pixels whose filter footprint meets the rectangle (one pixel of margin).
-        let x0 = ((lo.x * *w as f64).floor() as i64 - 1).max(0) as u32;
-        let y0 = ((lo.y * *h as f64).floor() as i64 - 1).max(0) as u32;
-        let x1 = ((hi.x * *w as f64).floor() as u32 + 1).min(w - 1);
-        let y1 = ((hi.y * *h as f64).floor() as u32 + 1).min(h - 1);
-        if x0 == 0 && y0 == 0 && x1 == w - 1 && y1 == h - 1 {
+        // Pixels whose filter footprint meets the rectangle (one pixel of margin), as at most
+        // two ranges per axis once wrapped.
+        let ranges = |lo: f64, hi: f64, n: u32| -> Vec<(u32, u32)> {
+            let (a, b) = (
+                (lo * n as f64).floor() as i64 - 1,
+                (hi * n as f64).floor() as i64 + 1,
+            );
+            let n = n as i64;
+            if b - a + 1 >= n {
+                vec![(0, (n - 1) as u32)]
+            } else if a < 0 {
+                vec![(0, b as u32), ((n + a) as u32, (n - 1) as u32)]
+            } else if b > n - 1 {
+                vec![(a as u32, (n - 1) as u32), (0, (b - n) as u32)]
+            } else {
+                vec![(a as u32, b as u32)]
+            }
+        };
+        let (xs, ys) = (ranges(lo.x, hi.x, *w), ranges(lo.y, hi.y, *h));
+        if xs == [(0, w - 1)] && ys == [(0, h - 1)] {
             return whole;
         }
-        let span = (x1 - x0 + 1).max(y1 - y0 + 1);
-        let level = (32 - span.leading_zeros()).saturating_sub(1) as usize;
-        let level = level.min(self.levels.len() - 1);
-        let (lw, lh, v) = &self.levels[level];
         let mut m = [0.0f64; 3];
-        for y in (y0 >> level)..=((y1 >> level).min(lh - 1)) {
-            for x in (x0 >> level)..=((x1 >> level).min(lw - 1)) {
-                let s = v[(y * lw + x) as usize];
-                m = [0, 1, 2].map(|k| m[k].max(s[k]));
+        for &(x0, x1) in &xs {
+            for &(y0, y1) in &ys {
+                let span = (x1 - x0 + 1).max(y1 - y0 + 1);
+                let level = (32 - span.leading_zeros()).saturating_sub(1) as usize;
+                let level = level.min(self.levels.len() - 1);
+                let (lw, lh, v) = &self.levels[level];
+                for y in (y0 >> level)..=((y1 >> level).min(lh - 1)) {
+                    for x in (x0 >> level)..=((x1 >> level).min(lw - 1)) {
+                        let s = v[(y * lw + x) as usize];
+                        m = [0, 1, 2].map(|k| m[k].max(s[k]));
+                    }
+                }
             }
         }
         m
@@ -808,6 +828,48 @@ impl SubsurfaceData {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The max pyramid bounds every bilinear sample of its rectangle, across the repeat wrap
+    /// too: a half black, half white texture sampled at u = 0 blends its last (white) column.
+    #[test]
+    fn texture_maximum_bounds_every_sample_across_the_wrap() {
+        let img = image::RgbaImage::from_fn(64, 32, |x, y| {
+            image::Rgba(if x >= 32 || y == 0 {
+                [255; 4]
+            } else {
+                [0, 0, 0, 255]
+            })
+        });
+        let texture = LinearTexture::new(&img);
+        let pyramid = MaxPyramid::new(&texture);
+        let mut rng = 12345u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..20000 {
+            // Small rectangles anywhere, many at the borders of the unit square.
+            let c = glam::DVec2::new(next() * 1.2 - 0.1, next() * 1.2 - 0.1);
+            let size = glam::DVec2::new(next(), next()) * 0.05;
+            let (lo, hi) = (c, c + size);
+            let top = pyramid.max_in(lo, hi);
+            for _ in 0..8 {
+                let p = lo + (hi - lo) * glam::DVec2::new(next(), next());
+                let v = texture.sample(p.as_vec2());
+                for k in 0..3 {
+                    assert!(
+                        v[k] <= top[k] + 1e-6,
+                        "sample {v:?} at {p} above the maximum {top:?} of [{lo}, {hi}]"
+                    );
+                }
+            }
+        }
+        // At u = 0 the filter reaches the last column (white): the maximum says so.
+        let top = pyramid.max_in(glam::DVec2::new(0.0, 0.5), glam::DVec2::new(0.001, 0.51));
+        assert!(top[0] > 0.99, "{top:?}");
+    }
 
     fn device(bytes: u64) -> crate::gpu::DeviceInfo {
         crate::gpu::DeviceInfo {
