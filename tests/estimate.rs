@@ -46,7 +46,7 @@ fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
 /// that fit were refused); it said 0.8 s for a 2000-gon coin that took 26 s and 1.0 s for a
 /// 1000-segment cylinder that ran past five minutes (every rim vertex a node, on node supports
 /// as long as the object); it knew nothing of the triangle count (a 4 M-triangle mesh: 0.2 s
-/// said, about 50 s taken).
+/// said, about 50 s taken). Measured: 0.58x (ketchup sphere) to 1.57x (the subdivided bunny).
 #[test]
 fn estimate_bounds_the_requirements() {
     let dir = common::temp_dir("estimate");
