@@ -209,8 +209,6 @@ pub struct Counts {
     pub shadow_side: u64,
     /// Shadow-map layers.
     pub shadow_layers: u64,
-    /// Lights.
-    pub lights: u64,
     /// Output pixels.
     pub pixels: u64,
     /// Whether the model has the single-scattering passes.

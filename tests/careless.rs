@@ -6,7 +6,9 @@
 mod common;
 
 use common::{bin, fails_with, render_cmd, stderr, temp_dir};
+use glam::Vec3;
 use std::path::Path;
+use translucent::scene::{mesh::Mesh, LONG_EDGE_SPACINGS};
 
 const TETRA_CLOCKWISE: &str =
     "v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 2 3\nf 1 4 2\nf 1 3 4\nf 2 4 3\n";
@@ -393,5 +395,109 @@ fn outputs_land_as_a_set() {
         assert!(out.join(f).is_file(), "{f}");
     }
     assert_ne!(std::fs::read(out.join("render.png")).unwrap(), b"old");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn longest_edge(m: &Mesh) -> f32 {
+    m.edge_lengths().fold(0.0, f32::max)
+}
+
+/// Long edges are split by conforming bisection: the surface, the volume, closedness and the
+/// attributes kept; seams of normals split alike; nothing done where nothing is too long.
+#[test]
+fn long_edges_are_split_and_the_surface_kept() {
+    let mut m = Mesh::parse_obj("cylinder", &common::cylinder_obj(400, 10.0, 40.0)).unwrap();
+    assert!(m.is_closed());
+    assert!(m.signed_volume() > 0.0, "the test cylinder winds outwards");
+    let (area, volume) = (m.surface_area(), m.signed_volume());
+    assert!(longest_edge(&m) > 20.0);
+    let added = m.refine_long_edges(2.0);
+    assert!(added > 0);
+    m.validate("refined").unwrap();
+    assert!(longest_edge(&m) <= 2.0, "{}", longest_edge(&m));
+    // Conforming: still closed (a T-junction would leave edges with one triangle), same
+    // surface and volume, every triangle facing as before.
+    assert!(m.is_closed());
+    assert!((m.surface_area() - area).abs() < 1e-4 * area);
+    assert!((m.signed_volume() - volume).abs() < 1e-4 * volume);
+    assert_eq!(m.positions.len(), m.normals.len());
+    assert_eq!(m.positions.len(), m.uvs.len());
+    // Seams of normals (a cube's corners are three vertices) are split alike.
+    let mut c = Mesh::cuboid(Vec3::new(10.0, 10.0, 10.0), 1);
+    c.refine_long_edges(1.0);
+    assert!(c.is_closed() && longest_edge(&c) <= 1.0);
+    assert!((c.surface_area() - 600.0).abs() < 1e-2);
+    // Nothing to do: nothing added, the mesh unchanged.
+    let s = Mesh::sphere(10.0, 32);
+    let mut t = s.clone();
+    assert_eq!(t.refine_long_edges(100.0), 0);
+    assert_eq!(s, t);
+}
+
+/// Faces wound against their neighbours are turned to agree with their part's majority.
+#[test]
+fn faces_wound_against_their_neighbours_are_turned() {
+    // Half the cylinder's sides wound inwards: closed, but its signed volume means little
+    // and the simplifier locks every vertex on an edge walked one way twice.
+    let good = Mesh::parse_obj("cylinder", &common::cylinder_obj(64, 10.0, 40.0)).unwrap();
+    let mut bad = good.clone();
+    for t in bad.indices.chunks_exact_mut(3).take(64) {
+        t.swap(1, 2);
+    }
+    bad.compute_normals();
+    assert_eq!(bad.orient_consistently(), 64);
+    assert_eq!(bad.indices, good.indices);
+    assert!(bad
+        .normals
+        .iter()
+        .zip(&good.normals)
+        .all(|(a, b)| a.distance(*b) < 1e-5));
+    // Consistent meshes are left alone, whatever their winding (outward is decided by the
+    // signed volume, later).
+    let mut inward = good.clone();
+    inward.flip_winding();
+    let before = inward.clone();
+    assert_eq!(inward.orient_consistently(), 0);
+    assert_eq!(inward, before);
+}
+
+/// Even meshes, coarse or fine, keep their triangles (the truth data and the accuracy figures
+/// were made on them); a mesh of long polygons is split when the scene loads, with a note.
+#[test]
+fn only_long_triangles_are_split() {
+    let mut texts = vec!["[mesh]\nbuiltin = \"bunny\"\n".to_string()];
+    for segments in [3, 8, 32, 140, 400] {
+        texts.push(format!(
+            "[mesh]\nbuiltin = \"sphere\"\nsegments = {segments}\n"
+        ));
+    }
+    for segments in [1, 4, 12] {
+        texts.push(format!(
+            "[mesh]\nbuiltin = \"box\"\nsize = [30.0, 2.0, 20.0]\nsegments = {segments}\n"
+        ));
+    }
+    for text in &texts {
+        let s = common::scene(text);
+        assert!(s.notes.is_empty(), "{text}: {:?}", s.notes);
+    }
+    // A 400-gon coin, ear-clipped caps: split to LONG_EDGE_SPACINGS vertex spacings, no edge
+    // longer.
+    let dir = temp_dir("coin");
+    let obj = dir.join("coin.obj");
+    std::fs::write(&obj, common::cylinder_obj(400, 20.0, 2.0)).unwrap();
+    let s = common::scene(&format!("[mesh]\nobj = {:?}\n", obj.to_str().unwrap()));
+    assert_eq!(s.notes.len(), 1, "{:?}", s.notes);
+    assert!(
+        s.notes[0].contains("long triangles split"),
+        "{}",
+        s.notes[0]
+    );
+    let spacing = Mesh::load_obj(&obj).unwrap().vertex_spacing();
+    let longest = longest_edge(&s.mesh);
+    assert!(
+        longest as f64 <= LONG_EDGE_SPACINGS * spacing * 1.0001,
+        "{longest} vs {spacing}"
+    );
+    assert!(s.mesh.is_closed());
     let _ = std::fs::remove_dir_all(&dir);
 }

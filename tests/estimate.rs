@@ -14,31 +14,6 @@ use translucent::preprocess::{
 
 fn quiet(_: &str, _: u64, _: u64) {}
 
-/// A closed cylinder of `n` segments whose caps are n-gons (ear-clipped into long slivers),
-/// winding outwards.
-fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
-    let mut text = String::new();
-    for y in [-0.5 * height, 0.5 * height] {
-        for k in 0..n {
-            let a = std::f32::consts::TAU * k as f32 / n as f32;
-            text += &format!("v {} {y} {}\n", radius * a.cos(), radius * a.sin());
-        }
-    }
-    for k in 0..n {
-        let (a, b) = (k + 1, (k + 1) % n + 1);
-        text += &format!("f {a} {} {} {b}\n", a + n, b + n);
-    }
-    text += "f";
-    for k in 1..=n {
-        text += &format!(" {k}");
-    }
-    text += "\nf";
-    for k in (n + 1..=2 * n).rev() {
-        text += &format!(" {k}");
-    }
-    text + "\n"
-}
-
 /// The estimate bounds what the upload needs (kernel texel-buffer elements and the device
 /// bytes that do not depend on pruning, within 0.7x to 1.4x), the node count (0.5x to 2x) and
 /// the preprocessing time (within [`ESTIMATE_TIME_FACTOR`] either way). It once counted
@@ -51,9 +26,9 @@ fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
 fn estimate_bounds_the_requirements() {
     let dir = common::temp_dir("estimate");
     let coin = dir.join("coin.obj");
-    std::fs::write(&coin, cylinder_obj(2000, 20.0, 2.0)).unwrap();
+    std::fs::write(&coin, common::cylinder_obj(2000, 20.0, 2.0)).unwrap();
     let cylinder = dir.join("cylinder.obj");
-    std::fs::write(&cylinder, cylinder_obj(1000, 10.0, 40.0)).unwrap();
+    std::fs::write(&cylinder, common::cylinder_obj(1000, 10.0, 40.0)).unwrap();
     let cases = [
         ("[output]\nwidth = 128\nheight = 128\n".to_string(), "bunny"),
         (

@@ -503,8 +503,8 @@ fn uniform_light_gets_what_f_gives() {
     );
 }
 
-/// Light is never negative: the optimized blending's fitted weights (constrained) and its
-/// direct term (bounded) keep every texel's response to light at any one texel non-negative,
+/// Light is never negative: the optimized blending's fitted weights (constrained), its kernels
+/// (balanced against F) and its direct term (bounded) keep every texel's response to light at any one texel non-negative,
 /// on the meshes where they once were not (a tetrahedron at 2 mm texels: -7 % of the peak, a
 /// 3-segment sphere, two disjoint spheres, a huge sigma). The bound is f32 rounding of
 /// responses the constraint sets to exactly zero.

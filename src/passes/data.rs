@@ -230,10 +230,10 @@ impl LinearTexture {
 
 /// Largest ratio of a texture sample to the texture mean it is divided by: texture modulation
 /// multiplies a texel's (or node's) untextured radiosity by T(x) / T_mean, which is unbounded
-/// where the mean is dark and a bright sample lies next to it (the sphere half black,
-/// half white reached 51.3 against 0.236 untextured; a checker 15.2 against 0.233). The mean is raised to at least the
-/// largest sample the fragment can meet divided by this, so the modulation is at most this
-/// many times the untextured radiosity; it keeps the mean (and so the energy) wherever the
+/// where the mean is dark and a bright sample lies next to it (a sphere half black, half white
+/// reached 51.3 against 0.236 untextured; a checker 15.2 against 0.233). The mean is raised to
+/// at least the largest sample the fragment can meet divided by this, so the modulation is at
+/// most this many times the untextured radiosity; it keeps the mean (and so the energy) wherever the
 /// texture within reach varies by less than this factor, and all detail everywhere.
 pub const MAX_TEXTURE_RATIO: f64 = 4.0;
 
@@ -496,7 +496,6 @@ pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::
             .map(|t| t.width() as u64 * t.height() as u64)
             .unwrap_or(1),
         shadow_side: crate::scene::shadow::shadow_map_size(scene, a.texel_mm).0 as u64,
-        lights: scene.lights.len() as u64,
         shadow_layers: scene
             .lights
             .iter()
@@ -842,13 +841,8 @@ mod tests {
         });
         let texture = LinearTexture::new(&img);
         let pyramid = MaxPyramid::new(&texture);
-        let mut rng = 12345u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (rng >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::truth::rng::Rng::new(&[12345]);
+        let mut next = || rng.uniform();
         for _ in 0..20000 {
             // Small rectangles anywhere, many at the borders of the unit square.
             let c = glam::DVec2::new(next() * 1.2 - 0.1, next() * 1.2 - 0.1);

@@ -713,10 +713,13 @@ impl Operators {
             seconds: [kernels_s, global_s, 0.0],
         };
         ops.optimized = ops.fit_near_field(atlas, nodes, &profiles, &basis.supports, progress);
-        ops.balance_kernels();
+        // What F carries beyond each mode's W depends on F, W and the gather, not on the
+        // kernels: computed once, before the kernels are balanced, for both uses.
+        let beyond = ops.beyond_kernel(Blend::Optimized);
+        ops.balance_kernels(&beyond);
         ops.seconds[2] = clock.elapsed().as_secs_f64();
-        ops.direct_simple = ops.direct_term(Blend::Simple);
-        ops.direct_optimized = ops.direct_term(Blend::Optimized);
+        ops.direct_simple = ops.direct_term(Blend::Simple, &ops.beyond_kernel(Blend::Simple));
+        ops.direct_optimized = ops.direct_term(Blend::Optimized, &beyond);
         progress("blending", 1, 1);
         ops
     }
@@ -732,10 +735,9 @@ impl Operators {
     /// K_tt) keeps both: under uniform light t receives what F gives, and light on t alone
     /// gives t zero, not less. A few percent of the texels (3 % for ketchup, partial texels at
     /// chart borders mostly); every blending mode reads the same kernels.
-    fn balance_kernels(&mut self) {
+    fn balance_kernels(&mut self, (g, returned): &(Vec<Rgb>, Vec<Rgb>)) {
         let kk = (self.kernel_size * self.kernel_size) as usize;
         let texels = self.kernels.len() / kk;
-        let (g, returned) = self.beyond_kernel(Blend::Optimized);
         for t in 0..texels {
             let centre = Rgb::from_f32(self.kernels[t * kk + kk / 2]);
             let around = self.kernel_sum(t, true) - centre;
@@ -794,8 +796,7 @@ impl Operators {
                     .row(t)
                     .map(|(q, phi)| (full[q as usize] - used[q as usize]) * phi as f64)
                     .sum();
-                let centre = Rgb::from_f32(self.kernels[t * kk + kk / 2]);
-                (g, self.self_response(t, mode) - centre)
+                (g, self.returned(t, mode))
             })
             .unzip()
     }
@@ -849,13 +850,12 @@ impl Operators {
     /// and light on t alone would give t a negative response. For optimized blending the
     /// kernels were balanced against F ([`Operators::balance_kernels`]) so that beta stays at
     /// least minus t's response to its own irradiance through the kernel's centre and W
-    /// ([`Operators::self_response`]); the bound here catches rounding. Simple blending
+    /// ([`Operators::returned`]); the bound here catches rounding. Simple blending
     /// keeps the paper's direct term: there beta is negative on most texels (the kernel's
     /// window exceeds F's diagonal) and the bound would cost 14 points of accuracy; a lit
     /// texel's neighbours make up for it under any illumination the light pass produces, and
     /// the composite clamps what a single lit texel would leave below zero.
-    fn direct_term(&self, mode: Blend) -> Vec<[f32; 3]> {
-        let (g, returned) = self.beyond_kernel(mode);
+    fn direct_term(&self, mode: Blend, (g, returned): &(Vec<Rgb>, Vec<Rgb>)) -> Vec<[f32; 3]> {
         let kk = (self.kernel_size * self.kernel_size) as usize;
         (0..self.kernels.len() / kk)
             .map(|t| {
@@ -875,13 +875,12 @@ impl Operators {
             .collect()
     }
 
-    /// Texel t's response to irradiance on t alone, without the direct term: the kernel's
-    /// centre weight plus what W carries from t's nodes (through the gather) back to t.
-    pub fn self_response(&self, t: usize, mode: Blend) -> Rgb {
-        let kk = (self.kernel_size * self.kernel_size) as usize;
-        let centre = Rgb::from_f32(self.kernels[t * kk + kk / 2]);
+    /// What W carries of irradiance on texel t alone from t's nodes (through the gather)
+    /// back to t: with the kernel's centre weight, t's response to its own light without the
+    /// direct term.
+    fn returned(&self, t: usize, mode: Blend) -> Rgb {
         let Some((m, skip_diagonal)) = self.global_matrix(mode) else {
-            return centre;
+            return Rgb::ZERO;
         };
         let mut through = Rgb::ZERO;
         for (q, phi_q) in self.texel_nodes.row(t) {
@@ -897,7 +896,7 @@ impl Operators {
                 through += Rgb::from_f32(w) * (phi_q * g) as f64;
             }
         }
-        centre + through
+        through
     }
 
     /// Fits the near-field entries of every receiver row (optimized blending).

@@ -483,6 +483,15 @@ impl Mesh {
         m
     }
 
+    /// The length of every triangle's three edges, mm (an edge shared by two triangles twice).
+    pub fn edge_lengths(&self) -> impl Iterator<Item = f32> + '_ {
+        self.indices.chunks_exact(3).flat_map(move |t| {
+            (0..3).map(move |k| {
+                self.positions[t[k] as usize].distance(self.positions[t[(k + 1) % 3] as usize])
+            })
+        })
+    }
+
     /// The mesh's vertex spacing: the edge of an equilateral triangle mesh with as many
     /// (welded) vertices over the same area, mm (area per vertex 0.866 e^2).
     pub fn vertex_spacing(&self) -> f64 {
@@ -904,7 +913,7 @@ fn load_options() -> tobj::LoadOptions {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
 
     #[test]
@@ -1002,97 +1011,6 @@ pub(crate) mod tests {
         let m = Mesh::parse_obj("disc", &text).unwrap();
         assert_eq!(m.triangle_count(), n - 2);
         assert!((area(&m) - std::f64::consts::PI).abs() < 1e-3);
-    }
-
-    /// A closed cylinder of `n` segments whose caps are n-gons (ear-clipped into long slivers).
-    pub(crate) fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
-        let mut text = String::new();
-        for y in [-0.5 * height, 0.5 * height] {
-            for k in 0..n {
-                let a = std::f32::consts::TAU * k as f32 / n as f32;
-                text += &format!("v {} {y} {}\n", radius * a.cos(), radius * a.sin());
-            }
-        }
-        for k in 0..n {
-            let (a, b) = (k + 1, (k + 1) % n + 1);
-            text += &format!("f {a} {} {} {b}\n", a + n, b + n);
-        }
-        text += "f";
-        for k in 1..=n {
-            text += &format!(" {k}");
-        }
-        text += "\nf";
-        for k in (n + 1..=2 * n).rev() {
-            text += &format!(" {k}");
-        }
-        text + "\n"
-    }
-
-    fn longest_edge(m: &Mesh) -> f32 {
-        m.indices
-            .chunks_exact(3)
-            .flat_map(|t| {
-                (0..3).map(|k| {
-                    m.positions[t[k] as usize].distance(m.positions[t[(k + 1) % 3] as usize])
-                })
-            })
-            .fold(0.0, f32::max)
-    }
-
-    #[test]
-    fn long_edges_are_split_and_the_surface_kept() {
-        let mut m = Mesh::parse_obj("cylinder", &cylinder_obj(400, 10.0, 40.0)).unwrap();
-        assert!(m.is_closed());
-        assert!(m.signed_volume() > 0.0, "the test cylinder winds outwards");
-        let (area, volume) = (m.surface_area(), m.signed_volume());
-        assert!(longest_edge(&m) > 20.0);
-        let added = m.refine_long_edges(2.0);
-        assert!(added > 0);
-        m.validate("refined").unwrap();
-        assert!(longest_edge(&m) <= 2.0, "{}", longest_edge(&m));
-        // Conforming: still closed (a T-junction would leave edges with one triangle), same
-        // surface and volume, every triangle facing as before.
-        assert!(m.is_closed());
-        assert!((m.surface_area() - area).abs() < 1e-4 * area);
-        assert!((m.signed_volume() - volume).abs() < 1e-4 * volume);
-        assert_eq!(m.positions.len(), m.normals.len());
-        assert_eq!(m.positions.len(), m.uvs.len());
-        // Seams of normals (a cube's corners are three vertices) are split alike.
-        let mut c = Mesh::cuboid(Vec3::new(10.0, 10.0, 10.0), 1);
-        c.refine_long_edges(1.0);
-        assert!(c.is_closed() && longest_edge(&c) <= 1.0);
-        assert!((c.surface_area() - 600.0).abs() < 1e-2);
-        // Nothing to do: nothing added, the mesh unchanged.
-        let s = Mesh::sphere(10.0, 32);
-        let mut t = s.clone();
-        assert_eq!(t.refine_long_edges(100.0), 0);
-        assert_eq!(s, t);
-    }
-
-    #[test]
-    fn faces_wound_against_their_neighbours_are_turned() {
-        // Half the cylinder's sides wound inwards: closed, but its signed volume means little
-        // and the simplifier locks every vertex on an edge walked one way twice.
-        let good = Mesh::parse_obj("cylinder", &cylinder_obj(64, 10.0, 40.0)).unwrap();
-        let mut bad = good.clone();
-        for t in bad.indices.chunks_exact_mut(3).take(64) {
-            t.swap(1, 2);
-        }
-        bad.compute_normals();
-        assert_eq!(bad.orient_consistently(), 64);
-        assert_eq!(bad.indices, good.indices);
-        assert!(bad
-            .normals
-            .iter()
-            .zip(&good.normals)
-            .all(|(a, b)| a.distance(*b) < 1e-5));
-        // Consistent meshes are left alone, whatever their winding (outward is decided by
-        // the signed volume, later).
-        let mut inward = good.clone();
-        inward.flip_winding();
-        let before = inward.clone();
-        assert_eq!(inward.orient_consistently(), 0);
-        assert_eq!(inward, before);
     }
 
     #[test]

@@ -151,7 +151,7 @@ pub struct Scene {
 
 /// Edges longer than this many times the mesh's vertex spacing are split
 /// ([`Mesh::refine_long_edges`]): no edge of an even mesh is (the bunny's longest is 2.74x;
-/// builtin spheres and boxes stay below too, `tests::only_long_triangles_are_split`).
+/// builtin spheres and boxes stay below too: `tests/careless.rs` only_long_triangles_are_split).
 pub const LONG_EDGE_SPACINGS: f64 = 3.0;
 
 /// Largest radius of the object after units and transform, mm (10 km): f32 positions keep
@@ -400,7 +400,7 @@ impl Scene {
         }
 
         // Long, thin triangles (a 2000-gon disc, a 1000-segment cylinder's sides): split to
-        // twice the mesh's own vertex spacing. The global response's node basis functions
+        // LONG_EDGE_SPACINGS times the mesh's own vertex spacing. The global response's node basis functions
         // are interpolated over render triangles; on long triangles they reach across the
         // object (F 85 % dense, minutes of fitting where the estimate said a second). Even
         // meshes, coarse or fine, have no edge that long and are left as they are. The length
@@ -409,17 +409,7 @@ impl Scene {
         let mut notes = Vec::new();
         {
             let spacing = mesh.vertex_spacing();
-            let edge_sum: f64 = mesh
-                .indices
-                .chunks_exact(3)
-                .flat_map(|t| {
-                    (0..3).map(|k| {
-                        mesh.positions[t[k] as usize]
-                            .distance(mesh.positions[t[(k + 1) % 3] as usize])
-                            as f64
-                    })
-                })
-                .sum();
+            let edge_sum: f64 = mesh.edge_lengths().map(f64::from).sum();
             let cap = (4 * mesh.triangle_count()).max(1 << 20) as f64;
             let max_len = (LONG_EDGE_SPACINGS * spacing).max(edge_sum / cap) as f32;
             let added = mesh.refine_long_edges(max_len);
@@ -668,8 +658,8 @@ impl Scene {
             let cone = l.cos_cone.acos();
             if let Some(off) = cone_misses(l.position, l.direction, cone, center, radius) {
                 warnings.push(format!(
-                        "[[lights]] #{} is a spot aimed {:.0} degrees away from the object, outside its cone: it lights nothing",
-                        i + 1,
+                    "[[lights]] #{} is a spot aimed {:.0} degrees away from the object, outside its cone: it lights nothing",
+                    i + 1,
                     off.to_degrees()
                 ));
             }
@@ -714,68 +704,6 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Even meshes, coarse or fine, keep their triangles (the truth data and the accuracy
-    /// figures were made on them); a mesh of long polygons is split, with a note.
-    #[test]
-    fn only_long_triangles_are_split() {
-        let mut texts = vec!["[mesh]\nbuiltin = \"bunny\"\n".to_string()];
-        for segments in [3, 8, 32, 140, 400] {
-            texts.push(format!(
-                "[mesh]\nbuiltin = \"sphere\"\nsegments = {segments}\n"
-            ));
-        }
-        for segments in [1, 4, 12] {
-            texts.push(format!(
-                "[mesh]\nbuiltin = \"box\"\nsize = [30.0, 2.0, 20.0]\nsegments = {segments}\n"
-            ));
-        }
-        for text in &texts {
-            let s = Scene::from_desc(
-                SceneDesc::parse(text).unwrap(),
-                Path::new(""),
-                &Overrides::default(),
-            )
-            .unwrap();
-            assert!(s.notes.is_empty(), "{text}: {:?}", s.notes);
-        }
-        // A 400-gon coin, ear-clipped caps: split to three vertex spacings, no edge longer.
-        let dir = std::env::temp_dir().join(format!("translucent-coin-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let obj = dir.join("coin.obj");
-        std::fs::write(&obj, mesh::tests::cylinder_obj(400, 20.0, 2.0)).unwrap();
-        let text = format!("[mesh]\nobj = {:?}\n", obj.to_str().unwrap());
-        let s = Scene::from_desc(
-            SceneDesc::parse(&text).unwrap(),
-            Path::new(""),
-            &Overrides::default(),
-        )
-        .unwrap();
-        assert_eq!(s.notes.len(), 1, "{:?}", s.notes);
-        assert!(
-            s.notes[0].contains("long triangles split"),
-            "{}",
-            s.notes[0]
-        );
-        let longest = s
-            .mesh
-            .indices
-            .chunks_exact(3)
-            .flat_map(|t| {
-                (0..3).map(|k| {
-                    s.mesh.positions[t[k] as usize]
-                        .distance(s.mesh.positions[t[(k + 1) % 3] as usize])
-                })
-            })
-            .fold(0.0f32, f32::max);
-        let spacing = Mesh::load_obj(&obj).unwrap().vertex_spacing();
-        assert!(
-            longest as f64 <= LONG_EDGE_SPACINGS * spacing * 1.0001,
-            "{longest} vs {spacing}"
-        );
-        assert!(s.mesh.is_closed());
-        let _ = std::fs::remove_dir_all(&dir);
-    }
 
     #[test]
     fn default_scene_is_the_bunny_about_50_mm_tall() {

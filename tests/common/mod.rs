@@ -138,3 +138,28 @@ pub fn committed_truth(dir: &str) -> (u32, u32, Vec<f32>, Vec<f32>) {
     let (_, _, noise) = translucent::output::read_exr(&dir.join("noise.exr")).unwrap();
     (w, h, truth, noise)
 }
+
+/// OBJ text of a closed cylinder of `n` segments around the y axis whose caps are n-gons (ear
+/// clipping makes them long slivers), winding outwards.
+pub fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
+    let mut text = String::new();
+    for y in [-0.5 * height, 0.5 * height] {
+        for k in 0..n {
+            let a = std::f32::consts::TAU * k as f32 / n as f32;
+            text += &format!("v {} {y} {}\n", radius * a.cos(), radius * a.sin());
+        }
+    }
+    for k in 0..n {
+        let (a, b) = (k + 1, (k + 1) % n + 1);
+        text += &format!("f {a} {} {} {b}\n", a + n, b + n);
+    }
+    text += "f";
+    for k in 1..=n {
+        text += &format!(" {k}");
+    }
+    text += "\nf";
+    for k in (n + 1..=2 * n).rev() {
+        text += &format!(" {k}");
+    }
+    text + "\n"
+}
