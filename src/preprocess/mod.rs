@@ -184,9 +184,9 @@ pub fn estimate(mesh: &Mesh, s: &Settings) -> Estimate {
         // the measured time on six meshes, from a 704-triangle box to a 235 000-triangle
         // bunny, long-triangle meshes included). The mesh term (welding, adjacency and
         // chart growth, simplification) is partly serial. The fit term lies between the
-        // bunny's constrained fit (which it overestimates about 1.5x) and a ketchup sphere's,
-        // whose dual sweeps run longer (underestimated about 2x; at the earlier 2/3 of this
-        // coefficient that scene came within 0.23x of a 4x bound on a busy machine).
+        // bunny's constrained fit (the whole estimate 1.1-1.4x of the measured time) and a
+        // ketchup sphere's, whose dual sweeps run longer (0.58-0.66x; at the earlier 2/3 of
+        // this coefficient that scene came to 0.23x, outside the 4x bound, on a busy run).
         seconds: (2.5e-7 * (texels * kk) as f64
             + 3.0e-7 * (nodes * nodes) as f64
             + 4.5e-8 * fit_work)
