@@ -81,16 +81,16 @@ impl Nodes {
     /// Builds the nodes for `mesh` with a target spacing (mm).
     pub fn build(mesh: &Mesh, spacing_mm: f64) -> Nodes {
         // Weld by position so that seams of normals or texture coordinates do not split nodes.
-        let mut map: HashMap<[u32; 3], u32> = HashMap::new();
+        let weld = mesh.welded();
+        let mut compact = vec![u32::MAX; mesh.positions.len()];
         let mut welded_of = Vec::with_capacity(mesh.positions.len());
         let mut first = Vec::new();
-        for (i, p) in mesh.positions.iter().enumerate() {
-            let next = first.len() as u32;
-            let id = *map.entry(p.to_array().map(f32::to_bits)).or_insert(next);
-            if id == next {
+        for (i, &w) in weld.iter().enumerate() {
+            if compact[w as usize] == u32::MAX {
+                compact[w as usize] = first.len() as u32;
                 first.push(i as u32);
             }
-            welded_of.push(id);
+            welded_of.push(compact[w as usize]);
         }
         let welded_positions: Vec<Vec3> =
             first.iter().map(|&i| mesh.positions[i as usize]).collect();

@@ -257,42 +257,36 @@ impl Mesh {
     /// exactly two triangles. Inside and outside, and the signed volume, mean something only
     /// then.
     pub fn is_closed(&self) -> bool {
-        // Welded to a millionth of the object's size: seams of generated meshes repeat a
-        // vertex with rounding differences.
-        let cell = (self.bounding_sphere().1 * 1e-6).max(f32::MIN_POSITIVE);
-        let key = |i: u32| {
-            (self.positions[i as usize] / cell)
-                .round()
-                .as_i64vec3()
-                .to_array()
-        };
-        let mut edges: std::collections::HashMap<([i64; 3], [i64; 3]), u32> =
+        let weld = self.welded();
+        let mut edges: std::collections::HashMap<(u32, u32), u32> =
             std::collections::HashMap::new();
         for t in self.indices.chunks_exact(3) {
             for k in 0..3 {
-                let (a, b) = (key(t[k]), key(t[(k + 1) % 3]));
+                let (a, b) = (weld[t[k] as usize], weld[t[(k + 1) % 3] as usize]);
                 if a == b {
                     continue;
                 }
-                *edges
-                    .entry(if a < b { (a, b) } else { (b, a) })
-                    .or_default() += 1;
+                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
             }
         }
         !edges.is_empty() && edges.values().all(|&n| n == 2)
     }
 
-    /// Per vertex, the first vertex at exactly the same position (seams of normals or texture
-    /// coordinates split vertices that are one point of the surface).
+    /// Per vertex, the first vertex at the same position, to a millionth of the object's size
+    /// (seams of normals or texture coordinates split vertices that are one point of the
+    /// surface, and generated meshes repeat seam vertices with rounding differences: a UV
+    /// sphere's seam at sin(2 pi) = -2.4e-16 rather than 0, or poles at -0.0 and 0.0; welded
+    /// exactly, such a mesh had a border that locked meshopt's simplification, and 800 of a
+    /// 2000-segment sphere's 3100 nodes crowded at its poles).
     pub fn welded(&self) -> Vec<u32> {
-        let mut first: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
+        let cell = (self.bounding_sphere().1 as f64 * 1e-6).max(f64::MIN_POSITIVE);
+        let mut first: std::collections::HashMap<[i64; 3], u32> = std::collections::HashMap::new();
         self.positions
             .iter()
             .enumerate()
             .map(|(i, p)| {
-                *first
-                    .entry(p.to_array().map(f32::to_bits))
-                    .or_insert(i as u32)
+                let key = (p.as_dvec3() / cell).round().as_i64vec3().to_array();
+                *first.entry(key).or_insert(i as u32)
             })
             .collect()
     }
@@ -608,7 +602,8 @@ impl Mesh {
         self.triangle_count() - before
     }
 
-    /// A UV sphere of `radius` around the origin with `segments` around the equator.
+    /// A UV sphere of `radius` around the origin with `segments` around the equator. The seam
+    /// column repeats the first one's positions exactly and the poles are one point each.
     pub fn sphere(radius: f32, segments: u32) -> Mesh {
         let seg = segments.max(3);
         let rings = (seg / 2).max(2);
@@ -621,12 +616,16 @@ impl Mesh {
             let theta = v * std::f32::consts::PI;
             for i in 0..=seg {
                 let u = i as f32 / seg as f32;
-                let phi = u * std::f32::consts::TAU;
-                let n = Vec3::new(
-                    theta.sin() * phi.cos(),
-                    theta.cos(),
-                    -theta.sin() * phi.sin(),
-                );
+                let phi = (i % seg) as f32 / seg as f32 * std::f32::consts::TAU;
+                let n = if j == 0 || j == rings {
+                    Vec3::new(0.0, theta.cos().signum(), 0.0)
+                } else {
+                    Vec3::new(
+                        theta.sin() * phi.cos(),
+                        theta.cos(),
+                        -theta.sin() * phi.sin(),
+                    )
+                };
                 m.positions.push(n * radius);
                 m.normals.push(n);
                 m.uvs.push(Vec2::new(u, v));
@@ -931,6 +930,45 @@ mod tests {
                 (p.dot(*n) - (n.abs() * Vec3::new(20.0, 20.0, 5.0)).max_element()).abs() < 1e-4
             );
         }
+    }
+
+    #[test]
+    fn welding_by_position_closes_generated_spheres() {
+        // A sphere open along its seam, or with poles split by the sign of zero, is a mesh
+        // with borders for the atlas and meshopt.
+        for seg in [3, 64, 501] {
+            let m = Mesh::sphere(25.0, seg);
+            let weld = m.welded();
+            let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
+            for t in m.indices.chunks_exact(3) {
+                for k in 0..3 {
+                    let (a, b) = (weld[t[k] as usize], weld[t[(k + 1) % 3] as usize]);
+                    assert_ne!(a, b, "degenerate triangle in a {seg}-segment sphere");
+                    *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+                }
+            }
+            let open = edges.values().filter(|&&n| n != 2).count();
+            assert_eq!(
+                open, 0,
+                "{seg} segments: {open} edges not shared by two triangles"
+            );
+        }
+        // The same seams with rounding differences, as generators in double precision write
+        // them, weld too.
+        let mut m = Mesh::sphere(25.0, 64);
+        for p in &mut m.positions {
+            if p.z == 0.0 {
+                p.z = if p.x < 0.0 { -0.0 } else { -6.1e-15 };
+            }
+        }
+        assert!(m.is_closed());
+        let weld = m.welded();
+        let distinct = weld
+            .iter()
+            .enumerate()
+            .filter(|(i, w)| *i == **w as usize)
+            .count();
+        assert_eq!(distinct, 64 * 31 + 2);
     }
 
     #[test]
