@@ -51,10 +51,14 @@ fn case(name: &str, model: Model, bounds: [f64; 3]) {
     }
 }
 
-// Measured at 64x64 (dipole, then the half-space model): bunny in skim milk 5.6 / 4.8 / 6.8
-// and 7.2 / 3.8 / 3.3 %; in marble 4.4 / 5.3 / 5.8 and 4.5 / 4.3 / 4.7 %; ketchup sphere
-// 60.5 / 62.5 / 61.6 and 22.8 / 3.9 / 5.3 %; slab lit from behind 76.5 / 10.8 / 37.5 and
-// 81.4 / 15.3 / 35.7 %.
+// Measured at 64x64 (dipole, then the half-space model): bunny in skim milk 5.5 / 4.7 / 6.5
+// and 7.4 / 4.1 / 3.6 %; in marble 5.6 / 6.5 / 7.4 and 6.1 / 6.3 / 7.1 %; ketchup sphere
+// 60.4 / 62.6 / 61.8 and 22.8 / 3.8 / 5.0 %; slab lit from behind 76.9 / 10.6 / 37.4 and
+// 81.6 / 15.1 / 35.6 %. At 64x64 the texel is one image pixel and the bunny in
+// marble moves by 1-2 points with the chart layout alone: best-first chart growth (which
+// ended the hundreds of sliver charts of fine meshes) took it from 4.4 / 5.3 / 5.8 and
+// 4.5 / 4.3 / 4.7 % to the figures above, while at 256x256 (the README's table) every
+// figure stayed within 0.2 points.
 
 #[test]
 fn bunny_in_skim_milk() {
@@ -68,8 +72,12 @@ fn bunny_in_skim_milk() {
 
 #[test]
 fn bunny_in_marble() {
-    case("bunny-marble", Model::Dipole, [0.051, 0.061, 0.067]);
-    case("bunny-marble", Model::HalfspaceSingle, [0.052, 0.05, 0.054]);
+    case("bunny-marble", Model::Dipole, [0.06, 0.07, 0.08]);
+    case(
+        "bunny-marble",
+        Model::HalfspaceSingle,
+        [0.066, 0.068, 0.076],
+    );
 }
 
 #[test]
