@@ -127,6 +127,14 @@ fn adjacency(mesh: &Mesh, welded: &[u32]) -> Vec<Vec<u32>> {
     adj
 }
 
+/// The area-weighted sum of the normals of `faces` (its direction is their mean normal).
+fn normal_sum(faces: &[u32], normals: &[DVec3], areas: &[f64]) -> DVec3 {
+    faces
+        .iter()
+        .map(|&f| normals[f as usize] * areas[f as usize])
+        .sum()
+}
+
 /// A triangle on a growing chart's border, ordered by `key` (then by index, for determinism).
 struct Candidate {
     key: f64,
@@ -170,6 +178,24 @@ fn member_is_free(member: &[Standing], f: u32) -> bool {
     member[f as usize] == Standing::Free
 }
 
+/// Per mesh triangle, what chart growth and merging mark; allocated once per atlas and left as
+/// found by each call, so that regrowing a folded chart costs its own triangles, not the mesh's.
+struct Scratch {
+    /// Every triangle `Outside` between calls.
+    standing: Vec<Standing>,
+    /// Every triangle `usize::MAX` (no chart) between calls.
+    chart_of: Vec<usize>,
+}
+
+impl Scratch {
+    fn new(triangles: usize) -> Scratch {
+        Scratch {
+            standing: vec![Standing::Outside; triangles],
+            chart_of: vec![usize::MAX; triangles],
+        }
+    }
+}
+
 /// Groups `faces` into charts whose normals stay within acos(`cos_max`) of the chart mean.
 fn grow_charts(
     faces: &[u32],
@@ -177,8 +203,9 @@ fn grow_charts(
     areas: &[f64],
     adj: &[Vec<u32>],
     cos_max: f64,
+    scratch: &mut Scratch,
 ) -> Vec<Vec<u32>> {
-    let mut member = vec![Standing::Outside; normals.len()];
+    let member = &mut scratch.standing;
     for &f in faces {
         member[f as usize] = Standing::Free;
     }
@@ -220,9 +247,9 @@ fn grow_charts(
                 }
             }
         };
-        push(&mut frontier, &member, seed);
+        push(&mut frontier, member, seed);
         while let Some(Candidate { face: g, .. }) = frontier.pop() {
-            if !member_is_free(&member, g) {
+            if !member_is_free(member, g) {
                 continue;
             }
             let mean = sum.normalize_or_zero();
@@ -232,18 +259,14 @@ fn grow_charts(
                 member[g as usize] = Standing::Taken;
                 sum += n * areas[g as usize];
                 chart.push(g);
-                push(&mut frontier, &member, g);
+                push(&mut frontier, member, g);
             }
         }
         // Enforce the bound against the final mean: violators go back to the pool, until the
         // mean of what is left no longer changes the verdict.
         let mut keep = chart;
         loop {
-            let mean = keep
-                .iter()
-                .map(|&f| normals[f as usize] * areas[f as usize])
-                .sum::<DVec3>()
-                .normalize_or_zero();
+            let mean = normal_sum(&keep, normals, areas).normalize_or_zero();
             let (ok, bad): (Vec<u32>, Vec<u32>) = keep.iter().partition(|&&f| {
                 normals[f as usize] == DVec3::ZERO
                     || mean == DVec3::ZERO
@@ -265,7 +288,10 @@ fn grow_charts(
         }
         charts.push(keep);
     }
-    merge_charts(charts, normals, areas, adj, cos_max)
+    for &f in faces {
+        member[f as usize] = Standing::Outside;
+    }
+    merge_charts(charts, normals, areas, adj, cos_max, &mut scratch.chart_of)
 }
 
 /// Merges edge-adjacent charts, smallest first, wherever every triangle of the union stays
@@ -277,18 +303,17 @@ fn merge_charts(
     areas: &[f64],
     adj: &[Vec<u32>],
     cos_max: f64,
+    chart_of: &mut [usize],
 ) -> Vec<Vec<u32>> {
     let max_angle = cos_max.clamp(-1.0, 1.0).acos();
-    let mut chart_of = vec![usize::MAX; normals.len()];
     for (c, faces) in charts.iter().enumerate() {
         for &f in faces {
             chart_of[f as usize] = c;
         }
     }
-    let weighted = |f: u32| normals[f as usize] * areas[f as usize];
     let mut sums: Vec<DVec3> = charts
         .iter()
-        .map(|c| c.iter().map(|&f| weighted(f)).sum())
+        .map(|c| normal_sum(c, normals, areas))
         .collect();
     // The widest angle between a chart's triangles and its mean normal (an upper bound after
     // merges that skipped the exact scan).
@@ -307,14 +332,17 @@ fn merge_charts(
         .zip(&sums)
         .map(|(c, s)| widest(c, s.normalize_or_zero()))
         .collect();
-    let area = |c: &[u32]| c.iter().map(|&f| areas[f as usize]).sum::<f64>();
-    let mut order: Vec<usize> = (0..charts.len()).collect();
-    let chart_areas: Vec<f64> = charts.iter().map(|c| area(c)).collect();
-    order.sort_by(|&a, &b| chart_areas[a].total_cmp(&chart_areas[b]).then(a.cmp(&b)));
+    let chart_areas: Vec<f64> = charts
+        .iter()
+        .map(|c| c.iter().map(|&f| areas[f as usize]).sum())
+        .collect();
     // Only charts smaller than the mean try to join a neighbour: the big ones rarely can, and
     // scanning them is what merging would cost on fine meshes.
     let mean_area = chart_areas.iter().sum::<f64>() / charts.len().max(1) as f64;
-    order.retain(|&c| chart_areas[c] < mean_area);
+    let mut order: Vec<usize> = (0..charts.len())
+        .filter(|&c| chart_areas[c] < mean_area)
+        .collect();
+    order.sort_by(|&a, &b| chart_areas[a].total_cmp(&chart_areas[b]).then(a.cmp(&b)));
     for c in order {
         let mut links: HashMap<usize, usize> = HashMap::new();
         for &f in &charts[c] {
@@ -361,6 +389,9 @@ fn merge_charts(
         }
     }
     charts.retain(|c| !c.is_empty());
+    for &f in charts.iter().flatten() {
+        chart_of[f as usize] = usize::MAX;
+    }
     charts
 }
 
@@ -533,6 +564,7 @@ impl Atlas {
         let (normals, areas) = face_normals(mesh);
         let adj = adjacency(mesh, &welded);
         let all: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
+        let mut scratch = Scratch::new(all.len());
         let mut pending = vec![(all, max_angle_deg)];
         let mut done: Vec<(Chart, Vec<Cell>)> = Vec::new();
         let mut singles: Vec<u32> = Vec::new();
@@ -542,7 +574,8 @@ impl Atlas {
             let grown: Vec<(Vec<u32>, f64)> = pending
                 .drain(..)
                 .flat_map(|(faces, angle)| {
-                    grow_charts(&faces, &normals, &areas, &adj, angle.to_radians().cos())
+                    let cos_max = angle.to_radians().cos();
+                    grow_charts(&faces, &normals, &areas, &adj, cos_max, &mut scratch)
                         .into_iter()
                         .map(move |c| (c, angle))
                 })
@@ -551,10 +584,7 @@ impl Atlas {
             let results: Vec<_> = groups
                 .into_par_iter()
                 .map(|(triangles, angle)| {
-                    let sum: DVec3 = triangles
-                        .iter()
-                        .map(|&f| normals[f as usize] * areas[f as usize])
-                        .sum();
+                    let sum = normal_sum(&triangles, &normals, &areas);
                     let n = if sum.length() > 0.0 {
                         sum.normalize()
                     } else {
