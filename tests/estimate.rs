@@ -21,7 +21,8 @@ fn quiet(_: &str, _: u64, _: u64) {}
 /// that fit were refused); it said 0.8 s for a 2000-gon coin that took 26 s and 1.0 s for a
 /// 1000-segment cylinder that ran past five minutes (every rim vertex a node, on node supports
 /// as long as the object); it knew nothing of the triangle count (a 4 M-triangle mesh: 0.2 s
-/// said, about 50 s taken). Measured: 0.58x (ketchup sphere) to 1.57x (the subdivided bunny).
+/// said, about 50 s taken). Measured over three runs: 0.58-0.72x (ketchup sphere) to
+/// 1.57-1.64x (the subdivided bunny).
 #[test]
 fn estimate_bounds_the_requirements() {
     let dir = common::temp_dir("estimate");
