@@ -55,6 +55,9 @@ pub enum Command {
     /// Tabulate the half-space profile by Monte Carlo (every albedo of the table; writes the
     /// file the tabulated model ships with, assets/profiles/halfspace.txt).
     Tabulate(TabulateArgs),
+    /// Write the shipped environment map: a clear sky with a sun disc over a dark ground
+    /// (assets/environments/sky.exr; see `src/environment/sky.rs`).
+    Sky(SkyArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
     /// Open a window: orbit, zoom and pan with the mouse, move the light, switch material and
@@ -73,6 +76,17 @@ pub struct TabulateArgs {
     pub seed: u64,
     /// The table file to write.
     #[arg(long, default_value = "assets/profiles/halfspace.txt")]
+    pub out: PathBuf,
+}
+
+/// Arguments of `sky`.
+#[derive(Debug, Args)]
+pub struct SkyArgs {
+    /// Width in pixels (the height is half).
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// The OpenEXR file to write.
+    #[arg(long, default_value = "assets/environments/sky.exr")]
     pub out: PathBuf,
 }
 
@@ -1335,6 +1349,15 @@ fn check_validation(gpu: &Gpu) -> Result<()> {
     Ok(gpu.validation.check()?)
 }
 
+fn sky(args: &SkyArgs) -> Result<()> {
+    if !(8..=16384).contains(&args.width) || args.width % 2 != 0 {
+        anyhow::bail!("--width = {} must be even, between 8 and 16384", args.width);
+    }
+    crate::environment::sky::write(&args.out, args.width)?;
+    eprintln!("wrote {}", args.out.display());
+    Ok(())
+}
+
 fn tabulate(args: &TabulateArgs) -> Result<()> {
     use crate::physics::profile::{table_albedos, table_radii, HalfSpaceTable};
     if args.paths == 0 || args.paths > 1 << 40 {
@@ -1441,6 +1464,7 @@ pub fn main() -> ExitCode {
         Some(Command::Chart(args)) => chart(&cli, args),
         Some(Command::Borders(args)) => borders(args),
         Some(Command::Tabulate(args)) => tabulate(args),
+        Some(Command::Sky(args)) => sky(args),
         Some(Command::Devices) => devices(),
         Some(Command::View(args)) => view(&cli, args),
     };

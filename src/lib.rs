@@ -13,6 +13,7 @@
 pub mod bench;
 pub mod chart;
 pub mod cli;
+pub mod environment;
 pub mod geometry;
 pub mod gpu;
 pub mod graph;

@@ -1,0 +1,657 @@
+//! Environment lighting: an HDR equirectangular map around the object, at infinity.
+//!
+//! The map is split in two for the renderer:
+//! - the **sun**: the compact region far brighter than the rest (found by [`Environment::new`]),
+//!   lit as a directional light with a shadow map, so that its shadows stay sharp;
+//! - the **rest** (the sun's pixels replaced by the sky around it): projected on spherical
+//!   harmonics ([`sh`]) and dotted per texel with the texel's transfer vector, its
+//!   visibility-weighted cosine and Fresnel transmittance (precomputed radiance transfer,
+//!   Sloan et al. 2002; [`prt`]).
+//!
+//! The references (`reference`, `truth`, the per-texel test) do not split: they sample the
+//! whole map by its brightness ([`Environment::sample`]) and cast rays.
+//!
+//! Directions follow Mitsuba 3's `envmap`: pixel (x, y) of a W x H map has u = (x + 0.5) / W,
+//! v = (y + 0.5) / H, and looks along w = (sin(theta) sin(phi), cos(theta), -sin(theta) cos(phi))
+//! with phi = 2 pi u and theta = pi v: +Y is up (the top row), the map's left edge looks along
+//! -Z, its centre along +Z. `w` points from the object towards the environment. A light's
+//! `rotate_deg` turns the map about +Y.
+
+pub mod prt;
+pub mod sh;
+pub mod sky;
+
+use anyhow::{bail, Context, Result};
+use glam::{DVec3, Quat};
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// The environment shipped with the renderer (`translucent sky` writes it): a clear sky with a
+/// sun disc over a dark ground.
+pub const SKY_EXR: &[u8] = include_bytes!("../../assets/environments/sky.exr");
+
+/// Widest map the renderer works on; wider maps are averaged down to it (area-weighted, so
+/// every integral of the map is kept). 1024 pixels make 0.35 degrees: the diffuse irradiance of
+/// a translucent object has no detail that fine, and the sun's sharp shadow comes from its
+/// shadow map, not from the map's pixels.
+pub const MAX_WORK_WIDTH: u32 = 1024;
+
+/// Widest map accepted as input.
+pub const MAX_INPUT_WIDTH: u32 = 16384;
+
+/// A region is a sun when its peak is at least this many times the map's mean radiance...
+pub const SUN_CONTRAST: f64 = 50.0;
+
+/// ...and it spans at most this solid angle (sr; a disc of 4.6 degrees radius). Wider bright
+/// regions (a window, an overcast sun) stay in the spherical harmonics.
+pub const MAX_SUN_SOLID_ANGLE: f64 = 0.02;
+
+/// Width of the map the spherical-harmonic projection sums over (box-averaged from the work
+/// map): 1.4 degrees a pixel, far finer than the highest band's lobes (30 degrees at order 6).
+const PROJECTION_WIDTH: u32 = 256;
+
+/// The compact bright region of the map, lit as a directional light.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sun {
+    /// Unit direction towards the sun, in the map's frame.
+    pub direction: DVec3,
+    /// Irradiance it gives at normal incidence (above the sky it hides), per channel.
+    pub irradiance: [f64; 3],
+    /// Solid angle of its pixels, sr.
+    pub solid_angle: f64,
+}
+
+/// An environment map ready to light a scene.
+#[derive(Debug, Clone)]
+pub struct Environment {
+    /// Where it came from (a file, or "sky" for the shipped map).
+    pub source: String,
+    /// Width of the work map, pixels (twice its height).
+    pub width: u32,
+    /// Height of the work map.
+    pub height: u32,
+    /// Linear radiance of the work map, row by row from the top (+Y).
+    pub radiance: Vec<[f32; 3]>,
+    /// The sun, when the map has one.
+    pub sun: Option<Sun>,
+    /// The map without the sun, summed per projection pixel: (direction in the map's frame,
+    /// radiance x solid angle).
+    residual: Vec<(DVec3, [f64; 3])>,
+    /// Cumulative sampling weights of the work map's pixels (brightest channel x solid angle).
+    cdf: Vec<f64>,
+    /// Hash of the pixels (keys of cached results).
+    pub hash: u64,
+}
+
+/// Luminance of linear sRGB.
+fn luminance(c: [f32; 3]) -> f64 {
+    0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64
+}
+
+/// Unit direction of map coordinates (u, v) in [0, 1]^2.
+pub fn direction(u: f64, v: f64) -> DVec3 {
+    let (phi, theta) = (2.0 * PI * u, PI * v);
+    let s = theta.sin();
+    DVec3::new(s * phi.sin(), theta.cos(), -s * phi.cos())
+}
+
+/// Map coordinates (u, v) of a unit direction.
+pub fn coordinates(w: DVec3) -> (f64, f64) {
+    let u = w.x.atan2(-w.z) / (2.0 * PI);
+    let u = if u < 0.0 { u + 1.0 } else { u };
+    (u.min(1.0 - 1e-12), w.y.clamp(-1.0, 1.0).acos() / PI)
+}
+
+/// Solid angle of row `y` of an `h`-row map, per pixel of a `w`-pixel row.
+fn pixel_solid_angle(y: u32, w: u32, h: u32) -> f64 {
+    let (t0, t1) = (PI * y as f64 / h as f64, PI * (y + 1) as f64 / h as f64);
+    (t0.cos() - t1.cos()) * 2.0 * PI / w as f64
+}
+
+/// Area-weighted resampling weights from `n` source cells to `m` destination cells of the
+/// same span: for each destination cell, (source cell, overlap as a fraction of a source cell).
+fn overlaps(n: u32, m: u32) -> Vec<Vec<(u32, f64)>> {
+    (0..m)
+        .map(|j| {
+            let (a, b) = (
+                j as f64 * n as f64 / m as f64,
+                (j + 1) as f64 * n as f64 / m as f64,
+            );
+            let mut out = Vec::new();
+            let mut i = a.floor() as u32;
+            while (i as f64) < b && i < n {
+                let o = (b.min(i as f64 + 1.0) - a.max(i as f64)).max(0.0);
+                if o > 0.0 {
+                    out.push((i, o));
+                }
+                i += 1;
+            }
+            out
+        })
+        .collect()
+}
+
+/// `src` (w x h) averaged down to `dw` x `dh`, each row weighted by its solid angle.
+fn resample(src: &[[f32; 3]], w: u32, h: u32, dw: u32, dh: u32) -> Vec<[f32; 3]> {
+    let cols = overlaps(w, dw);
+    let rows = overlaps(h, dh);
+    let mut out = vec![[0f32; 3]; (dw * dh) as usize];
+    for (j, row) in rows.iter().enumerate() {
+        let mut acc = vec![[0f64; 3]; dw as usize];
+        let mut total = 0.0;
+        for &(y, oy) in row {
+            // Solid angle of the overlapped part of source row y (per unit of u).
+            let (t0, t1) = (PI * y as f64 / h as f64, PI * (y + 1) as f64 / h as f64);
+            let frac_lo = (j as f64 * h as f64 / dh as f64 - y as f64).clamp(0.0, 1.0);
+            let frac_hi = frac_lo + oy;
+            let (a, b) = (t0 + (t1 - t0) * frac_lo, t0 + (t1 - t0) * frac_hi);
+            let wy = a.cos() - b.cos();
+            total += wy;
+            for (k, col) in cols.iter().enumerate() {
+                for &(x, ox) in col {
+                    let p = src[(y * w + x) as usize];
+                    for c in 0..3 {
+                        acc[k][c] += wy * ox * p[c] as f64;
+                    }
+                }
+            }
+        }
+        let per_col = w as f64 / dw as f64;
+        for (k, a) in acc.iter().enumerate() {
+            out[j * dw as usize + k] = a.map(|v| (v / (total * per_col).max(1e-300)) as f32);
+        }
+    }
+    out
+}
+
+impl Environment {
+    /// Reads an equirectangular map: OpenEXR or Radiance HDR (told apart by their first bytes).
+    pub fn load(path: &Path) -> Result<Environment> {
+        let meta = std::fs::metadata(path)
+            .with_context(|| format!("cannot read environment map '{}'", path.display()))?;
+        crate::input::check_regular(path, &meta, crate::input::MAX_DATA_BYTES, "environment map")?;
+        let bytes = std::fs::read(path)
+            .with_context(|| format!("cannot read environment map '{}'", path.display()))?;
+        let (w, h, px) =
+            decode(&bytes).with_context(|| format!("environment map '{}'", path.display()))?;
+        Environment::new(&path.display().to_string(), w, h, px)
+            .with_context(|| format!("environment map '{}'", path.display()))
+    }
+
+    /// The shipped sky ([`SKY_EXR`]).
+    pub fn sky() -> Result<Environment> {
+        let (w, h, px) = decode(SKY_EXR).context("the shipped sky")?;
+        Environment::new("sky", w, h, px)
+    }
+
+    /// An environment from `w` x `h` linear RGB pixels: checked (2:1, finite, non-negative),
+    /// averaged down to [`MAX_WORK_WIDTH`], its sun found and set apart.
+    pub fn new(source: &str, w: u32, h: u32, pixels: Vec<[f32; 3]>) -> Result<Environment> {
+        if w != 2 * h || h < 4 {
+            bail!("an equirectangular map is twice as wide as it is high, at least 8 x 4 pixels: this one is {w} x {h}");
+        }
+        if w > MAX_INPUT_WIDTH {
+            bail!("{w} pixels wide: at most {MAX_INPUT_WIDTH} are read");
+        }
+        if pixels.len() != (w * h) as usize {
+            bail!("{} pixels for a {w} x {h} map", pixels.len());
+        }
+        let bad = pixels.iter().position(|p| p.iter().any(|c| !c.is_finite()));
+        if let Some(i) = bad {
+            let n = pixels
+                .iter()
+                .filter(|p| p.iter().any(|c| !c.is_finite()))
+                .count();
+            bail!(
+                "{n} pixel(s) are not finite (NaN or infinite), the first at ({}, {}): {:?}",
+                i as u32 % w,
+                i as u32 / w,
+                pixels[i]
+            );
+        }
+        if let Some(i) = pixels.iter().position(|p| p.iter().any(|c| *c < 0.0)) {
+            let n = pixels.iter().filter(|p| p.iter().any(|c| *c < 0.0)).count();
+            bail!(
+                "{n} pixel(s) have negative radiance, the first at ({}, {}): {:?}; light is never negative",
+                i as u32 % w,
+                i as u32 / w,
+                pixels[i]
+            );
+        }
+        let max = pixels
+            .iter()
+            .flat_map(|p| p.iter())
+            .fold(0f32, |a, &c| a.max(c)) as f64;
+        if max > crate::scene::MAX_RADIANCE {
+            bail!(
+                "a pixel of radiance {max:e} exceeds {:e}: the passes' f32 sums would overflow",
+                crate::scene::MAX_RADIANCE
+            );
+        }
+        let (radiance, width, height) = if w > MAX_WORK_WIDTH {
+            let (dw, dh) = (MAX_WORK_WIDTH, MAX_WORK_WIDTH / 2);
+            (resample(&pixels, w, h, dw, dh), dw, dh)
+        } else {
+            (pixels, w, h)
+        };
+        let mut hash = crate::preprocess::cache::Fnv::default();
+        hash.write(&width.to_le_bytes());
+        hash.write(bytemuck::cast_slice(&radiance));
+        let (sun, without_sun) = find_sun(&radiance, width, height);
+        let pw = PROJECTION_WIDTH.min(width);
+        let projected = if pw < width {
+            resample(&without_sun, width, height, pw, pw / 2)
+        } else {
+            without_sun
+        };
+        let ph = pw / 2;
+        let mut residual = Vec::with_capacity(projected.len());
+        for y in 0..ph {
+            let d_omega = pixel_solid_angle(y, pw, ph);
+            for x in 0..pw {
+                let w = direction((x as f64 + 0.5) / pw as f64, (y as f64 + 0.5) / ph as f64);
+                let p = projected[(y * pw + x) as usize];
+                residual.push((w, p.map(|c| c as f64 * d_omega)));
+            }
+        }
+        let mut cdf = Vec::with_capacity(radiance.len());
+        let mut total = 0.0;
+        for y in 0..height {
+            let d_omega = pixel_solid_angle(y, width, height);
+            for x in 0..width {
+                let p = radiance[(y * width + x) as usize];
+                total += p.iter().fold(0f32, |a, &c| a.max(c)) as f64 * d_omega;
+                cdf.push(total);
+            }
+        }
+        if total <= 0.0 {
+            bail!("every pixel is black: the environment gives no light");
+        }
+        Ok(Environment {
+            source: source.to_string(),
+            width,
+            height,
+            radiance,
+            sun,
+            residual,
+            cdf,
+            hash: hash.finish(),
+        })
+    }
+
+    /// Radiance arriving from map direction `w` (the pixel it falls in).
+    pub fn radiance_towards(&self, w: DVec3) -> [f64; 3] {
+        let (u, v) = coordinates(w);
+        let x = ((u * self.width as f64) as u32).min(self.width - 1);
+        let y = ((v * self.height as f64) as u32).min(self.height - 1);
+        self.radiance[(y * self.width + x) as usize].map(|c| c as f64)
+    }
+
+    /// A direction drawn by brightness from three uniform numbers: (direction in the map's
+    /// frame, radiance from it, probability density per steradian). Within a pixel the
+    /// direction is uniform in solid angle, so the density is the pixel's weight over its
+    /// solid angle.
+    pub fn sample(&self, r: [f64; 3]) -> (DVec3, [f64; 3], f64) {
+        let total = *self.cdf.last().unwrap_or(&1.0);
+        let target = r[0] * total;
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= target)
+            .min(self.cdf.len() - 1);
+        let (x, y) = (i as u32 % self.width, i as u32 / self.width);
+        let (t0, t1) = (
+            PI * y as f64 / self.height as f64,
+            PI * (y + 1) as f64 / self.height as f64,
+        );
+        let cos_t = t0.cos() + r[2] * (t1.cos() - t0.cos());
+        let v = cos_t.clamp(-1.0, 1.0).acos() / PI;
+        let u = (x as f64 + r[1]) / self.width as f64;
+        let w = direction(u, v);
+        let weight = self.cdf[i] - if i > 0 { self.cdf[i - 1] } else { 0.0 };
+        let pdf = weight / total / pixel_solid_angle(y, self.width, self.height);
+        (w, self.radiance[i].map(|c| c as f64), pdf)
+    }
+
+    /// The map without its sun projected on spherical harmonics of `order`, turned by
+    /// `rotation` (map frame -> world): per coefficient, RGB.
+    pub fn sh_coefficients(&self, order: u32, rotation: Quat) -> Vec<[f64; 3]> {
+        let k = sh::coefficients(order);
+        let q = rotation.as_dquat();
+        let mut out = vec![[0.0; 3]; k];
+        let mut y = vec![0.0; k];
+        for (w, l) in &self.residual {
+            sh::eval(order, q * *w, &mut y);
+            for (o, yk) in out.iter_mut().zip(&y) {
+                for c in 0..3 {
+                    o[c] += l[c] * yk;
+                }
+            }
+        }
+        out
+    }
+
+    /// Irradiance of the map without its sun on a plane facing map direction `n`, nothing in
+    /// the way (the sum over the projection's pixels).
+    pub fn sky_irradiance(&self, n: DVec3) -> [f64; 3] {
+        let mut e = [0.0; 3];
+        for (w, l) in &self.residual {
+            let c = n.dot(*w);
+            if c > 0.0 {
+                for k in 0..3 {
+                    e[k] += l[k] * c;
+                }
+            }
+        }
+        e
+    }
+
+    /// The most irradiance the whole map gives a plane, nothing in the way (the brightest of
+    /// 256 orientations spread over the sphere): sets the automatic exposure.
+    pub fn peak_irradiance(&self) -> f64 {
+        let n = 256;
+        (0..n)
+            .map(|i| {
+                // Fibonacci sphere.
+                let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
+                let phi = i as f64 * PI * (3.0 - 5f64.sqrt());
+                let r = (1.0 - z * z).sqrt();
+                let d = DVec3::new(r * phi.cos(), z, r * phi.sin());
+                let mut e = self.sky_irradiance(d);
+                if let Some(s) = &self.sun {
+                    let c = d.dot(s.direction).max(0.0);
+                    for k in 0..3 {
+                        e[k] += s.irradiance[k] * c;
+                    }
+                }
+                e.iter().fold(0.0f64, |a, &b| a.max(b))
+            })
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Decodes an OpenEXR (first RGBA layer, alpha ignored) or Radiance HDR file's bytes.
+pub fn decode(bytes: &[u8]) -> Result<(u32, u32, Vec<[f32; 3]>)> {
+    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        use exr::prelude::*;
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgba_channels(
+                |resolution, _| {
+                    (
+                        resolution.width(),
+                        vec![[0f32; 3]; resolution.width() * resolution.height()],
+                    )
+                },
+                |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                    px[pos.y() * *w + pos.x()] = [r, g, b];
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(std::io::Cursor::new(bytes))
+            .context("not a readable OpenEXR image with RGB channels")?;
+        let size = image.layer_data.size;
+        if size.width() > MAX_INPUT_WIDTH as usize || size.height() > MAX_INPUT_WIDTH as usize {
+            bail!(
+                "{} x {}: at most {MAX_INPUT_WIDTH} pixels a side are read",
+                size.width(),
+                size.height()
+            );
+        }
+        Ok((
+            size.width() as u32,
+            size.height() as u32,
+            image.layer_data.channel_data.pixels.1,
+        ))
+    } else if bytes.starts_with(b"#?") {
+        let decoder = image::codecs::hdr::HdrDecoder::new(std::io::Cursor::new(bytes))
+            .context("not a readable Radiance HDR image")?;
+        let image = image::DynamicImage::from_decoder(decoder)
+            .context("not a readable Radiance HDR image")?
+            .into_rgb32f();
+        let (w, h) = image.dimensions();
+        Ok((w, h, image.pixels().map(|p| p.0).collect()))
+    } else {
+        bail!("neither OpenEXR nor Radiance HDR (by its first bytes)")
+    }
+}
+
+/// Finds the sun of a map (see [`SUN_CONTRAST`], [`MAX_SUN_SOLID_ANGLE`]): its pixels are those
+/// joined to the brightest one above the geometric mean of the peak and the map's mean
+/// luminance. Returns it and the map with those pixels set to the mean of the sky around them.
+fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]>) {
+    let lum: Vec<f64> = radiance.iter().map(|&p| luminance(p)).collect();
+    let mut mean = 0.0;
+    for y in 0..h {
+        let d = pixel_solid_angle(y, w, h);
+        for x in 0..w {
+            mean += lum[(y * w + x) as usize] * d;
+        }
+    }
+    mean /= 4.0 * PI;
+    let peak_i = (0..lum.len())
+        .max_by(|&a, &b| lum[a].total_cmp(&lum[b]))
+        .unwrap_or(0);
+    let peak = lum[peak_i];
+    let unchanged = radiance.to_vec();
+    if mean <= 0.0 || peak < SUN_CONTRAST * mean {
+        return (None, unchanged);
+    }
+    let threshold = (peak * mean).sqrt();
+    // Flood fill, 8-connected, wrapping across the map's left and right edges.
+    let mut inside = vec![false; lum.len()];
+    let mut stack = vec![peak_i];
+    inside[peak_i] = true;
+    let mut region = Vec::new();
+    while let Some(i) = stack.pop() {
+        region.push(i);
+        let (x, y) = ((i as u32 % w) as i64, (i as u32 / w) as i64);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let ny = y + dy;
+                if ny < 0 || ny >= h as i64 {
+                    continue;
+                }
+                let nx = (x + dx).rem_euclid(w as i64);
+                let j = (ny as u32 * w + nx as u32) as usize;
+                if !inside[j] && lum[j] > threshold {
+                    inside[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    let solid: f64 = region
+        .iter()
+        .map(|&i| pixel_solid_angle(i as u32 / w, w, h))
+        .sum();
+    if solid > MAX_SUN_SOLID_ANGLE {
+        return (None, unchanged);
+    }
+    // The sky around: the pixels within two of the region, not in it.
+    let mut ring = vec![false; lum.len()];
+    for &i in &region {
+        let (x, y) = ((i as u32 % w) as i64, (i as u32 / w) as i64);
+        for dy in -2..=2 {
+            for dx in -2..=2 {
+                let ny = y + dy;
+                if ny < 0 || ny >= h as i64 {
+                    continue;
+                }
+                let j = (ny as u32 * w + (x + dx).rem_euclid(w as i64) as u32) as usize;
+                ring[j] = !inside[j];
+            }
+        }
+    }
+    let (mut sky, mut sky_w) = ([0.0f64; 3], 0.0);
+    for (j, _) in ring.iter().enumerate().filter(|(_, r)| **r) {
+        let d = pixel_solid_angle(j as u32 / w, w, h);
+        for c in 0..3 {
+            sky[c] += radiance[j][c] as f64 * d;
+        }
+        sky_w += d;
+    }
+    let sky = sky.map(|s| s / sky_w.max(1e-300));
+    let mut irradiance = [0.0; 3];
+    let mut dir = DVec3::ZERO;
+    let mut out = unchanged;
+    for &i in &region {
+        let (x, y) = (i as u32 % w, i as u32 / w);
+        let d = pixel_solid_angle(y, w, h);
+        let wdir = direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
+        let excess: [f64; 3] = std::array::from_fn(|c| (radiance[i][c] as f64 - sky[c]).max(0.0));
+        for c in 0..3 {
+            irradiance[c] += excess[c] * d;
+        }
+        dir += wdir * luminance(excess.map(|e| e as f32)) * d;
+        out[i] = sky.map(|s| s as f32);
+    }
+    let sun = Sun {
+        direction: dir.normalize_or(DVec3::Y),
+        irradiance,
+        solid_angle: solid,
+    };
+    (Some(sun), out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn directions_and_coordinates_invert() {
+        for &(u, v) in &[(0.1, 0.2), (0.5, 0.5), (0.9, 0.7), (0.25, 0.01)] {
+            let (a, b) = coordinates(direction(u, v));
+            assert!(
+                (a - u).abs() < 1e-9 && (b - v).abs() < 1e-9,
+                "{u} {v} -> {a} {b}"
+            );
+        }
+        // Mitsuba's frame: the top row is +Y, u = 0.25 looks along +X, u = 0.5 along +Z.
+        assert!(direction(0.3, 0.0).distance(DVec3::Y) < 1e-9);
+        assert!(direction(0.25, 0.5).distance(DVec3::X) < 1e-9);
+        assert!(direction(0.5, 0.5).distance(DVec3::Z) < 1e-9);
+    }
+
+    fn uniform(w: u32, value: f32) -> Vec<[f32; 3]> {
+        vec![[value; 3]; (w * w / 2) as usize]
+    }
+
+    #[test]
+    fn a_uniform_map_projects_and_samples_exactly() {
+        let env = Environment::new("test", 64, 32, uniform(64, 2.0)).unwrap();
+        assert!(env.sun.is_none());
+        // Irradiance of a uniform radiance L on any plane: pi L.
+        let e = env.sky_irradiance(DVec3::new(0.3, 0.4, 0.5).normalize());
+        assert!((e[0] - 2.0 * PI).abs() < 1e-3 * 2.0 * PI, "{e:?}");
+        // Only the constant band: 2 sqrt(pi) L.
+        let c = env.sh_coefficients(3, Quat::from_rotation_y(0.7));
+        assert!((c[0][1] - 2.0 * 2.0 * PI.sqrt()).abs() < 1e-6, "{:?}", c[0]);
+        // The others vanish up to the pixel-centre quadrature (a 64 x 32 map: 5e-4 of c0).
+        for k in 1..9 {
+            assert!(c[k][1].abs() < 1e-3 * c[0][1], "{k}: {:?}", c[k]);
+        }
+        // Sampling: uniform over the sphere.
+        let (_, l, pdf) = env.sample([0.3, 0.6, 0.2]);
+        assert!((pdf - 1.0 / (4.0 * PI)).abs() < 1e-9 && l[2] == 2.0);
+    }
+
+    #[test]
+    fn the_sun_is_set_apart_with_its_irradiance() {
+        let (w, h) = (256u32, 128u32);
+        let mut px = uniform(w, 0.5);
+        // A 3 x 3-pixel sun of radiance 1000 over the sky of 0.5.
+        let (sx, sy) = (40u32, 30u32);
+        let mut expect = 0.0;
+        for y in sy - 1..=sy + 1 {
+            for x in sx - 1..=sx + 1 {
+                px[(y * w + x) as usize] = [1000.0; 3];
+                expect += 999.5 * pixel_solid_angle(y, w, h);
+            }
+        }
+        let env = Environment::new("test", w, h, px).unwrap();
+        let sun = env.sun.expect("a sun");
+        assert!((sun.irradiance[0] - expect).abs() < 1e-6 * expect);
+        let d = direction((sx as f64 + 0.5) / w as f64, (sy as f64 + 0.5) / h as f64);
+        assert!(
+            sun.direction.angle_between(d) < 0.01,
+            "{:?} vs {d:?}",
+            sun.direction
+        );
+        // The rest is the uniform sky again.
+        let e = env.sky_irradiance(DVec3::Y);
+        assert!((e[0] - 0.5 * PI).abs() < 1e-3, "{e:?}");
+        // A wide bright region is no sun.
+        let mut wide = uniform(w, 0.5);
+        for y in 20..60 {
+            for x in 20..100 {
+                wide[(y * w + x) as usize] = [1000.0; 3];
+            }
+        }
+        assert!(Environment::new("test", w, h, wide).unwrap().sun.is_none());
+    }
+
+    #[test]
+    fn averaging_down_keeps_the_integrals() {
+        let (w, h) = (2 * MAX_WORK_WIDTH + 6, MAX_WORK_WIDTH + 3);
+        let px: Vec<[f32; 3]> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                [1.0 + (x % 7) as f32, 1.0 + (y % 5) as f32, 2.0]
+            })
+            .collect();
+        let mut total = [0.0; 3];
+        for y in 0..h {
+            for x in 0..w {
+                for c in 0..3 {
+                    total[c] += px[(y * w + x) as usize][c] as f64 * pixel_solid_angle(y, w, h);
+                }
+            }
+        }
+        let env = Environment::new("test", w, h, px).unwrap();
+        assert_eq!(env.width, MAX_WORK_WIDTH);
+        let mut after = [0.0; 3];
+        for y in 0..env.height {
+            for x in 0..env.width {
+                for c in 0..3 {
+                    after[c] += env.radiance[(y * env.width + x) as usize][c] as f64
+                        * pixel_solid_angle(y, env.width, env.height);
+                }
+            }
+        }
+        for c in 0..3 {
+            assert!(
+                (after[c] - total[c]).abs() < 1e-4 * total[c],
+                "{after:?} vs {total:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_maps_are_refused_by_name() {
+        let e = Environment::new("t", 30, 10, vec![[1.0; 3]; 300]).unwrap_err();
+        assert!(e.to_string().contains("twice as wide"), "{e}");
+        let mut px = uniform(16, 1.0);
+        px[5] = [f32::NAN, 0.0, 0.0];
+        let e = Environment::new("t", 16, 8, px).unwrap_err();
+        assert!(e.to_string().contains("not finite"), "{e}");
+        let mut px = uniform(16, 1.0);
+        px[9] = [0.0, -1.0, 0.0];
+        let e = Environment::new("t", 16, 8, px).unwrap_err();
+        assert!(e.to_string().contains("negative"), "{e}");
+        let e = Environment::new("t", 16, 8, uniform(16, 0.0)).unwrap_err();
+        assert!(e.to_string().contains("black"), "{e}");
+        assert!(decode(b"P6 not an hdr").is_err());
+    }
+
+    #[test]
+    fn the_shipped_sky_has_a_sun() {
+        let env = Environment::sky().unwrap();
+        let sun = env.sun.expect("the shipped sky has a sun");
+        // Above the horizon, several times the sky's irradiance on the ground.
+        assert!(sun.direction.y > 0.3, "{:?}", sun.direction);
+        let sky = env.sky_irradiance(DVec3::Y);
+        assert!(sun.irradiance[1] > 2.0 * sky[1], "{sun:?} vs {sky:?}");
+    }
+}
