@@ -6,6 +6,7 @@
 #define MAX_LIGHTS 8
 #define MAX_SHADOW_LAYERS 48
 #define EXIT_LOBE_SAMPLES 16
+#define MAX_SH_COEFFICIENTS 36
 #define LIGHT_DIRECTIONAL 0u
 #define LIGHT_POINT 1u
 #define LIGHT_SPOT 2u
@@ -26,11 +27,14 @@ layout(std140, set = 0, binding = 0) uniform Frame {
     vec4 material;         // x: relative index of refraction eta
     vec4 sigma_s;          // rgb: reduced scattering coefficient, 1/mm
     vec4 sigma_t;          // rgb: sigma_s' + sigma_a, 1/mm
-    uvec4 counts;          // x: number of lights, y: number of shadow-map layers
+    uvec4 counts;          // x: number of lights, y: number of shadow-map layers,
+                           // z: the environment's SH coefficients (0: none), w: transfer
+                           //    elements (8 f16 coefficients each) per atlas texel
     Light lights[MAX_LIGHTS];
     mat4 shadow_view_proj[MAX_SHADOW_LAYERS]; // world (mm) -> shadow-map clip space, per layer
     mat4 shadow_inverse[MAX_SHADOW_LAYERS];   // shadow-map clip space -> world (mm), per layer
     vec4 exit_lobe[EXIT_LOBE_SAMPLES]; // rgb: exit radiance / Lambertian at cosines (i + 0.5) / 16
+    vec4 environment[MAX_SH_COEFFICIENTS]; // rgb: the environment's SH coefficients, turned, scaled
 } frame;
 
 // The profile's exit radiance relative to a Lambertian exit at exit cosine mu (1 for the

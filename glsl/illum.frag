@@ -1,11 +1,19 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Irradiance entering the surface: E = sum over lights of L F_t(eta, cos) max(0, N.w_i) V.
+// Irradiance entering the surface: E = sum over lights of L F_t(eta, cos) max(0, N.w_i) V,
+// plus the environment's: its spherical-harmonic coefficients dotted with the texel's transfer
+// (visibility x cosine x Fresnel, precomputed; its sun is one of the lights).
 // Alpha 1 marks texels whose centre a triangle covers (the dilation pass fills the rest).
 #include "frame.glsl"
 #include "shadow.glsl"
 
 layout(set = 0, binding = 1) uniform sampler2DArrayShadow shadow_maps;
+// Per atlas texel, counts.w elements of eight f16 transfer coefficients.
+layout(set = 0, binding = 2) uniform usamplerBuffer transfer;
+
+layout(push_constant) uniform Push {
+    vec2 atlas_size;                     // texels
+} push;
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
@@ -25,6 +33,25 @@ void main() {
             e += irradiance * cos_i * fresnel_transmittance(eta, cos_i)
                 * shadow_visibility(shadow_maps, i, in_position, n);
         }
+    }
+    uint coefficients = frame.counts.z;
+    if (coefficients > 0u) {
+        uvec2 t = uvec2(gl_FragCoord.xy);
+        int base = int((t.y * uint(push.atlas_size.x) + t.x) * frame.counts.w);
+        for (uint j = 0u; j < frame.counts.w; ++j) {
+            uvec4 q = texelFetch(transfer, base + int(j));
+            uint words[4] = uint[4](q.x, q.y, q.z, q.w);
+            for (uint i = 0u; i < 8u; ++i) {
+                uint k = 8u * j + i;
+                if (k >= coefficients) {
+                    break;
+                }
+                vec2 h = unpackHalf2x16(words[i / 2u]);
+                e += ((i & 1u) == 0u ? h.x : h.y) * frame.environment[k].rgb;
+            }
+        }
+        // Negative ringing of a truncated series where little light arrives.
+        e = max(e, vec3(0.0));
     }
     out_irradiance = vec4(e, 1.0);
 }

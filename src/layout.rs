@@ -63,11 +63,14 @@ pub enum Item {
     SingleDepth,
     /// Light-entry depth per shadow-map texel, without the shadow bias (the same models).
     EntryDepth,
+    /// The environment's transfer per atlas texel: its spherical-harmonic coefficients as f16,
+    /// eight to an element (scenes with an environment light; 1 element else).
+    EnvironmentTransfer,
 }
 
 impl Item {
     /// Every item, in the memory report's order.
-    pub const ALL: [Item; 27] = [
+    pub const ALL: [Item; 28] = [
         Item::AtlasVertices,
         Item::AtlasIndices,
         Item::CoveredTexels,
@@ -95,6 +98,7 @@ impl Item {
         Item::BackDepth,
         Item::SingleDepth,
         Item::EntryDepth,
+        Item::EnvironmentTransfer,
     ];
 
     /// Its name: the Vulkan object's debug name and the memory report's label.
@@ -127,6 +131,7 @@ impl Item {
             Item::BackDepth => "back-face depth",
             Item::SingleDepth => "single-scattering depth",
             Item::EntryDepth => "light-entry depth",
+            Item::EnvironmentTransfer => "environment transfer",
         }
     }
 
@@ -143,7 +148,7 @@ impl Item {
             | Item::SeamRows
             | Item::GatherRows
             | Item::GlobalRows => F::R32_UINT,
-            Item::Kernels | Item::GlobalEntries => F::R32G32B32A32_UINT,
+            Item::Kernels | Item::GlobalEntries | Item::EnvironmentTransfer => F::R32G32B32A32_UINT,
             Item::SeamEntries
             | Item::IlluminationMap
             | Item::LocalResponse
@@ -213,6 +218,8 @@ pub struct Counts {
     pub pixels: u64,
     /// Whether the model has the single-scattering passes.
     pub single: bool,
+    /// Environment transfer elements per atlas texel (0 without an environment light).
+    pub transfer_per_texel: u64,
 }
 
 impl Counts {
@@ -238,6 +245,7 @@ impl Counts {
             | Item::Display
             | Item::RadianceReadback
             | Item::DisplayReadback => self.pixels,
+            Item::EnvironmentTransfer => self.atlas_texels * self.transfer_per_texel,
             Item::EntryDepth => {
                 if self.single {
                     self.shadow_side * self.shadow_side * self.shadow_layers

@@ -101,6 +101,8 @@ pub struct Renderer {
     /// The uniforms that follow from the material (fixed for a renderer).
     material_uniforms: MaterialUniforms,
     last_lights: Option<Vec<Light>>,
+    /// Order of the environment's transfer (0 without an environment).
+    sh_order: u32,
     window: Option<(Arc<Image>, passes::overlay::Text)>,
     readback_requested: bool,
 }
@@ -144,12 +146,30 @@ impl Renderer {
     ) -> Result<SubsurfaceData> {
         // Refuse before allocating anything what the device cannot hold.
         passes::data::Requirements::of(scene, pre, options.mode).check(&gpu.info)?;
+        let transfer = scene.environment.as_ref().map(|_| {
+            let t = crate::environment::prt::transfer(
+                &scene.mesh,
+                &pre.atlas,
+                scene.material.eta,
+                scene.prt,
+            );
+            tracing::info!(
+                "environment transfer: order {} ({} coefficients), {} rays per texel, {} texels: {:.2} s",
+                t.settings.order,
+                crate::environment::sh::coefficients(t.settings.order),
+                t.settings.rays,
+                pre.atlas.texels.len(),
+                t.seconds
+            );
+            t
+        });
         SubsurfaceData::upload(
             gpu,
             scene,
             pre,
             options.mode,
             options.global_layout == compute::GlobalLayout::Storage,
+            transfer.as_ref(),
         )
         .context("uploading the preprocessing")
     }
@@ -194,6 +214,7 @@ impl Renderer {
         let gather_entries = g.import_buffer(data.gather_entries.clone(), None);
         let global_rows = g.import_buffer(data.global_rows.clone(), None);
         let global_entries = g.import_buffer(data.global_entries.clone(), None);
+        let transfer = g.import_buffer(data.transfer.clone(), None);
         let charts = g.import_image(data.charts.clone(), Access::Sampled(Stage::Compute));
         let texture = g.import_image(data.texture.clone(), Access::Sampled(Stage::Fragment));
         let local = g.import_image(local_image, Access::StorageRead(Stage::Fragment));
@@ -251,6 +272,7 @@ impl Renderer {
                 indices,
                 index_count: data.index_count,
                 shadow_maps,
+                transfer,
             },
             map,
         );
@@ -435,6 +457,7 @@ impl Renderer {
             display_readback,
             capture,
             shadow_map_size: s,
+            sh_order: data.sh_order,
             last_lights: None,
             window,
             readback_requested: false,
@@ -569,6 +592,7 @@ impl Renderer {
             &self.material_uniforms,
             lights,
             self.shadow_map_size,
+            self.sh_order,
         )?;
         if !self.uniforms.write_mapped(bytemuck::bytes_of(&uniforms)) {
             anyhow::bail!("the uniform buffer is not host-visible");

@@ -28,7 +28,7 @@ use std::f64::consts::PI;
 pub const LIFT_TEXELS: f64 = 0.5;
 
 /// The transfer's order and ray count.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct PrtSettings {
     /// Spherical-harmonic order (bands 0..order-1).
     pub order: u32,
@@ -60,7 +60,7 @@ impl PrtSettings {
     pub fn validate(&self) -> anyhow::Result<()> {
         if !(1..=sh::MAX_ORDER).contains(&self.order) {
             anyhow::bail!(
-                "--sh-order = {} must lie between 1 and {}",
+                "sh_order = {} must lie between 1 and {}",
                 self.order,
                 sh::MAX_ORDER
             );
@@ -68,7 +68,7 @@ impl PrtSettings {
         let s = (self.rays as f64).sqrt().round() as u32;
         if self.rays == 0 || s * s != self.rays || self.rays > 65536 {
             anyhow::bail!(
-                "--prt-rays = {} must be a square number (16 x 16 = 256) between 1 and 65536",
+                "rays = {} must be a square number (16 x 16 = 256) between 1 and 65536",
                 self.rays
             );
         }

@@ -65,6 +65,65 @@ pub fn eval(order: u32, w: DVec3, out: &mut [f64]) {
     }
 }
 
+/// Nodes and weights of n-point Gauss-Legendre quadrature on [-1, 1].
+fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|i| {
+            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            let mut dp = 1.0;
+            for _ in 0..100 {
+                // P_n(x) and its derivative by the three-term recurrence.
+                let (mut p0, mut p1) = (1.0, x);
+                for k in 2..=n {
+                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                    p0 = p1;
+                    p1 = p2;
+                }
+                let p = if n == 0 { 1.0 } else { p1 };
+                dp = n as f64 * (x * p - p0) / (x * x - 1.0);
+                let step = p / dp;
+                x -= step;
+                if step.abs() < 1e-15 {
+                    break;
+                }
+            }
+            (x, 2.0 / ((1.0 - x * x) * dp * dp))
+        })
+        .collect()
+}
+
+/// The matrix that turns coefficients of order `order` by `q`: if f has coefficients c,
+/// f(q^-1 w) has coefficients M c, with M[k][j] = integral of Y_k(q w) Y_j(w) dw (row-major,
+/// `order^2` square; zero between different bands). Exact: the integrand is a polynomial of
+/// degree 2 (order - 1) at most on the sphere, which a product of Gauss-Legendre nodes in z and
+/// equally spaced ones in phi integrates exactly.
+pub fn rotation(order: u32, q: glam::DQuat) -> Vec<f64> {
+    let k = coefficients(order);
+    let mut m = vec![0.0; k * k];
+    let n = order as usize + 1;
+    let np = 2 * order as usize + 1;
+    let (mut a, mut b) = (vec![0.0; k], vec![0.0; k]);
+    for (z, wz) in gauss_legendre(n) {
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        for j in 0..np {
+            let phi = 2.0 * std::f64::consts::PI * j as f64 / np as f64;
+            let w = DVec3::new(r * phi.cos(), r * phi.sin(), z);
+            let weight = wz * 2.0 * std::f64::consts::PI / np as f64;
+            eval(order, q * w, &mut a);
+            eval(order, w, &mut b);
+            for l in 0..order as usize {
+                let band = l * l..(l + 1) * (l + 1);
+                for row in band.clone() {
+                    for col in band.clone() {
+                        m[row * k + col] += weight * a[row] * b[col];
+                    }
+                }
+            }
+        }
+    }
+    m
+}
+
 /// K_l^m = sqrt((2l + 1) / (4 pi) (l - m)! / (l + m)!).
 fn norm(l: usize, m: usize) -> f64 {
     let mut ratio = 1.0;
@@ -96,6 +155,60 @@ mod tests {
         assert!((y[6] - c20).abs() < 1e-12);
         let c22 = 0.25 * (15.0 / PI).sqrt() * (w.x * w.x - w.y * w.y);
         assert!((y[8].abs() - c22.abs()).abs() < 1e-12, "{} {}", y[8], c22);
+    }
+
+    #[test]
+    fn rotating_coefficients_equals_rotating_the_function() {
+        // f = a sum of a few lobes; its coefficients turned by M must be those of the turned
+        // function, projected again by quadrature.
+        let order = MAX_ORDER;
+        let k = coefficients(order);
+        let lobes = [
+            (DVec3::new(0.3, 0.8, 0.1).normalize(), 3.0),
+            (DVec3::new(-0.7, -0.2, 0.5).normalize(), 1.5),
+        ];
+        let f = |w: DVec3| -> f64 {
+            lobes
+                .iter()
+                .map(|(d, s)| (s * (w.dot(*d) - 1.0)).exp())
+                .sum()
+        };
+        let q = glam::DQuat::from_euler(glam::EulerRot::YXZ, 0.7, -0.4, 1.1);
+        let project = |g: &dyn Fn(DVec3) -> f64| -> Vec<f64> {
+            let (nt, np) = (300, 600);
+            let mut c = vec![0.0; k];
+            let mut y = vec![0.0; k];
+            for i in 0..nt {
+                let (t0, t1) = (PI * i as f64 / nt as f64, PI * (i + 1) as f64 / nt as f64);
+                let theta = 0.5 * (t0 + t1);
+                let d = (t0.cos() - t1.cos()) * 2.0 * PI / np as f64;
+                for j in 0..np {
+                    let phi = 2.0 * PI * (j as f64 + 0.5) / np as f64;
+                    let w = DVec3::new(
+                        theta.sin() * phi.cos(),
+                        theta.sin() * phi.sin(),
+                        theta.cos(),
+                    );
+                    eval(order, w, &mut y);
+                    let v = g(w) * d;
+                    for (ck, yk) in c.iter_mut().zip(&y) {
+                        *ck += v * yk;
+                    }
+                }
+            }
+            c
+        };
+        let c = project(&f);
+        let turned = project(&|w: DVec3| f(q.inverse() * w));
+        let m = rotation(order, q);
+        for row in 0..k {
+            let mc: f64 = (0..k).map(|col| m[row * k + col] * c[col]).sum();
+            assert!(
+                (mc - turned[row]).abs() < 2e-4 * c[0].abs(),
+                "{row}: {mc} vs {}",
+                turned[row]
+            );
+        }
     }
 
     #[test]

@@ -169,6 +169,10 @@ pub struct SubsurfaceData {
     pub node_count: u32,
     /// The texture (white 1x1 without one).
     pub texture: Arc<Image>,
+    /// The environment's transfer per atlas texel (one zero element without an environment).
+    pub transfer: Arc<Buffer>,
+    /// Its spherical-harmonic order (0 without an environment).
+    pub sh_order: u32,
 }
 
 /// The sRGB transfer function, inverted (textures are sRGB-encoded; the GPU samples them
@@ -503,6 +507,17 @@ pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::
             .sum(),
         pixels: scene.width as u64 * scene.height as u64,
         single: scene.material.model.has_single_pass(),
+        transfer_per_texel: transfer_per_texel(scene),
+    }
+}
+
+/// Transfer elements per atlas texel: eight f16 coefficients to an element, 0 without an
+/// environment light.
+pub fn transfer_per_texel(scene: &Scene) -> u64 {
+    if scene.environment.is_some() {
+        crate::environment::sh::coefficients(scene.prt.order).div_ceil(8) as u64
+    } else {
+        0
     }
 }
 
@@ -535,6 +550,7 @@ impl Requirements {
         Requirements {
             total: items.iter().map(|i| i.1).sum(),
             largest_texel_buffer: [
+                Item::EnvironmentTransfer,
                 Item::Kernels,
                 Item::GlobalEntries,
                 Item::GatherEntries,
@@ -607,14 +623,16 @@ impl Requirements {
 }
 
 impl SubsurfaceData {
-    /// Uploads the preprocessing of `scene` for blending `mode`; with `global_storage` the
-    /// global matrix is also usable as storage buffers (see `GlobalLayout::Storage`).
+    /// Uploads the preprocessing of `scene` for blending `mode`, with the environment's
+    /// `transfer` where the scene has an environment light; with `global_storage` the global
+    /// matrix is also usable as storage buffers (see `GlobalLayout::Storage`).
     pub fn upload(
         gpu: &Arc<Gpu>,
         scene: &Scene,
         pre: &Preprocessed,
         mode: Blend,
         global_storage: bool,
+        transfer: Option<&crate::environment::prt::Transfer>,
     ) -> GpuResult<SubsurfaceData> {
         let atlas = &pre.atlas;
         let ops = &pre.ops;
@@ -799,7 +817,34 @@ impl SubsurfaceData {
             )?,
             None => Image::from_rgba8(gpu, "albedo texture (white)", 1, 1, &[255; 4])?,
         };
+        // Dense over the atlas (the illumination pass finds a fragment's texel by its
+        // coordinates), eight f16 coefficients to an element; zero on uncovered texels.
+        let (transfer, sh_order) = match transfer {
+            Some(tr) => {
+                let k = crate::environment::sh::coefficients(tr.settings.order);
+                let per = k.div_ceil(8);
+                let mut dense = vec![[0u32; 4]; (atlas.width * atlas.height) as usize * per];
+                for (t, texel) in atlas.texels.iter().enumerate() {
+                    let base = (texel.y * atlas.width + texel.x) as usize * per;
+                    let row = &tr.coefficients[t * k..(t + 1) * k];
+                    for (j, c) in row.iter().enumerate() {
+                        let e = &mut dense[base + j / 8][(j % 8) / 2];
+                        *e |= (crate::gpu::half::to_f16(*c) as u32) << (16 * (j % 2));
+                    }
+                }
+                (
+                    upload(gpu, Item::EnvironmentTransfer, &dense, texel_usage)?,
+                    tr.settings.order,
+                )
+            }
+            None => (
+                upload(gpu, Item::EnvironmentTransfer, &[[0u32; 4]], texel_usage)?,
+                0,
+            ),
+        };
         Ok(SubsurfaceData {
+            transfer,
+            sh_order,
             vertices,
             indices,
             index_count: atlas.indices.len() as u32,

@@ -32,7 +32,13 @@ pub struct FrameUniforms {
     shadow_view_proj: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
     shadow_inverse: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
     exit_lobe: [[f32; 4]; EXIT_LOBE_SAMPLES],
+    environment: [[f32; 4]; MAX_SH_COEFFICIENTS],
 }
+
+/// Spherical-harmonic coefficients of the environment in the uniforms (`MAX_SH_COEFFICIENTS`
+/// in glsl/frame.glsl).
+pub const MAX_SH_COEFFICIENTS: usize =
+    crate::environment::sh::coefficients(crate::environment::sh::MAX_ORDER);
 
 /// Samples of the exit lobe in the uniforms (`EXIT_LOBE_SAMPLES` in glsl/frame.glsl): the
 /// exit cosine at the centres of equal bins over (0, 1].
@@ -70,12 +76,15 @@ impl MaterialUniforms {
 
 impl FrameUniforms {
     /// Uniforms for `scene` (its material's part given as `material`) with its lights as given
-    /// and `shadow_map_size`-texel shadow maps.
+    /// and `shadow_map_size`-texel shadow maps. An environment light becomes its sun (a
+    /// directional light, black without one) and its map's spherical-harmonic coefficients of
+    /// `sh_order` (the transfer's), turned and scaled as the light says.
     pub fn new(
         scene: &Scene,
         material: &MaterialUniforms,
         lights: &[Light],
         shadow_map_size: u32,
+        sh_order: u32,
     ) -> Result<FrameUniforms> {
         let (center, radius) = scene.bounds();
         let aspect = scene.width as f32 / scene.height as f32;
@@ -99,15 +108,36 @@ impl FrameUniforms {
                 u.shadow_inverse[layer + k] = s.view_proj.inverse().to_cols_array_2d();
             }
             let shadow = shadows[0];
+            let mut radiance = light.radiance;
             let kind = match light.kind {
                 LightKind::Directional => 0.0,
                 LightKind::Point => 1.0,
                 LightKind::Spot => 2.0,
+                LightKind::Environment => {
+                    let Some(env) = &scene.environment else {
+                        bail!("an environment light in a scene without an environment map");
+                    };
+                    let sun = env.sun.map_or([0.0; 3], |s| s.irradiance);
+                    radiance *= glam::DVec3::from_array(sun).as_vec3();
+                    if sh_order > 0 {
+                        let c = env.coefficients(sh_order, light.rotation);
+                        for (u, c) in u.environment.iter_mut().zip(&c) {
+                            *u = [0, 1, 2, 3].map(|ch| {
+                                if ch < 3 {
+                                    (c[ch] * light.radiance[ch] as f64) as f32
+                                } else {
+                                    0.0
+                                }
+                            });
+                        }
+                    }
+                    0.0
+                }
             };
             *slot = GpuLight {
                 position: light.position.extend(1.0).to_array(),
                 direction: light.direction.extend(0.0).to_array(),
-                radiance: light.radiance.extend(0.0).to_array(),
+                radiance: radiance.extend(0.0).to_array(),
                 params: [
                     light.cos_cone,
                     1.5 * shadow.texel_mm,
@@ -118,7 +148,13 @@ impl FrameUniforms {
             };
             layer += shadows.len();
         }
-        u.counts = [lights.len() as u32, layer as u32, 0, 0];
+        let environment = lights.iter().any(|l| l.kind == LightKind::Environment);
+        let sh = if environment {
+            crate::environment::sh::coefficients(sh_order) as u32
+        } else {
+            0
+        };
+        u.counts = [lights.len() as u32, layer as u32, sh, sh.div_ceil(8)];
         Ok(u)
     }
 }
@@ -129,11 +165,11 @@ mod tests {
 
     #[test]
     fn uniform_layout_matches_std140() {
-        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 vec4.
+        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 vec4 + 36 vec4.
         assert_eq!(std::mem::size_of::<GpuLight>(), 80);
         assert_eq!(
             std::mem::size_of::<FrameUniforms>(),
-            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16
+            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16 + 36 * 16
         );
     }
 }

@@ -24,6 +24,8 @@ pub struct IllumInputs {
     pub index_count: u32,
     /// Shadow maps.
     pub shadow_maps: ResourceId,
+    /// The environment's transfer per atlas texel.
+    pub transfer: ResourceId,
 }
 
 /// Declares `illum`, writing `map`.
@@ -33,12 +35,14 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
         .access(inputs.frame, Access::Uniform(Stage::Fragment))
         .mesh(inputs.vertices, inputs.indices)
         .access(inputs.shadow_maps, Access::Sampled(Stage::Fragment))
+        .access(inputs.transfer, Access::TexelRead(Stage::Fragment))
         .access(map, Access::ColorAttachment)
         .setup(move |gpu, res| {
             let set = res
                 .bind()
                 .uniform(0, inputs.frame)
                 .sampled(1, inputs.shadow_maps, Sampler::shadow(gpu)?)
+                .texel(2, inputs.transfer, Item::EnvironmentTransfer.format())
                 .finish()?;
             let pipeline = Pipeline::graphics::<[f32; 2]>(
                 gpu,

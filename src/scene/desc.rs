@@ -17,11 +17,19 @@
 //! up = [0, 1, 0]
 //! fov_deg = 30
 //!
-//! [[lights]]                 # directional | point | spot; default: one directional light
+//! [[lights]]                 # directional | point | spot | environment; default: one directional light
 //! kind = "directional"
 //! direction = [-1, -1, -1]   # the direction the light travels
 //! color = [1, 1, 1]
 //! intensity = 1.0            # irradiance at normal incidence (point/spot: at 1 mm)
+//!
+//! [[lights]]                 # at most one environment: an equirectangular HDR map at infinity
+//! kind = "environment"
+//! file = "studio.exr"        # OpenEXR or Radiance HDR; omitted: the shipped sky
+//! rotate_deg = 0             # turns the map about +Y
+//! intensity = 1.0            # multiplies the map's radiance (and color, per channel)
+//! sh_order = 4               # spherical-harmonic order of the transfer (1..6)
+//! rays = 256                 # rays per texel for the transfer (a square number)
 //!
 //! [material]
 //! preset = "skimmilk"        # or sigma_s_prime / sigma_a (1/mm, RGB) and eta
@@ -134,6 +142,8 @@ pub enum LightKind {
     Point,
     /// Point light restricted to a cone.
     Spot,
+    /// An HDR environment map at infinity (`crate::environment`).
+    Environment,
 }
 
 /// One `[[lights]]` entry.
@@ -156,6 +166,15 @@ pub struct LightDesc {
     pub intensity: Option<f64>,
     /// Spot cone half-angle in degrees.
     pub cone_deg: Option<f64>,
+    /// Environment map file (environment), relative to the scene file; omitted: the shipped
+    /// sky.
+    pub file: Option<PathBuf>,
+    /// Rotation of the environment about +Y, degrees.
+    pub rotate_deg: Option<f64>,
+    /// Spherical-harmonic order of the environment's per-texel transfer (environment).
+    pub sh_order: Option<u32>,
+    /// Rays per texel of the transfer, a square number (environment).
+    pub rays: Option<u32>,
 }
 
 /// `[material]`.

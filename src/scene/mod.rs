@@ -53,6 +53,10 @@ pub struct Light {
     pub radiance: Vec3,
     /// cos of the spot half-angle (-1 for other kinds).
     pub cos_cone: f32,
+    /// Map frame -> world (environment; identity for other kinds). An environment's
+    /// `direction` is the one its sun's light travels, turned with it (-Y without a sun), and
+    /// its `radiance` the scale on the map's radiance.
+    pub rotation: glam::Quat,
 }
 
 impl Light {
@@ -62,6 +66,7 @@ impl Light {
         Light {
             position: center + q * (self.position - center),
             direction: (q * self.direction).normalize_or(Vec3::ZERO),
+            rotation: (q * self.rotation).normalize(),
             ..*self
         }
     }
@@ -70,9 +75,11 @@ impl Light {
     /// (infinite for a directional light) and the factor on `radiance` there (1 for a
     /// directional light; 1 / r^2 for point and spot lights, `radiance` being their intensity at
     /// 1 mm, times the spot's smooth cone edge, which falls from 1 to 0 over the outer 5 % of
-    /// 1 - cos of the half-angle).
+    /// 1 - cos of the half-angle). An environment is no delta light: a factor of 0 (its light
+    /// is sampled from its map, `crate::environment::Environment::sample`).
     pub fn towards(&self, x: DVec3) -> (DVec3, f64, f64) {
         match self.kind {
+            LightKind::Environment => (DVec3::Y, f64::INFINITY, 0.0),
             LightKind::Directional => (-self.direction.as_dvec3().normalize(), f64::INFINITY, 1.0),
             LightKind::Point | LightKind::Spot => {
                 let d = self.position.as_dvec3() - x;
@@ -129,6 +136,10 @@ pub struct Scene {
     pub camera: Camera,
     /// The lights (1 to [`MAX_LIGHTS`]).
     pub lights: Vec<Light>,
+    /// The map of the environment light, when the scene has one (at most one).
+    pub environment: Option<std::sync::Arc<crate::environment::Environment>>,
+    /// The environment's transfer settings (unused without one).
+    pub prt: crate::environment::prt::PrtSettings,
     /// The medium.
     pub material: Material,
     /// Image width, pixels.
@@ -459,6 +470,10 @@ impl Scene {
                 color: Some([1.0, 1.0, 1.0]),
                 intensity: Some(1.0),
                 cone_deg: None,
+                file: None,
+                rotate_deg: None,
+                sh_order: None,
+                rays: None,
             }]
         });
         if light_descs.is_empty() {
@@ -471,24 +486,31 @@ impl Scene {
             );
         }
         let mut lights = Vec::new();
+        let mut environment = None;
+        let mut prt = crate::environment::prt::PrtSettings::default();
         for (i, l) in light_descs.iter_mut().enumerate() {
             let name = |field: &str| format!("[[lights]] #{} {field}", i + 1);
+            let env = l.kind == LightKind::Environment;
             for (key, given, applies) in [
                 (
                     "position",
                     l.position.is_some(),
-                    l.kind != LightKind::Directional,
+                    l.kind == LightKind::Point || l.kind == LightKind::Spot,
                 ),
                 (
                     "direction",
                     l.direction.is_some(),
-                    l.kind != LightKind::Point,
+                    l.kind == LightKind::Directional || l.kind == LightKind::Spot,
                 ),
                 ("cone_deg", l.cone_deg.is_some(), l.kind == LightKind::Spot),
+                ("file", l.file.is_some(), env),
+                ("rotate_deg", l.rotate_deg.is_some(), env),
+                ("sh_order", l.sh_order.is_some(), env),
+                ("rays", l.rays.is_some(), env),
             ] {
                 if given && !applies {
                     bail!(
-                        "{} does not apply to a {} light (position: point and spot; direction: directional and spot; cone_deg: spot)",
+                        "{} does not apply to a {} light (position: point and spot; direction: directional and spot; cone_deg: spot; file and rotate_deg: environment)",
                         name(key),
                         format!("{:?}", l.kind).to_lowercase()
                     );
@@ -510,6 +532,52 @@ impl Scene {
             }
             let radiance = vec3(color) * intensity as f32;
             let light = match l.kind {
+                LightKind::Environment => {
+                    if environment.is_some() {
+                        bail!("{}: a scene has at most one environment light", name(""));
+                    }
+                    let map = match &l.file {
+                        Some(f) => {
+                            let p = base.join(f);
+                            let map = crate::environment::Environment::load(&p)?;
+                            l.file = Some(absolute(&p));
+                            map
+                        }
+                        None => crate::environment::Environment::sky()?,
+                    };
+                    prt = crate::environment::prt::PrtSettings {
+                        order: *l
+                            .sh_order
+                            .get_or_insert(crate::environment::prt::DEFAULT_ORDER),
+                        rays: *l.rays.get_or_insert(crate::environment::prt::DEFAULT_RAYS),
+                    };
+                    prt.validate().with_context(|| name(""))?;
+                    let yaw = *l.rotate_deg.get_or_insert(0.0);
+                    finite(&name("rotate_deg"), &[yaw])?;
+                    let peak = map.radiance.iter().flatten().fold(0f32, |a, &c| a.max(c)) as f64
+                        * color.iter().fold(0.0f64, |a, &c| a.max(c))
+                        * intensity;
+                    if peak > MAX_RADIANCE {
+                        bail!(
+                            "{}: the map's brightest pixel x colour x intensity = {peak:e} exceeds {MAX_RADIANCE:e}: the passes' f32 sums would overflow to infinity and NaN",
+                            name("")
+                        );
+                    }
+                    let rotation = glam::Quat::from_rotation_y((yaw as f32).to_radians());
+                    let direction = map
+                        .sun
+                        .map(|s| -(rotation * s.direction.as_vec3()))
+                        .unwrap_or(Vec3::NEG_Y);
+                    environment = Some(std::sync::Arc::new(map));
+                    Light {
+                        kind: l.kind,
+                        position: Vec3::ZERO,
+                        direction,
+                        radiance,
+                        cos_cone: -1.0,
+                        rotation,
+                    }
+                }
                 LightKind::Directional => Light {
                     kind: l.kind,
                     position: Vec3::ZERO,
@@ -519,6 +587,7 @@ impl Scene {
                     )?,
                     radiance,
                     cos_cone: -1.0,
+                    rotation: glam::Quat::IDENTITY,
                 },
                 LightKind::Point | LightKind::Spot => {
                     let Some(p) = l.position else {
@@ -545,6 +614,7 @@ impl Scene {
                         direction,
                         radiance,
                         cos_cone,
+                        rotation: glam::Quat::IDENTITY,
                     }
                 }
             };
@@ -610,6 +680,11 @@ impl Scene {
                         let e = l.radiance.max_element();
                         match l.kind {
                             LightKind::Directional => e,
+                            LightKind::Environment => {
+                                e * environment
+                                    .as_ref()
+                                    .map_or(0.0, |m| m.peak_irradiance() as f32)
+                            }
                             _ => e / l.position.distance_squared(center).max(1e-6),
                         }
                     })
@@ -638,7 +713,8 @@ impl Scene {
             bail!("the object lies outside the camera's view ([camera] looks {:.0} degrees away from it)", off_axis.to_degrees());
         }
         for (i, l) in lights.iter().enumerate() {
-            if closed && l.kind != LightKind::Directional && bvh.contains(l.position.as_dvec3()) {
+            let at_infinity = matches!(l.kind, LightKind::Directional | LightKind::Environment);
+            if closed && !at_infinity && bvh.contains(l.position.as_dvec3()) {
                 bail!(
                     "[[lights]] #{} at {:?} lies inside the object: it would light nothing",
                     i + 1,
@@ -684,6 +760,8 @@ impl Scene {
             texture,
             camera,
             lights,
+            environment,
+            prt,
             material,
             width,
             height,
@@ -739,6 +817,7 @@ mod tests {
             direction: Vec3::X,
             radiance: Vec3::ONE,
             cos_cone: -1.0,
+            rotation: glam::Quat::IDENTITY,
         };
         let q = glam::Quat::from_axis_angle(Vec3::Y, std::f32::consts::FRAC_PI_2);
         let r = l.rotated(q, Vec3::new(1.0, 2.0, 3.0));

@@ -48,7 +48,8 @@ pub fn shadow_projections(
 ) -> Vec<ShadowProjection> {
     let radius = radius.max(1e-3);
     match light.kind {
-        LightKind::Directional => {
+        // An environment's map is its sun's (the rest needs none).
+        LightKind::Directional | LightKind::Environment => {
             let eye = center - light.direction * 2.0 * radius;
             let view = Mat4::look_at_rh(eye, center, any_perpendicular(light.direction));
             let proj =
@@ -202,6 +203,7 @@ mod tests {
             direction,
             radiance: Vec3::ONE,
             cos_cone: 0.9,
+            rotation: glam::Quat::IDENTITY,
         }
     }
 
