@@ -10,13 +10,16 @@
 #define LIGHT_DIRECTIONAL 0u
 #define LIGHT_POINT 1u
 #define LIGHT_SPOT 2u
+#define LIGHT_SUN 3u
 #define PI 3.14159265358979
 
 struct Light {
-    vec4 position;         // xyz: position in mm (point, spot); unused for directional
-    vec4 direction;        // xyz: direction the light travels (directional, spot axis)
+    vec4 position;         // xyz: position in mm (point, spot); unused for directional;
+                           // w: the shadow map's depth range in mm (sun)
+    vec4 direction;        // xyz: direction the light travels (directional, spot axis, sun)
     vec4 radiance;         // rgb: colour * intensity (irradiance at normal incidence, at 1 mm for point/spot)
-    vec4 params;           // x: cos(spot half-angle), y: normal-offset bias (mm), z: depth bias, w: kind
+    vec4 params;           // x: cos(spot half-angle), tan(angular radius) of a sun,
+                           // y: normal-offset bias (mm), z: depth bias, w: kind
     uvec4 layers;          // x: first shadow-map layer, y: layers (1, or 6 cube faces for a point light)
 };
 
@@ -50,7 +53,7 @@ vec3 exit_lobe(float mu) {
 // cosine and visibility terms.
 void light_at(Light l, vec3 x, out vec3 wi, out vec3 irradiance) {
     uint kind = uint(l.params.w + 0.5);
-    if (kind == LIGHT_DIRECTIONAL) {
+    if (kind == LIGHT_DIRECTIONAL || kind == LIGHT_SUN) {
         wi = -normalize(l.direction.xyz);
         irradiance = l.radiance.rgb;
         return;

@@ -46,4 +46,53 @@ float shadow_visibility(sampler2DArrayShadow maps, uint index, vec3 x, vec3 n) {
     return sum / 9.0;
 }
 
+// Taps of the sun's blocker search and filter: (2 SUN_TAPS + 1)^2 each.
+#define SUN_TAPS 2
+
+// Visibility of a sun (a disc of angular radius atan(params.x) at infinity, `index` a
+// LIGHT_SUN) from x: percentage-closer soft shadows (Fernando 2005) on its orthographic map.
+// Blockers are searched over the widest penumbra the disc can cast on x (occluders up to the
+// map's near plane); their mean depth gives the penumbra's half-width at x,
+// (depth(x) - depth(blockers)) x range x tan(radius), over which the comparisons are averaged
+// (at least the 3 x 3 texels of `shadow_visibility`).
+float sun_visibility(sampler2DArrayShadow maps, sampler2DArray depths, uint index, vec3 x, vec3 n) {
+    Light l = frame.lights[index];
+    uint layer = l.layers.x;
+    vec4 clip = frame.shadow_view_proj[layer] * vec4(x + n * l.params.y, 1.0);
+    vec3 ndc = clip.xyz / clip.w;
+    vec2 uv = ndc.xy * 0.5 + 0.5;
+    if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0))) || ndc.z > 1.0) {
+        return 1.0;
+    }
+    vec2 texel = 1.0 / vec2(textureSize(maps, 0).xy);
+    float texel_mm = l.params.y / 1.5;
+    float ref = ndc.z - l.params.z;
+    float per_depth = l.position.w * l.params.x / texel_mm; // texels of half-width per unit depth
+    float search = max(ref * per_depth, 1.0);
+    float blockers = 0.0;
+    float count = 0.0;
+    for (int j = -SUN_TAPS; j <= SUN_TAPS; ++j) {
+        for (int i = -SUN_TAPS; i <= SUN_TAPS; ++i) {
+            vec2 at = uv + vec2(i, j) * (search / float(SUN_TAPS)) * texel;
+            float d = texture(depths, vec3(at, float(layer))).r;
+            if (d < ref) {
+                blockers += d;
+                count += 1.0;
+            }
+        }
+    }
+    if (count == 0.0) {
+        return 1.0;
+    }
+    float radius = max((ref - blockers / count) * per_depth, 1.0);
+    float sum = 0.0;
+    for (int j = -SUN_TAPS; j <= SUN_TAPS; ++j) {
+        for (int i = -SUN_TAPS; i <= SUN_TAPS; ++i) {
+            vec2 at = uv + vec2(i, j) * (radius / float(SUN_TAPS)) * texel;
+            sum += texture(maps, vec4(at, float(layer), ref));
+        }
+    }
+    return sum / float((2 * SUN_TAPS + 1) * (2 * SUN_TAPS + 1));
+}
+
 #endif

@@ -610,6 +610,149 @@ pub fn plot(dir: &Path, title: &str, points: &[Point]) -> Result<()> {
     crate::output::write_png(&dir.join("chart.png"), w, h, &rgba)
 }
 
+/// One order of `translucent prt`.
+#[derive(Debug, Clone, Copy)]
+pub struct PrtRow {
+    /// Spherical-harmonic order.
+    pub order: u32,
+    /// Per-texel relative RMS error, RGB.
+    pub rms: [f64; 3],
+    /// The reference's noise on the same scale, RGB.
+    pub noise: [f64; 3],
+    /// Seconds to compute the transfer.
+    pub transfer_s: f64,
+    /// Median time of the illumination pass, ms.
+    pub illum_ms: f64,
+}
+
+fn draw_prt<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[PrtRow]) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
+    root.fill(&WHITE).map_err(err)?;
+    let root = root
+        .titled(
+            "environment lighting: spherical-harmonic order against error and cost",
+            ("sans-serif", 20),
+        )
+        .map_err(err)?;
+    let (left, right) = root.split_horizontally(root.dim_in_pixel().0 / 2);
+    let x_max = rows.iter().map(|r| r.order).max().unwrap_or(1) as f64 + 0.5;
+    let y_max = rows
+        .iter()
+        .flat_map(|r| r.rms.iter().chain(&r.noise))
+        .fold(0.0f64, |a, &b| a.max(100.0 * b))
+        * 1.1;
+    let mut chart = ChartBuilder::on(&left)
+        .caption("per-texel irradiance vs ray-traced", ("sans-serif", 16))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.5..x_max, 0.0..y_max.max(1e-3))
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("order (bands 0..order-1)")
+        .y_desc("relative RMS error (%)")
+        .draw()
+        .map_err(err)?;
+    let channels = [
+        ("R", RGBColor(200, 40, 40)),
+        ("G", RGBColor(40, 150, 40)),
+        ("B", RGBColor(40, 80, 200)),
+    ];
+    for (c, (name, col)) in channels.into_iter().enumerate() {
+        chart
+            .draw_series(LineSeries::new(
+                rows.iter().map(|r| (r.order as f64, 100.0 * r.rms[c])),
+                col.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label(format!("{name} error"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col.stroke_width(2)));
+        chart
+            .draw_series(
+                rows.iter()
+                    .map(|r| Circle::new((r.order as f64, 100.0 * r.rms[c]), 3, col.filled())),
+            )
+            .map_err(err)?;
+    }
+    let grey = RGBColor(130, 130, 130);
+    chart
+        .draw_series(LineSeries::new(
+            rows.iter().map(|r| (r.order as f64, 100.0 * r.noise[1])),
+            grey.stroke_width(1),
+        ))
+        .map_err(err)?
+        .label("reference noise (G)")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], grey.stroke_width(1)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    let c_max = rows
+        .iter()
+        .flat_map(|r| [r.illum_ms, r.transfer_s])
+        .fold(0.0f64, f64::max)
+        * 1.15;
+    let mut cost = ChartBuilder::on(&right)
+        .caption("cost", ("sans-serif", 16))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.5..x_max, 0.0..c_max.max(1e-3))
+        .map_err(err)?;
+    cost.configure_mesh()
+        .x_desc("order")
+        .y_desc("illumination pass (ms per frame) / transfer (s, once)")
+        .draw()
+        .map_err(err)?;
+    for (name, col, f) in [
+        (
+            "illum pass, ms",
+            RGBColor(200, 30, 90),
+            (|r: &PrtRow| r.illum_ms) as fn(&PrtRow) -> f64,
+        ),
+        ("transfer, s", RGBColor(40, 120, 200), |r: &PrtRow| {
+            r.transfer_s
+        }),
+    ] {
+        cost.draw_series(LineSeries::new(
+            rows.iter().map(|r| (r.order as f64, f(r))),
+            col.stroke_width(2),
+        ))
+        .map_err(err)?
+        .label(name)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col.stroke_width(2)));
+    }
+    cost.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// Draws `translucent prt`'s chart (error and cost against the order) as a PNG.
+pub fn plot_prt(path: &Path, rows: &[PrtRow]) -> Result<()> {
+    register_font();
+    let (w, h) = (1400u32, 560u32);
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    draw_prt(
+        BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area(),
+        rows,
+    )?;
+    let rgba: Vec<u8> = rgb
+        .chunks(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    crate::output::write_png(path, w, h, &rgba)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

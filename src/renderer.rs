@@ -87,6 +87,31 @@ pub struct WindowOutput {
     pub linear: bool,
 }
 
+/// The environment's per-texel transfer for `scene` (None without an environment light),
+/// timed and logged.
+pub fn environment_transfer(
+    scene: &Scene,
+    pre: &Preprocessed,
+) -> Option<crate::environment::prt::Transfer> {
+    scene.environment.as_ref().map(|_| {
+        let t = crate::environment::prt::transfer(
+            &scene.mesh,
+            &pre.atlas,
+            scene.material.eta,
+            scene.prt,
+        );
+        tracing::info!(
+            "environment transfer: order {} ({} coefficients), {} rays per texel, {} texels: {:.2} s",
+            t.settings.order,
+            crate::environment::sh::coefficients(t.settings.order),
+            t.settings.rays,
+            pre.atlas.texels.len(),
+            t.seconds
+        );
+        t
+    })
+}
+
 /// A scene on the GPU with its compiled frame graph.
 pub struct Renderer {
     gpu: Arc<Gpu>,
@@ -103,6 +128,8 @@ pub struct Renderer {
     last_lights: Option<Vec<Light>>,
     /// Order of the environment's transfer (0 without an environment).
     sh_order: u32,
+    /// Seconds the transfer took to compute.
+    transfer_seconds: f64,
     window: Option<(Arc<Image>, passes::overlay::Text)>,
     readback_requested: bool,
 }
@@ -138,38 +165,35 @@ impl Renderer {
 
     /// Checks that the device can hold the scene's data, then uploads it (what
     /// [`Renderer::new`] does before building the graph; the viewer keeps it across resizes).
+    /// With an environment light, the transfer is computed first ([`environment_transfer`]).
     pub fn upload(
         gpu: &Arc<Gpu>,
         scene: &Scene,
         pre: &Preprocessed,
         options: &Options,
     ) -> Result<SubsurfaceData> {
+        let transfer = environment_transfer(scene, pre);
+        Self::upload_with(gpu, scene, pre, options, transfer.as_ref())
+    }
+
+    /// [`Renderer::upload`] with the environment's transfer given (computed once for several
+    /// renderers, or kept across material changes that keep eta).
+    pub fn upload_with(
+        gpu: &Arc<Gpu>,
+        scene: &Scene,
+        pre: &Preprocessed,
+        options: &Options,
+        transfer: Option<&crate::environment::prt::Transfer>,
+    ) -> Result<SubsurfaceData> {
         // Refuse before allocating anything what the device cannot hold.
         passes::data::Requirements::of(scene, pre, options.mode).check(&gpu.info)?;
-        let transfer = scene.environment.as_ref().map(|_| {
-            let t = crate::environment::prt::transfer(
-                &scene.mesh,
-                &pre.atlas,
-                scene.material.eta,
-                scene.prt,
-            );
-            tracing::info!(
-                "environment transfer: order {} ({} coefficients), {} rays per texel, {} texels: {:.2} s",
-                t.settings.order,
-                crate::environment::sh::coefficients(t.settings.order),
-                t.settings.rays,
-                pre.atlas.texels.len(),
-                t.seconds
-            );
-            t
-        });
         SubsurfaceData::upload(
             gpu,
             scene,
             pre,
             options.mode,
             options.global_layout == compute::GlobalLayout::Storage,
-            transfer.as_ref(),
+            transfer,
         )
         .context("uploading the preprocessing")
     }
@@ -273,6 +297,7 @@ impl Renderer {
                 index_count: data.index_count,
                 shadow_maps,
                 transfer,
+                environment: scene.environment.is_some(),
             },
             map,
         );
@@ -458,6 +483,7 @@ impl Renderer {
             capture,
             shadow_map_size: s,
             sh_order: data.sh_order,
+            transfer_seconds: data.transfer_seconds,
             last_lights: None,
             window,
             readback_requested: false,
@@ -642,6 +668,11 @@ impl Renderer {
             timings.push(self.frame(&lights)?);
         }
         self.output(timings)
+    }
+
+    /// Seconds the environment's transfer took to compute (0 without an environment).
+    pub fn transfer_seconds(&self) -> f64 {
+        self.transfer_seconds
     }
 
     /// The device this renderer runs on.

@@ -17,6 +17,7 @@
 //! -Z, its centre along +Z. `w` points from the object towards the environment. A light's
 //! `rotate_deg` turns the map about +Y.
 
+pub mod accuracy;
 pub mod prt;
 pub mod sh;
 pub mod sky;
@@ -59,6 +60,10 @@ pub struct Sun {
     pub irradiance: [f64; 3],
     /// Solid angle of its pixels, sr.
     pub solid_angle: f64,
+    /// Angular radius of the disc it appears as, radians: from the second moment of its
+    /// excess brightness about its direction (a uniform disc of radius r has r^2 / 2), less
+    /// the pixels' own spread.
+    pub angular_radius: f64,
 }
 
 /// An environment map ready to light a scene.
@@ -95,6 +100,11 @@ pub fn direction(u: f64, v: f64) -> DVec3 {
     let (phi, theta) = (2.0 * PI * u, PI * v);
     let s = theta.sin();
     DVec3::new(s * phi.sin(), theta.cos(), -s * phi.cos())
+}
+
+/// Direction of the centre of pixel (x, y) of a `w` x `h` map.
+fn direction_of(x: u32, y: u32, w: u32, h: u32) -> DVec3 {
+    direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64)
 }
 
 /// Map coordinates (u, v) of a unit direction.
@@ -526,7 +536,7 @@ fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]
     for &i in &region {
         let (x, y) = (i as u32 % w, i as u32 / w);
         let d = pixel_solid_angle(y, w, h);
-        let wdir = direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
+        let wdir = direction_of(x, y, w, h);
         let excess: [f64; 3] = std::array::from_fn(|c| (radiance[i][c] as f64 - sky[c]).max(0.0));
         for c in 0..3 {
             irradiance[c] += excess[c] * d;
@@ -534,10 +544,28 @@ fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]
         dir += wdir * luminance(excess.map(|e| e as f32)) * d;
         out[i] = sky.map(|s| s as f32);
     }
+    let direction = dir.normalize_or(DVec3::Y);
+    let (mut m2, mut total) = (0.0, 0.0);
+    for &i in &region {
+        let (x, y) = (i as u32 % w, i as u32 / w);
+        let d = pixel_solid_angle(y, w, h);
+        let wdir = direction_of(x, y, w, h);
+        let excess = luminance(std::array::from_fn(|c| {
+            (radiance[i][c] as f64 - sky[c]).max(0.0) as f32
+        })) * d;
+        m2 += excess * wdir.angle_between(direction).powi(2);
+        total += excess;
+    }
+    // A pixel spans 2 pi / w in azimuth (times sin(theta)) and pi / h in elevation: uniform
+    // spreads of variance span^2 / 12 each.
+    let theta = direction.y.clamp(-1.0, 1.0).acos();
+    let (da, de) = (2.0 * PI / w as f64 * theta.sin(), PI / h as f64);
+    let spread = (da * da + de * de) / 12.0;
     let sun = Sun {
-        direction: dir.normalize_or(DVec3::Y),
+        direction,
         irradiance,
         solid_angle: solid,
+        angular_radius: (2.0 * (m2 / total.max(1e-300) - spread)).max(0.0).sqrt(),
     };
     (Some(sun), out)
 }
@@ -690,6 +718,14 @@ mod tests {
         let sun = env.sun.expect("the shipped sky has a sun");
         // Above the horizon, several times the sky's irradiance on the ground.
         assert!(sun.direction.y > 0.3, "{:?}", sun.direction);
+        // Its disc's radius, measured from the pixels, is the generator's within a tenth.
+        let r = sky::SUN_RADIUS_DEG.to_radians();
+        assert!(
+            (sun.angular_radius - r).abs() < 0.1 * r,
+            "{} vs {r}",
+            sun.angular_radius
+        );
+        assert!(sun.direction.angle_between(sky::sun_direction()) < 0.1 * r);
         let sky = env.sky_irradiance(DVec3::Y);
         assert!(sun.irradiance[1] > 2.0 * sky[1], "{sun:?} vs {sky:?}");
     }

@@ -54,8 +54,10 @@ fn sky(w: DVec3, sun: DVec3) -> [f64; 3] {
     }
 }
 
-/// The sky, `width` x `width / 2` pixels of linear RGB, rows from the top.
-pub fn generate(width: u32) -> Vec<[f32; 3]> {
+/// The sky, `width` x `width / 2` pixels of linear RGB, rows from the top, its sun giving
+/// `sun_to_sky` times the sky's irradiance on level ground ([`SUN_TO_SKY`] in the shipped map;
+/// 0: no sun disc, the glow stays).
+pub fn generate(width: u32, sun_to_sky: f64) -> Vec<[f32; 3]> {
     let height = width / 2;
     let sun = sun_direction();
     let cos_disc = SUN_RADIUS_DEG.to_radians().cos();
@@ -74,7 +76,7 @@ pub fn generate(width: u32) -> Vec<[f32; 3]> {
             }
         }
     }
-    let sun_radiance = SUN_TO_SKY * level / disc_solid;
+    let sun_radiance = sun_to_sky * level / disc_solid;
     let n = 4;
     (0..width * height)
         .map(|i| {
@@ -85,7 +87,7 @@ pub fn generate(width: u32) -> Vec<[f32; 3]> {
                     let u = (x as f64 + (sx as f64 + 0.5) / n as f64) / width as f64;
                     let v = (y as f64 + (sy as f64 + 0.5) / n as f64) / height as f64;
                     let w = direction(u, v);
-                    let l = if w.dot(sun) >= cos_disc {
+                    let l = if sun_to_sky > 0.0 && w.dot(sun) >= cos_disc {
                         SUN_COLOUR.map(|c| c * sun_radiance)
                     } else {
                         sky(w, sun)
@@ -101,8 +103,8 @@ pub fn generate(width: u32) -> Vec<[f32; 3]> {
 }
 
 /// Writes the sky as a half-float OpenEXR file.
-pub fn write(path: &std::path::Path, width: u32) -> anyhow::Result<()> {
-    let px = generate(width);
+pub fn write(path: &std::path::Path, width: u32, sun_to_sky: f64) -> anyhow::Result<()> {
+    let px = generate(width, sun_to_sky);
     crate::output::write_atomic(path, |tmp| {
         use exr::prelude::f16;
         let w = width as usize;

@@ -173,6 +173,8 @@ pub struct SubsurfaceData {
     pub transfer: Arc<Buffer>,
     /// Its spherical-harmonic order (0 without an environment).
     pub sh_order: u32,
+    /// Seconds its computation took (0 without an environment).
+    pub transfer_seconds: f64,
 }
 
 /// The sRGB transfer function, inverted (textures are sRGB-encoded; the GPU samples them
@@ -819,6 +821,7 @@ impl SubsurfaceData {
         };
         // Dense over the atlas (the illumination pass finds a fragment's texel by its
         // coordinates), eight f16 coefficients to an element; zero on uncovered texels.
+        let transfer_seconds = transfer.map_or(0.0, |t| t.seconds);
         let (transfer, sh_order) = match transfer {
             Some(tr) => {
                 let k = crate::environment::sh::coefficients(tr.settings.order);
@@ -845,6 +848,7 @@ impl SubsurfaceData {
         Ok(SubsurfaceData {
             transfer,
             sh_order,
+            transfer_seconds,
             vertices,
             indices,
             index_count: atlas.indices.len() as u32,

@@ -98,7 +98,12 @@ impl FrameUniforms {
         u.sigma_t = material.sigma_t;
         u.exit_lobe = material.exit_lobe;
         let mut layer = 0usize;
-        for (slot, light) in u.lights.iter_mut().zip(lights) {
+        // An environment's sun goes last (the illumination pass treats it apart).
+        let ordered = lights
+            .iter()
+            .filter(|l| l.kind != LightKind::Environment)
+            .chain(lights.iter().filter(|l| l.kind == LightKind::Environment));
+        for (slot, light) in u.lights.iter_mut().zip(ordered) {
             let shadows = shadow_projections(light, center, radius, shadow_map_size);
             if layer + shadows.len() > MAX_SHADOW_LAYERS {
                 bail!("the lights need more than {MAX_SHADOW_LAYERS} shadow-map layers");
@@ -109,6 +114,8 @@ impl FrameUniforms {
             }
             let shadow = shadows[0];
             let mut radiance = light.radiance;
+            let mut position = light.position.extend(1.0).to_array();
+            let mut cos_cone = light.cos_cone;
             let kind = match light.kind {
                 LightKind::Directional => 0.0,
                 LightKind::Point => 1.0,
@@ -119,6 +126,10 @@ impl FrameUniforms {
                     };
                     let sun = env.sun.map_or([0.0; 3], |s| s.irradiance);
                     radiance *= glam::DVec3::from_array(sun).as_vec3();
+                    // The sun's disc for its soft shadow: tan of its angular radius, and the
+                    // depth range of its orthographic map (`scene::shadow`: 2 radii).
+                    cos_cone = env.sun.map_or(0.0, |s| s.angular_radius.tan() as f32);
+                    position[3] = 2.0 * radius.max(1e-3);
                     if sh_order > 0 {
                         let c = env.coefficients(sh_order, light.rotation);
                         for (u, c) in u.environment.iter_mut().zip(&c) {
@@ -131,19 +142,14 @@ impl FrameUniforms {
                             });
                         }
                     }
-                    0.0
+                    3.0
                 }
             };
             *slot = GpuLight {
-                position: light.position.extend(1.0).to_array(),
+                position,
                 direction: light.direction.extend(0.0).to_array(),
                 radiance: radiance.extend(0.0).to_array(),
-                params: [
-                    light.cos_cone,
-                    1.5 * shadow.texel_mm,
-                    shadow.depth_bias,
-                    kind,
-                ],
+                params: [cos_cone, 1.5 * shadow.texel_mm, shadow.depth_bias, kind],
                 layers: [layer as u32, shadows.len() as u32, 0, 0],
             };
             layer += shadows.len();

@@ -26,6 +26,9 @@ pub struct IllumInputs {
     pub shadow_maps: ResourceId,
     /// The environment's transfer per atlas texel.
     pub transfer: ResourceId,
+    /// Whether the scene has an environment light (the last light of the uniforms is then its
+    /// sun, and the transfer is read).
+    pub environment: bool,
 }
 
 /// Declares `illum`, writing `map`.
@@ -43,6 +46,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                 .uniform(0, inputs.frame)
                 .sampled(1, inputs.shadow_maps, Sampler::shadow(gpu)?)
                 .texel(2, inputs.transfer, Item::EnvironmentTransfer.format())
+                .sampled(3, inputs.shadow_maps, Sampler::nearest(gpu)?)
                 .finish()?;
             let pipeline = Pipeline::graphics::<[f32; 2]>(
                 gpu,
@@ -60,7 +64,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                     color_formats: &[FORMAT],
                     depth_format: vk::Format::UNDEFINED,
                     cull: vk::CullModeFlags::NONE,
-                    fragment_constants: &[],
+                    fragment_constants: &[inputs.environment as u32],
                     depth_bias: None,
                 },
                 set,

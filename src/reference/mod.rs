@@ -5,7 +5,10 @@
 //!   (m = ceil(longest edge / spacing)) and sampled at their centroids with their areas (the
 //!   midpoint rule; second order in the spacing).
 //! - E at each sample uses the interpolated normal, the same lights and Fresnel transmittance as
-//!   the renderer, and exact visibility by casting a ray against the mesh (BVH).
+//!   the renderer, and exact visibility by casting a ray against the mesh (BVH). An
+//!   environment is integrated by [`ENVIRONMENT_RAYS`] rays per sample drawn by the map's
+//!   brightness, sun included ([`environment_irradiance`]): no spherical harmonics, no shadow
+//!   map.
 //! - The sum is evaluated hierarchically (Barnes-Hut): a cluster of lit samples farther than
 //!   `1/theta` times its radius contributes as one sample at its weighted centroid, corrected to
 //!   second order by its covariance (tr(C H) with H the Hessian of R_d(|x - y|) in y); nearer
@@ -84,9 +87,63 @@ pub struct Reference {
     pub settings: ReferenceSettings,
 }
 
+/// Rays per surface sample with which the reference integrates an environment: the noise of
+/// one sample's irradiance (about 1 / sqrt(N) of it where the sky is partly hidden) averages
+/// out over the thousands of samples a pixel's profile sums.
+pub const ENVIRONMENT_RAYS: u32 = 64;
+
+/// Irradiance entering the surface at `x` (normal `n`, face normal `f`, rays leaving `eps` off
+/// the face on their side) from the scene's environment light, by `rays` directions drawn by
+/// the map's brightness ([`crate::environment::Environment::sample`]) with shadow rays; `rng`
+/// gives the directions. Zero without an environment.
+pub fn environment_irradiance(
+    scene: &Scene,
+    bvh: &Bvh,
+    (x, n, f): (DVec3, DVec3, DVec3),
+    eps: f64,
+    rays: u32,
+    rng: &mut crate::truth::rng::Rng,
+) -> [f64; 3] {
+    let mut e = [0.0; 3];
+    let (Some(env), Some(light)) = (
+        &scene.environment,
+        scene
+            .lights
+            .iter()
+            .find(|l| l.kind == crate::scene::desc::LightKind::Environment),
+    ) else {
+        return e;
+    };
+    let q = light.rotation.as_dquat();
+    let scale = light.radiance.as_dvec3();
+    for _ in 0..rays {
+        let (w, l, pdf) = env.sample([rng.uniform(), rng.uniform(), rng.uniform()]);
+        let w = q * w;
+        let cos = n.dot(w);
+        if cos <= 0.0 || pdf <= 0.0 {
+            continue;
+        }
+        let side = if f.dot(w) >= 0.0 { f } else { -f };
+        if bvh.occluded(x + side * eps, w, f64::INFINITY) {
+            continue;
+        }
+        let k = fresnel_transmittance(scene.material.eta, cos) * cos / pdf / rays as f64;
+        for c in 0..3 {
+            e[c] += l[c] * scale[c] * k;
+        }
+    }
+    e
+}
+
 /// Irradiance entering the surface at `x` with shading normal `n` and face normal `f`.
 pub fn irradiance(scene: &Scene, bvh: &Bvh, x: DVec3, n: DVec3, f: DVec3, eps: f64) -> [f64; 3] {
     let mut e = [0.0; 3];
+    if scene.environment.is_some() {
+        // A stream per point, whichever thread computes it.
+        let mut rng =
+            crate::truth::rng::Rng::new(&[0x656e76, x.x.to_bits(), x.y.to_bits(), x.z.to_bits()]);
+        e = environment_irradiance(scene, bvh, (x, n, f), eps, ENVIRONMENT_RAYS, &mut rng);
+    }
     for l in &scene.lights {
         let (wi, dist, scale) = l.towards(x);
         let cos = n.dot(wi);

@@ -19,7 +19,10 @@
 //!   the camera: albedo x phase x the lamp's radiance x the transmittance e^(-sigma_t l), where
 //!   l is the length of the shadow ray inside the medium, over every segment (concave parts,
 //!   ears in front of the body). Delta lights are reached by this estimate only, so nothing is
-//!   counted twice.
+//!   counted twice. An environment is too: one direction per collision drawn by the map's
+//!   brightness (sun included; `Environment::sample`), weighted by 1 / its density; a path
+//!   leaving for good adds nothing, so the environment seen straight through the medium
+//!   without scattering (order 0, which the method does not model either) is not in the image.
 //! - Absorption is analog: a collision scatters with probability albedo and ends the path
 //!   otherwise, with the weight staying one. Both choices are unbiased (no Russian roulette,
 //!   no cut-off depth); a path ends by absorption or by leaving the object for good. A safety
@@ -267,7 +270,17 @@ impl<'a> Tracer<'a> {
                         let u = (k as f64 + 0.5) / steps as f64 * total;
                         let s = -(1.0 - u).ln() / sigma_t;
                         let x = o + d * (from + s);
-                        part += self.next_event(x, d, c, depth, scratch);
+                        // Delta lights use no random numbers; an environment one direction
+                        // per step, from a stream of the ray and the step.
+                        let mut rng = Rng::new(&[
+                            0x73696e67,
+                            d.x.to_bits(),
+                            d.y.to_bits(),
+                            d.z.to_bits(),
+                            k as u64,
+                            c as u64,
+                        ]);
+                        part += self.next_event(x, d, c, depth, &mut rng, scratch);
                     }
                     sum += (-before).exp() * albedo * part * total / steps as f64;
                     before += sigma_t * length;
@@ -308,11 +321,34 @@ impl<'a> Tracer<'a> {
     /// Light of every lamp arriving at `x` and scattered into the direction opposite to the
     /// path's propagation direction `d` (towards the camera), per unit sigma_s: phase x
     /// radiance x transmittance.
-    fn next_event(&self, x: DVec3, d: DVec3, c: usize, depth: i32, s: &mut Scratch) -> f64 {
+    fn next_event(
+        &self,
+        x: DVec3,
+        d: DVec3,
+        c: usize,
+        depth: i32,
+        rng: &mut Rng,
+        s: &mut Scratch,
+    ) -> f64 {
         let mut sum = 0.0;
         for l in &self.scene.lights {
             let le = l.radiance[c] as f64;
             if le <= 0.0 {
+                continue;
+            }
+            if l.kind == crate::scene::desc::LightKind::Environment {
+                // One direction drawn by the map's brightness (sun included).
+                let Some(env) = &self.scene.environment else {
+                    continue;
+                };
+                let (w, radiance, pdf) = env.sample([rng.uniform(), rng.uniform(), rng.uniform()]);
+                if pdf <= 0.0 || radiance[c] <= 0.0 {
+                    continue;
+                }
+                let wi = l.rotation.as_dquat() * w;
+                let tau =
+                    self.medium.sigma_t[c] * self.inside_length(x, wi, f64::INFINITY, depth, s);
+                sum += le * radiance[c] / pdf * self.medium.phase(d.dot(wi)) * (-tau).exp();
                 continue;
             }
             let (wi, dist, scale) = l.towards(x);
@@ -364,7 +400,7 @@ impl<'a> Tracer<'a> {
             order += 1;
             r.events += 1;
             if order >= self.min_order {
-                r.radiance += albedo * self.next_event(o, d, c, depth, scratch);
+                r.radiance += albedo * self.next_event(o, d, c, depth, rng, scratch);
             }
             if order >= self.max_order || rng.uniform() >= albedo {
                 return r;
@@ -571,7 +607,7 @@ pub fn compute(
 }
 
 /// Bump whenever the truth's results change for the same inputs.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Key of a truth computation: everything the image depends on (geometry, medium, lights,
 /// camera, size, samples, seed, phase, orders) and the format version.
@@ -592,6 +628,10 @@ pub fn key(scene: &Scene, settings: &TruthSettings) -> u64 {
             h.write(bytemuck::bytes_of(&v));
         }
         h.write(&l.cos_cone.to_le_bytes());
+        h.write(bytemuck::bytes_of(&l.rotation));
+    }
+    if let Some(env) = &scene.environment {
+        h.write(&env.hash.to_le_bytes());
     }
     let c = &scene.camera;
     for v in [c.position, c.target, c.up] {
