@@ -157,6 +157,10 @@ pub struct ViewArgs {
     /// Present without waiting for vertical blank (mailbox or immediate where offered).
     #[arg(long)]
     pub no_vsync: bool,
+    /// More environment maps (OpenEXR or Radiance HDR) to switch between with key `e`, for a
+    /// scene with an environment light.
+    #[arg(long, value_delimiter = ',')]
+    pub environment: Vec<PathBuf>,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -1309,6 +1313,14 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
         }
     };
     let scene = args.input.load()?;
+    if !args.environment.is_empty() && scene.environment.is_none() {
+        anyhow::bail!("--environment needs a scene with an environment light ([[lights]] kind = \"environment\")");
+    }
+    let environments = args
+        .environment
+        .iter()
+        .map(|p| crate::environment::Environment::load(p).map(std::sync::Arc::new))
+        .collect::<Result<Vec<_>>>()?;
     let event_loop = crate::viewer::connect()?;
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     for r in &choice.reasons {
@@ -1332,6 +1344,7 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
             vsync: !args.no_vsync,
             validate: cli.validate,
             device: cli.device.clone(),
+            environments,
         },
     )
 }

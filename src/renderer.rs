@@ -670,6 +670,13 @@ impl Renderer {
         self.output(timings)
     }
 
+    /// Lights the scene with another environment map (the transfer does not depend on the map;
+    /// the next frame runs every light pass).
+    pub fn set_environment(&mut self, env: Arc<crate::environment::Environment>) {
+        self.scene.environment = Some(env);
+        self.last_lights = None;
+    }
+
     /// Seconds the environment's transfer took to compute (0 without an environment).
     pub fn transfer_seconds(&self) -> f64 {
         self.transfer_seconds

@@ -77,6 +77,8 @@ pub struct ViewConfig {
     pub validate: bool,
     /// Device selector.
     pub device: Option<String>,
+    /// More environment maps to switch between (key `e`), besides the scene's and the sky.
+    pub environments: Vec<Arc<crate::environment::Environment>>,
 }
 
 /// Degrees of camera orbit per pixel of drag.
@@ -97,6 +99,8 @@ struct View {
     pan: Vec3,
     light_yaw: f32,
     light_pitch: f32,
+    /// The environment's own turn about the up axis, degrees (on top of the lights').
+    environment_yaw: f32,
 }
 
 impl Default for View {
@@ -108,6 +112,7 @@ impl Default for View {
             pan: Vec3::ZERO,
             light_yaw: 0.0,
             light_pitch: 0.0,
+            environment_yaw: 0.0,
         }
     }
 }
@@ -167,19 +172,35 @@ impl Rig {
 
     fn lights(&self, v: &View) -> Vec<Light> {
         let q = self.rotation(v.light_yaw, v.light_pitch);
+        let turn = Quat::from_axis_angle(self.base.up, v.environment_yaw.to_radians());
         self.lights
             .iter()
-            .map(|l| l.rotated(q, self.center))
+            .map(|l| {
+                let l = if l.kind == crate::scene::desc::LightKind::Environment {
+                    l.rotated(turn, self.center)
+                } else {
+                    *l
+                };
+                l.rotated(q, self.center)
+            })
             .collect()
     }
 }
+
+/// What a material's background run produces: the material, its preprocessing and, with an
+/// environment light, the transfer over its atlas.
+type JobResult = (
+    Material,
+    Preprocessed,
+    Option<crate::environment::prt::Transfer>,
+);
 
 /// A preprocessing run for a new material on a background thread.
 struct Job {
     material: String,
     started: Instant,
     progress: Arc<Mutex<(String, u64, u64)>>,
-    handle: JoinHandle<Result<(Material, Preprocessed)>>,
+    handle: JoinHandle<Result<JobResult>>,
 }
 
 /// The window and everything that draws into it.
@@ -209,6 +230,13 @@ struct Running {
     cursor: PhysicalPosition<f64>,
     shift: bool,
     frames: u64,
+    /// The environment maps to switch between (empty without an environment light).
+    environments: Vec<Arc<crate::environment::Environment>>,
+    /// The one shown.
+    environment_index: usize,
+    /// The environment's transfer for the current preprocessing (kept across blending
+    /// changes; recomputed with a new material's atlas).
+    transfer: Option<crate::environment::prt::Transfer>,
 }
 
 struct App {
@@ -271,7 +299,13 @@ impl Running {
     fn reupload(&mut self) -> Result<()> {
         self.renderer = None;
         let options = renderer_options(self.mode, self.linear());
-        self.data = Renderer::upload(&self.gpu, &self.scene, &self.pre, &options)?;
+        self.data = Renderer::upload_with(
+            &self.gpu,
+            &self.scene,
+            &self.pre,
+            &options,
+            self.transfer.as_ref(),
+        )?;
         self.rebuild()
     }
 
@@ -296,6 +330,14 @@ impl Running {
                 v.light_yaw += yaw;
                 v.light_pitch += pitch;
             }
+            Action::Environment(yaw) => {
+                if self.scene.environment.is_some() {
+                    v.environment_yaw += yaw;
+                } else {
+                    self.status = "the scene has no environment light".into();
+                }
+            }
+            Action::NextEnvironment(step) => self.next_environment(step)?,
             Action::Material(name) => self.request_material(name, app)?,
             Action::NextMaterial(step) => {
                 let n = PRESETS.len() as i32;
@@ -350,6 +392,42 @@ impl Running {
         Ok(true)
     }
 
+    /// Shows the environment map `step` places on in the list (the scene's, the shipped sky,
+    /// the `--environment` files). The transfer does not depend on the map: only the uniforms
+    /// change.
+    fn next_environment(&mut self, step: i32) -> Result<()> {
+        if self.scene.environment.is_none() || self.environments.len() < 2 {
+            self.status = if self.scene.environment.is_none() {
+                "the scene has no environment light".into()
+            } else {
+                "one environment map (add more with --environment)".into()
+            };
+            return Ok(());
+        }
+        let n = self.environments.len() as i32;
+        self.environment_index = (self.environment_index as i32 + step).rem_euclid(n) as usize;
+        let env = self.environments[self.environment_index].clone();
+        for l in self
+            .rig
+            .lights
+            .iter_mut()
+            .chain(self.scene.lights.iter_mut())
+        {
+            if l.kind == crate::scene::desc::LightKind::Environment {
+                l.direction = env
+                    .sun
+                    .map(|s| -(l.rotation * s.direction.as_vec3()))
+                    .unwrap_or(Vec3::NEG_Y);
+            }
+        }
+        self.status = format!("environment {}", env.source);
+        self.scene.environment = Some(env.clone());
+        if let Some(r) = self.renderer.as_mut() {
+            r.set_environment(env);
+        }
+        Ok(())
+    }
+
     fn request_material(&mut self, name: String, app: &AppSettings) -> Result<()> {
         // Check the name now: a typo is an error, not a silent no-op.
         Material::preset(&name).with_context(|| format!("material '{name}'"))?;
@@ -367,7 +445,7 @@ impl Running {
         let (overrides, target, cache) = (app.overrides, app.target_error, app.cache.clone());
         let p = progress.clone();
         let material = name.clone();
-        let handle = std::thread::spawn(move || -> Result<(Material, Preprocessed)> {
+        let handle = std::thread::spawn(move || -> Result<JobResult> {
             scene.material = Material::preset(&material)?;
             let choice = preprocess::choose(&scene, &overrides, target)?;
             let report = |stage: &str, done: u64, total: u64| {
@@ -376,7 +454,9 @@ impl Running {
                 }
             };
             let (pre, _) = preprocess::prepare(&scene, &choice, cache.as_deref(), &report)?;
-            Ok((scene.material, pre))
+            report("environment transfer", 0, 1);
+            let transfer = crate::renderer::environment_transfer(&scene, &pre);
+            Ok((scene.material, pre, transfer))
         });
         self.status = format!("preprocessing {name}...");
         self.job = Some(Job {
@@ -395,10 +475,11 @@ impl Running {
         let job = self.job.take().expect("checked above");
         let seconds = job.started.elapsed().as_secs_f64();
         match job.handle.join() {
-            Ok(Ok((material, pre))) => {
+            Ok(Ok((material, pre, transfer))) => {
                 self.scene.material = material;
                 self.scene.resolved.material.preset = Some(job.material.clone());
                 self.pre = pre;
+                self.transfer = transfer;
                 self.reupload()?;
                 self.status = format!("{} ready in {seconds:.1} s", job.material);
             }
@@ -508,6 +589,12 @@ impl Running {
         } else if !self.status.is_empty() {
             lines.push(self.status.clone());
         }
+        if let Some(env) = &self.scene.environment {
+            lines.push(format!(
+                "environment {} turned {:.0} deg | shift+right drag, [ ] turn | e/E map",
+                env.source, self.view.environment_yaw
+            ));
+        }
         lines.push("drag orbit | right drag/arrows light | wheel zoom | mid drag pan".into());
         lines.push("m/M material | 1 local 2 global 3 both | b blend | p shot | h | q".into());
         lines
@@ -608,6 +695,8 @@ impl Running {
             },
             "light_yaw_deg": self.view.light_yaw,
             "light_pitch_deg": self.view.light_pitch,
+            "environment_yaw_deg": self.view.environment_yaw,
+            "environment": self.scene.environment.as_ref().map(|e| e.source.clone()),
             "settings": &self.pre.settings,
         });
         output::write_atomic(&out.join(format!("{name}.json")), |p| {
@@ -645,6 +734,10 @@ impl Running {
                 "p" if !event.repeat => Action::Screenshot(None),
                 "h" if !event.repeat => Action::ToggleOverlay,
                 "r" => Action::Reset,
+                "e" if !event.repeat => Action::NextEnvironment(1),
+                "E" if !event.repeat => Action::NextEnvironment(-1),
+                "[" => Action::Environment(-KEY_LIGHT_DEG),
+                "]" => Action::Environment(KEY_LIGHT_DEG),
                 "+" | "=" => Action::Zoom(WHEEL_ZOOM),
                 "-" => Action::Zoom(1.0 / WHEEL_ZOOM),
                 _ => return None,
@@ -660,6 +753,7 @@ impl Running {
         Some(match button {
             MouseButton::Left if self.shift => Action::Pan(dx, dy),
             MouseButton::Left => Action::Orbit(-dx * DRAG_DEG_PER_PX, -dy * DRAG_DEG_PER_PX),
+            MouseButton::Right if self.shift => Action::Environment(dx * DRAG_DEG_PER_PX),
             MouseButton::Right => Action::Light(dx * DRAG_DEG_PER_PX, -dy * DRAG_DEG_PER_PX),
             MouseButton::Middle => Action::Pan(dx, dy),
             _ => return None,
@@ -709,7 +803,22 @@ impl App {
         let size = window.inner_size();
         let swapchain = Swapchain::new(&gpu, size.width.max(1), size.height.max(1), config.vsync)?;
         let options = renderer_options(config.mode, swapchain::is_srgb(swapchain.format));
-        let data = Renderer::upload(&gpu, &config.scene, &config.pre, &options)?;
+        let transfer = crate::renderer::environment_transfer(&config.scene, &config.pre);
+        let data = Renderer::upload_with(
+            &gpu,
+            &config.scene,
+            &config.pre,
+            &options,
+            transfer.as_ref(),
+        )?;
+        let mut environments: Vec<Arc<crate::environment::Environment>> =
+            config.scene.environment.iter().cloned().collect();
+        if !environments.is_empty() {
+            if environments[0].source != "sky" {
+                environments.push(Arc::new(crate::environment::Environment::sky()?));
+            }
+            environments.extend(config.environments.iter().cloned());
+        }
         let both_blend = match config.mode {
             Blend::Simple => Blend::Simple,
             _ => Blend::Optimized,
@@ -739,6 +848,9 @@ impl App {
             cursor: PhysicalPosition::new(0.0, 0.0),
             shift: false,
             frames: 0,
+            environments,
+            environment_index: 0,
+            transfer,
         };
         running.rebuild()?;
         println!(

@@ -4,6 +4,7 @@
 //! ```text
 //! frames 3; light 40 10; frames 2; screenshot lit; material ketchup; wait; mode simple;
 //! orbit 30 0; zoom 1.2; pan 20 0; resize 640 480; frames 2; screenshot; quit
+//! environment 90; envmap; frames 2; screenshot turned
 //! ```
 //!
 //! Commands are separated by `;` or new lines; `#` starts a comment.
@@ -23,6 +24,10 @@ pub enum Action {
     Pan(f32, f32),
     /// Turn the lights about the object: degrees about the up axis and about the right axis.
     Light(f32, f32),
+    /// Turn the environment alone about the up axis, degrees.
+    Environment(f32),
+    /// Step through the environment maps by this many places.
+    NextEnvironment(i32),
     /// Switch to a material preset (preprocessing runs in the background).
     Material(String),
     /// Step through the presets by this many places.
@@ -91,6 +96,11 @@ fn parse_step(words: &[&str]) -> Result<Step> {
             let (a, b) = two("angle in degrees")?;
             Step::Act(Action::Light(a, b))
         }
+        "environment" => {
+            let a = finite(number(words.get(1).copied(), "angle in degrees")?, "angle")?;
+            Step::Act(Action::Environment(a))
+        }
+        "envmap" => Step::Act(Action::NextEnvironment(1)),
         "pan" => {
             let (a, b) = two("pixel offset")?;
             Step::Act(Action::Pan(a, b))
@@ -128,12 +138,15 @@ fn parse_step(words: &[&str]) -> Result<Step> {
         }
         "quit" => Step::Act(Action::Quit),
         other => bail!(
-            "unknown command '{other}' (frames, wait, orbit, light, pan, zoom, material, mode, \
-             screenshot, overlay, reset, resize, quit)"
+            "unknown command '{other}' (frames, wait, orbit, light, environment, envmap, pan, \
+             zoom, material, mode, screenshot, overlay, reset, resize, quit)"
         ),
     };
     let expected = match &step {
-        Step::Frames(_) | Step::Act(Action::Zoom(_) | Action::Material(_) | Action::Mode(_)) => 2,
+        Step::Frames(_)
+        | Step::Act(
+            Action::Zoom(_) | Action::Material(_) | Action::Mode(_) | Action::Environment(_),
+        ) => 2,
         Step::Act(Action::Screenshot(_)) => words.len().min(2),
         Step::Act(Action::Orbit(..) | Action::Light(..) | Action::Pan(..) | Action::Resize(..)) => {
             3
