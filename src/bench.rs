@@ -233,7 +233,11 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
     let per = |item: I, n: u64| n * item.bytes();
     let (read, written) = match pass {
         PassName::Shadow => (mesh * c.shadow_layers, b(I::ShadowMaps)),
-        PassName::Illum => (mesh, b(I::IlluminationMap)),
+        // With an environment, each rasterised texel reads its transfer.
+        PassName::Illum => (
+            mesh + per(I::EnvironmentTransfer, c.texels * c.transfer_per_texel),
+            b(I::IlluminationMap),
+        ),
         PassName::Dilate => (
             b(I::DilateTexels) + per(I::IlluminationMap, c.dilate_texels),
             0,
@@ -362,6 +366,12 @@ pub struct SceneSize {
     pub kernel_size: u32,
     /// Image size.
     pub image: [u32; 2],
+    /// The environment map, when the scene has an environment light: turned with the other
+    /// lights every frame (new spherical-harmonic coefficients and sun shadow map, no
+    /// preprocessing).
+    pub environment: Option<String>,
+    /// Spherical-harmonic coefficients of its transfer (0 without).
+    pub sh_coefficients: usize,
 }
 
 impl BenchReport {
@@ -434,6 +444,12 @@ impl BenchReport {
                 nonzeros: pre.ops.global_nonzeros(mode),
                 kernel_size: pre.ops.kernel_size,
                 image: [scene.width, scene.height],
+                environment: scene.environment.as_ref().map(|e| e.source.clone()),
+                sh_coefficients: if scene.environment.is_some() {
+                    crate::environment::sh::coefficients(scene.prt.order)
+                } else {
+                    0
+                },
             },
         }
     }

@@ -717,6 +717,12 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
         b.scene.image[1],
         k = b.scene.kernel_size
     );
+    if let Some(env) = &b.scene.environment {
+        println!(
+            "environment: {env}, {} spherical-harmonic coefficients, turned with the light every frame (no preprocessing)",
+            b.scene.sh_coefficients
+        );
+    }
     println!(
         "device bandwidth (this run): {:.1} GB/s ({})",
         b.device_gbps, b.device_bandwidth_source
