@@ -1545,7 +1545,7 @@ fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
 }
 
 fn sky(args: &SkyArgs) -> Result<()> {
-    if !(8..=16384).contains(&args.width) || args.width % 2 != 0 {
+    if !(8..=16384).contains(&args.width) || !args.width.is_multiple_of(2) {
         anyhow::bail!("--width = {} must be even, between 8 and 16384", args.width);
     }
     if !(args.sun_to_sky.is_finite() && (0.0..=1e4).contains(&args.sun_to_sky)) {

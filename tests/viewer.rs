@@ -251,6 +251,67 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
 }
 
 #[test]
+fn the_environment_turns_and_switches_maps_in_the_viewer() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer-environment");
+    // A second map: the shipped sky without its sun (`translucent sky`).
+    let mut sky = common::bin();
+    sky.args(["sky", "--sun-to-sky", "0", "--width", "256", "--out"])
+        .arg(dir.join("overcast.exr"));
+    let o = sky.output().unwrap();
+    assert!(o.status.success(), "{}", common::stderr(&o));
+    std::fs::write(
+        dir.join("scene.toml"),
+        "[[lights]]\nkind = \"environment\"\n[output]\nwidth = 256\nheight = 256\n",
+    )
+    .unwrap();
+    let script = "frames 2; screenshot sky\n\
+                  environment 90; frames 2; screenshot turned\n\
+                  envmap; frames 2; screenshot overcast\n\
+                  envmap; frames 2; screenshot back\n\
+                  quit";
+    let mut view = common::bin();
+    view.env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["--validate", "view", "--script", script, "--cache"])
+        .arg(dir.join("cache"))
+        .arg("--environment")
+        .arg(dir.join("overcast.exr"))
+        .arg("--out")
+        .arg(&dir)
+        .arg(dir.join("scene.toml"));
+    let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
+    assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
+    let exr = |name: &str| {
+        translucent::output::read_exr(&dir.join(format!("{name}.exr")))
+            .unwrap()
+            .2
+    };
+    let rms = |a: &[f32], b: &[f32]| {
+        translucent::reference::metrics::compare(a, b, None)
+            .0
+            .rel_rms
+    };
+    let (sky, turned, overcast, back) = (exr("sky"), exr("turned"), exr("overcast"), exr("back"));
+    // Turning the map moved its sun; the other map lights differently; switching back gives
+    // the turned sky again, to rounding.
+    assert!(rms(&turned, &sky) > 0.05, "turning changed little");
+    assert!(
+        rms(&overcast, &turned) > 0.05,
+        "the second map looks like the first"
+    );
+    assert!(
+        rms(&back, &turned) < 1e-4,
+        "back to the sky: {}",
+        rms(&back, &turned)
+    );
+    assert_eq!(json(&dir.join("turned.json"))["environment_yaw_deg"], 90.0);
+    assert_eq!(json(&dir.join("turned.json"))["environment"], "sky");
+    let shown = json(&dir.join("overcast.json"))["environment"].to_string();
+    assert!(shown.contains("overcast.exr"), "{shown}");
+}
+
+#[test]
 fn without_a_display_the_viewer_says_what_it_needs() {
     let mut cmd = common::bin();
     cmd.env_remove("DISPLAY")
