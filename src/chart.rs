@@ -617,6 +617,8 @@ pub struct PrtRow {
     pub order: u32,
     /// Per-texel relative RMS error, RGB.
     pub rms: [f64; 3],
+    /// The same with the harmonics and the sun's disc on the CPU (no shadow map), RGB.
+    pub cpu_rms: [f64; 3],
     /// The reference's noise on the same scale, RGB.
     pub noise: [f64; 3],
     /// Seconds to compute the transfer.
@@ -678,6 +680,21 @@ where
             )
             .map_err(err)?;
     }
+    let dark = RGBColor(40, 40, 40);
+    chart
+        .draw_series(LineSeries::new(
+            rows.iter().map(|r| (r.order as f64, 100.0 * r.cpu_rms[1])),
+            dark.stroke_width(1),
+        ))
+        .map_err(err)?
+        .label("G, harmonics + ray-traced sun (no shadow map)")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], dark.stroke_width(1)));
+    chart
+        .draw_series(
+            rows.iter()
+                .map(|r| Cross::new((r.order as f64, 100.0 * r.cpu_rms[1]), 4, dark)),
+        )
+        .map_err(err)?;
     let grey = RGBColor(130, 130, 130);
     chart
         .draw_series(LineSeries::new(

@@ -1511,6 +1511,7 @@ fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
         plotted.push(crate::chart::PrtRow {
             order,
             rms: e.rel_rms,
+            cpu_rms: cpu.rel_rms,
             noise: e.rel_noise,
             transfer_s: r.transfer_seconds(),
             illum_ms: ms,

@@ -364,4 +364,10 @@ fn prt_reports_order_against_error_and_cost() {
     let mut cmd = common::bin();
     cmd.args(["prt", "--no-cache", "--out"]).arg(&dir);
     common::fails_with(cmd, "no environment light");
+    // So are maps for the viewer of such a scene, before any window opens.
+    let mut cmd = common::bin();
+    cmd.env_remove("DISPLAY")
+        .args(["view", "--environment", "sky.exr", "--out"])
+        .arg(&dir);
+    common::fails_with(cmd, "--environment needs a scene with an environment light");
 }

@@ -108,6 +108,36 @@ pub fn choose(
     // Not a preprocessing setting, but chosen from the texel like them: said here with them.
     let (_, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
     choice.reasons.push(why);
+    if let Some(env) = &scene.environment {
+        let p = scene.prt;
+        choice.reasons.push(format!(
+            "environment {} ({} x {} work map): {}; the rest as spherical harmonics of order {} ({} coefficients{}), {} rays per texel ({})",
+            env.source,
+            env.width,
+            env.height,
+            match &env.sun {
+                Some(s) => format!(
+                    "sun {:.2} deg across at elevation {:.1} deg (lit as a directional light with a soft shadow map)",
+                    2.0 * s.angular_radius.to_degrees(),
+                    s.direction.y.clamp(-1.0, 1.0).asin().to_degrees()
+                ),
+                None => "no sun (no compact region 50x brighter than the mean)".to_string(),
+            },
+            p.order,
+            crate::environment::sh::coefficients(p.order),
+            if p.order == crate::environment::prt::DEFAULT_ORDER {
+                ": the first at the ray-traced reference's noise on the bunny under the sky"
+            } else {
+                ", given"
+            },
+            p.rays,
+            if p.rays == crate::environment::prt::DEFAULT_RAYS {
+                "16 x 16 stratified"
+            } else {
+                "given"
+            }
+        ));
+    }
     Ok(choice)
 }
 
