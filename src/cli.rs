@@ -495,7 +495,7 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     let resolved = scene.resolved.to_toml();
     let scene_warnings = scene.warnings.clone();
     let mode = args.mode;
-    let mut renderer = Renderer::new(
+    let mut renderer = Renderer::cached(
         &gpu,
         scene,
         &pre,
@@ -503,6 +503,7 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
             mode,
             ..Default::default()
         },
+        args.pre.cache_dir().as_deref(),
     )?;
     let mut timings = Vec::with_capacity(args.frames);
     for f in 0..args.frames {
@@ -669,7 +670,7 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
     let mode = args.mode;
-    let mut renderer = Renderer::new(
+    let mut renderer = Renderer::cached(
         &gpu,
         scene.clone(),
         &pre,
@@ -678,6 +679,7 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
             global_layout: args.global_layout,
             ..Default::default()
         },
+        args.pre.cache_dir().as_deref(),
     )?;
     let total = args.warmup + args.frames;
     let mut timings = Vec::with_capacity(args.frames);
@@ -1449,7 +1451,9 @@ fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
             capture: true,
             ..Default::default()
         };
-        let transfer = crate::renderer::environment_transfer(&s, &pre).context("no transfer")?;
+        let transfer =
+            crate::renderer::environment_transfer(&s, &pre, args.pre.cache_dir().as_deref())
+                .context("no transfer")?;
         let cpu = crate::environment::accuracy::cpu_estimate(
             &s,
             &pre.atlas,

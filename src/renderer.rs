@@ -88,28 +88,51 @@ pub struct WindowOutput {
 }
 
 /// The environment's per-texel transfer for `scene` (None without an environment light),
-/// timed and logged.
+/// loaded from `cache` or computed (and stored there), timed and logged.
 pub fn environment_transfer(
     scene: &Scene,
     pre: &Preprocessed,
+    cache: Option<&std::path::Path>,
 ) -> Option<crate::environment::prt::Transfer> {
-    scene.environment.as_ref().map(|_| {
-        let t = crate::environment::prt::transfer(
-            &scene.mesh,
-            &pre.atlas,
-            scene.material.eta,
-            scene.prt,
-        );
-        tracing::info!(
-            "environment transfer: order {} ({} coefficients), {} rays per texel, {} texels: {:.2} s",
-            t.settings.order,
-            crate::environment::sh::coefficients(t.settings.order),
-            t.settings.rays,
-            pre.atlas.texels.len(),
-            t.seconds
-        );
-        t
-    })
+    use crate::preprocess::cache;
+    scene.environment.as_ref()?;
+    let key = crate::environment::prt::key(
+        cache::key(&scene.mesh, &scene.material, &pre.settings),
+        scene.prt,
+    );
+    if let Some(dir) = cache {
+        match cache::load::<crate::environment::prt::Transfer>(dir, key) {
+            Ok(Some(t))
+                if t.coefficients.len()
+                    == pre.atlas.texels.len()
+                        * crate::environment::sh::coefficients(t.settings.order) =>
+            {
+                tracing::info!(
+                    "environment transfer loaded from {}",
+                    cache::path(dir, key).display()
+                );
+                return Some(t);
+            }
+            Ok(_) => {}
+            Err(e) => tracing::warn!("{e:#}; recomputing the environment transfer"),
+        }
+    }
+    let t =
+        crate::environment::prt::transfer(&scene.mesh, &pre.atlas, scene.material.eta, scene.prt);
+    tracing::info!(
+        "environment transfer: order {} ({} coefficients), {} rays per texel, {} texels: {:.2} s",
+        t.settings.order,
+        crate::environment::sh::coefficients(t.settings.order),
+        t.settings.rays,
+        pre.atlas.texels.len(),
+        t.seconds
+    );
+    if let Some(dir) = cache {
+        if let Err(e) = cache::store(dir, key, &t) {
+            tracing::warn!("cannot store the environment transfer in the cache: {e:#}");
+        }
+    }
+    Some(t)
 }
 
 /// A scene on the GPU with its compiled frame graph.
@@ -152,6 +175,20 @@ fn read_back<T: bytemuck::Pod>(buffer: &Buffer, count: usize) -> Result<Vec<T>> 
 }
 
 impl Renderer {
+    /// [`Renderer::new`] with the environment's transfer from the preprocessing cache `cache`
+    /// (computed and stored there when missing).
+    pub fn cached(
+        gpu: &Arc<Gpu>,
+        scene: Scene,
+        pre: &Preprocessed,
+        options: Options,
+        cache: Option<&std::path::Path>,
+    ) -> Result<Renderer> {
+        let transfer = environment_transfer(&scene, pre, cache);
+        let data = Self::upload_with(gpu, &scene, pre, &options, transfer.as_ref())?;
+        Self::with_data(gpu, scene, &data, options)
+    }
+
     /// Uploads the scene's preprocessing and builds the frame graph.
     pub fn new(
         gpu: &Arc<Gpu>,
@@ -172,7 +209,7 @@ impl Renderer {
         pre: &Preprocessed,
         options: &Options,
     ) -> Result<SubsurfaceData> {
-        let transfer = environment_transfer(scene, pre);
+        let transfer = environment_transfer(scene, pre, None);
         Self::upload_with(gpu, scene, pre, options, transfer.as_ref())
     }
 

@@ -371,3 +371,30 @@ fn prt_reports_order_against_error_and_cost() {
         .arg(&dir);
     common::fails_with(cmd, "--environment needs a scene with an environment light");
 }
+
+#[test]
+fn the_transfer_is_cached_with_the_preprocessing() {
+    let dir = common::temp_dir("transfer-cache");
+    let mut scene = common::scene(
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[[lights]]\nkind = \"environment\"\nrays = 16\n",
+    );
+    scene.width = 64;
+    scene.height = 64;
+    let pre = common::preprocess(&scene, SettingsOverrides::default());
+    let first = translucent::renderer::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
+    let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+    assert_eq!(files.len(), 1, "the transfer was not stored");
+    let again = translucent::renderer::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
+    assert_eq!(first.coefficients, again.coefficients);
+    assert_eq!(again.seconds, first.seconds, "recomputed instead of loaded");
+    // Another order is another entry; a corrupt entry is recomputed, not used.
+    let mut other = scene.clone();
+    other.prt.order = 2;
+    let o = translucent::renderer::environment_transfer(&other, &pre, Some(&dir)).unwrap();
+    assert_eq!(o.coefficients.len(), pre.atlas.texels.len() * 4);
+    for f in std::fs::read_dir(&dir).unwrap() {
+        std::fs::write(f.unwrap().path(), b"garbage").unwrap();
+    }
+    let fresh = translucent::renderer::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
+    assert_eq!(fresh.coefficients, first.coefficients);
+}

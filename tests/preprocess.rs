@@ -291,9 +291,9 @@ fn cache_round_trips_and_rejects_corrupt_or_stale_files() {
     let dir = std::env::temp_dir().join(format!("translucent-cache-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let key = cache::key(&mesh, &m, &p.settings);
-    assert!(cache::load(&dir, key).unwrap().is_none());
+    assert!(cache::load::<Preprocessed>(&dir, key).unwrap().is_none());
     let path = cache::store(&dir, key, &p).unwrap();
-    assert_eq!(cache::load(&dir, key).unwrap().unwrap(), p);
+    assert_eq!(cache::load::<Preprocessed>(&dir, key).unwrap().unwrap(), p);
     // Any change of input changes the key.
     let other = Material::preset("marble").unwrap();
     assert_ne!(cache::key(&mesh, &other, &p.settings), key);
@@ -306,15 +306,21 @@ fn cache_round_trips_and_rejects_corrupt_or_stale_files() {
     let last = flipped.len() - 10;
     flipped[last] ^= 0x55;
     std::fs::write(&path, &flipped).unwrap();
-    assert!(format!("{:#}", cache::load(&dir, key).unwrap_err()).contains("corrupt"));
+    assert!(
+        format!("{:#}", cache::load::<Preprocessed>(&dir, key).unwrap_err()).contains("corrupt")
+    );
     std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
-    assert!(format!("{:#}", cache::load(&dir, key).unwrap_err()).contains("truncated"));
+    assert!(
+        format!("{:#}", cache::load::<Preprocessed>(&dir, key).unwrap_err()).contains("truncated")
+    );
     let mut old = bytes.clone();
     old[8] = old[8].wrapping_add(1);
     std::fs::write(&path, &old).unwrap();
-    assert!(format!("{:#}", cache::load(&dir, key).unwrap_err()).contains("version"));
+    assert!(
+        format!("{:#}", cache::load::<Preprocessed>(&dir, key).unwrap_err()).contains("version")
+    );
     std::fs::write(&path, b"garbage").unwrap();
-    assert!(cache::load(&dir, key).is_err());
+    assert!(cache::load::<Preprocessed>(&dir, key).is_err());
     // prepare() rebuilds over the bad file and leaves a good one.
     let scene_desc = translucent::scene::desc::SceneDesc::parse("[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"ketchup\"").unwrap();
     let scene =

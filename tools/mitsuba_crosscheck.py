@@ -10,8 +10,13 @@ where `truth` traces pixel centres, so the object means are compared over the pi
 3x3 neighbourhood lies inside the object in both images; Mitsuba's standard error comes from
 two renders with different seeds, truth's from its noise.exr.
 
+With `--environment`, the light is the shipped sky (assets/environments/sky.exr) instead: an
+`envmap` in Mitsuba (whose direction convention the renderer follows), `[[lights]] kind =
+"environment"` in `truth`; both draw environment directions by brightness.
+
 Needs: `pip install mitsuba numpy` and a release build (`cargo build --release`).
 Usage:   python3 tools/mitsuba_crosscheck.py [--material skin1] [--spp 256] [--size 64]
+                                             [--environment]
 Prints the object means, their difference in combined standard errors, and the relative RMS
 difference after 4x4 binning with both noises removed. Exits 1 when the means differ by
 more than 2 combined standard errors in any channel.
@@ -41,8 +46,16 @@ LIGHT = [-0.5, -1.0, -0.3]  # direction of travel
 HALF = 10.0  # mm: half the cube's edge
 
 
-def truth(binary, material, spp, size, out):
+SKY = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets", "environments", "sky.exr")
+
+
+def truth(binary, material, spp, size, out, environment):
     cam, tgt, up, fov = CAMERA
+    light = (
+        '[[lights]]\nkind = "environment"'
+        if environment
+        else f'[[lights]]\nkind = "directional"\ndirection = {LIGHT}'
+    )
     scene = f"""
 [mesh]
 builtin = "box"
@@ -53,9 +66,7 @@ position = {cam}
 target = {tgt}
 up = {up}
 fov_deg = {fov}
-[[lights]]
-kind = "directional"
-direction = {LIGHT}
+{light}
 [material]
 preset = "{material}"
 eta = 1.0
@@ -75,7 +86,7 @@ height = {size}
     return img, noise, info
 
 
-def mitsuba(material, spp, size, seed):
+def mitsuba(material, spp, size, seed, environment):
     sp, sa = PRESETS[material]
     sigma_t = [s + a for s, a in zip(sp, sa)]
     albedo = [s / t for s, t in zip(sp, sigma_t)]
@@ -101,11 +112,15 @@ def mitsuba(material, spp, size, seed):
                 },
                 "sampler": {"type": "independent", "sample_count": spp},
             },
-            "light": {
-                "type": "directional",
-                "direction": LIGHT,
-                "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
-            },
+            "light": (
+                {"type": "envmap", "filename": os.path.abspath(SKY)}
+                if environment
+                else {
+                    "type": "directional",
+                    "direction": LIGHT,
+                    "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+                }
+            ),
             "cube": {
                 "type": "cube",
                 "to_world": mi.ScalarTransform4f().scale([HALF, HALF, HALF]),
@@ -140,12 +155,13 @@ def main():
     p.add_argument("--spp", type=int, default=256)
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--binary", default="target/release/translucent")
+    p.add_argument("--environment", action="store_true", help="light by the shipped sky")
     a = p.parse_args()
     mi.set_variant("scalar_rgb")
     out = tempfile.mkdtemp(prefix="crosscheck-")
-    t, t_noise, info = truth(a.binary, a.material, a.spp, a.size, out)
-    ma = mitsuba(a.material, a.spp // 2, a.size, 1)
-    mb = mitsuba(a.material, a.spp // 2, a.size, 2)
+    t, t_noise, info = truth(a.binary, a.material, a.spp, a.size, out, a.environment)
+    ma = mitsuba(a.material, a.spp // 2, a.size, 1, a.environment)
+    mb = mitsuba(a.material, a.spp // 2, a.size, 2, a.environment)
     m = 0.5 * (ma + mb)
     m_noise = 0.5 * np.abs(ma - mb)
     # Orientation: Mitsuba's image against truth's and its mirror image; keep the closer.
@@ -157,7 +173,8 @@ def main():
     if d_f < d:
         m, m_noise, mask = flipped, m_noise[:, ::-1], mask_f
     n = mask.sum()
-    print(f"material {a.material}, {a.size}x{a.size}, {a.spp} spp each, {n} interior pixels")
+    light = "the shipped sky" if a.environment else "a directional light"
+    print(f"material {a.material} under {light}, {a.size}x{a.size}, {a.spp} spp each, {n} interior pixels")
     print(f"truth: {info['seconds']:.1f} s, {info['events_per_second'] / 1e6:.2f} M collisions/s")
     worst = 0.0
     for c, name in enumerate(["red", "green", "blue"]):

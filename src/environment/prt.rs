@@ -77,7 +77,7 @@ impl PrtSettings {
 }
 
 /// Per-texel transfer vectors.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Transfer {
     /// Settings used.
     pub settings: PrtSettings,
@@ -149,6 +149,17 @@ pub fn transfer(mesh: &Mesh, atlas: &Atlas, eta: f64, settings: PrtSettings) -> 
         coefficients,
         seconds: start.elapsed().as_secs_f64(),
     }
+}
+
+/// Cache key of the transfer over the atlas of the preprocessing keyed `preprocessing` (which
+/// covers the mesh, the material and so eta, and the settings the atlas follows from).
+pub fn key(preprocessing: u64, settings: PrtSettings) -> u64 {
+    let mut h = crate::preprocess::cache::Fnv::default();
+    h.write(b"environment transfer 1");
+    h.write(&preprocessing.to_le_bytes());
+    h.write(&settings.order.to_le_bytes());
+    h.write(&settings.rays.to_le_bytes());
+    h.finish()
 }
 
 impl Transfer {

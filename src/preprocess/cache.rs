@@ -6,7 +6,7 @@
 //! Files are written to a temporary name and renamed, so an interrupted write leaves nothing
 //! under the final name.
 
-use super::{settings::Settings, Preprocessed};
+use super::settings::Settings;
 use crate::physics::Material;
 use crate::scene::mesh::Mesh;
 use anyhow::{bail, Context, Result};
@@ -77,8 +77,8 @@ pub fn path(dir: &Path, key: u64) -> PathBuf {
     dir.join(format!("{key:016x}.bin"))
 }
 
-/// Writes `value` under `key`.
-pub fn store(dir: &Path, key: u64, value: &Preprocessed) -> Result<PathBuf> {
+/// Writes `value` (a preprocessing, or another result keyed like one) under `key`.
+pub fn store<T: serde::Serialize>(dir: &Path, key: u64, value: &T) -> Result<PathBuf> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create cache folder '{}'", dir.display()))?;
     let payload = bincode::serialize(value).context("cannot serialise the preprocessing")?;
@@ -98,7 +98,7 @@ pub fn store(dir: &Path, key: u64, value: &Preprocessed) -> Result<PathBuf> {
 
 /// Loads the entry for `key`: `Ok(None)` if there is none, an error naming the problem if
 /// the file is stale or corrupt.
-pub fn load(dir: &Path, key: u64) -> Result<Option<Preprocessed>> {
+pub fn load<T: serde::de::DeserializeOwned>(dir: &Path, key: u64) -> Result<Option<T>> {
     let p = path(dir, key);
     match std::fs::metadata(&p) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),

@@ -455,7 +455,7 @@ impl Running {
             };
             let (pre, _) = preprocess::prepare(&scene, &choice, cache.as_deref(), &report)?;
             report("environment transfer", 0, 1);
-            let transfer = crate::renderer::environment_transfer(&scene, &pre);
+            let transfer = crate::renderer::environment_transfer(&scene, &pre, cache.as_deref());
             Ok((scene.material, pre, transfer))
         });
         self.status = format!("preprocessing {name}...");
@@ -803,7 +803,11 @@ impl App {
         let size = window.inner_size();
         let swapchain = Swapchain::new(&gpu, size.width.max(1), size.height.max(1), config.vsync)?;
         let options = renderer_options(config.mode, swapchain::is_srgb(swapchain.format));
-        let transfer = crate::renderer::environment_transfer(&config.scene, &config.pre);
+        let transfer = crate::renderer::environment_transfer(
+            &config.scene,
+            &config.pre,
+            config.cache.as_deref(),
+        );
         let data = Renderer::upload_with(
             &gpu,
             &config.scene,
