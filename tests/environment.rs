@@ -398,3 +398,54 @@ fn the_transfer_is_cached_with_the_preprocessing() {
     let fresh = translucent::renderer::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
     assert_eq!(fresh.coefficients, first.coefficients);
 }
+
+#[test]
+fn an_environment_adds_to_the_other_lights() {
+    // Light is additive: the environment listed first with a spot and a directional light
+    // gives the sum of their images (the uniforms put the environment's sun last; the
+    // illumination pass must still count every light once).
+    let env = "[[lights]]\nkind = \"environment\"\nintensity = 0.5\n";
+    let others = "[[lights]]\nkind = \"directional\"\ndirection = [1.0, -0.5, -0.2]\n\
+                  [[lights]]\nkind = \"spot\"\nposition = [0.0, 60.0, 80.0]\nintensity = 4000.0\n";
+    // One shadow-map size for all three (by default it follows the widest light's extent).
+    let out = "[output]\nwidth = 96\nheight = 96\nexposure = 1.0\nshadow_map = 768\n";
+    let a = common::scene(&format!("{env}{out}"));
+    let b = common::scene(&format!("{others}{out}"));
+    let both = common::scene(&format!("{env}{others}{out}"));
+    let pre = common::preprocess(&both, SettingsOverrides::default());
+    let render = |s: &Scene| common::render(s, &pre, Options::default(), 1).radiance;
+    let (ia, ib, ic) = (render(&a), render(&b), render(&both));
+    let sum: Vec<f32> = ia
+        .iter()
+        .zip(&ib)
+        .enumerate()
+        .map(|(i, (x, y))| if i % 4 == 3 { *x } else { x + y })
+        .collect();
+    let (e, _) = metrics::compare(&ic, &sum, None);
+    assert!(e.pixels > 1000);
+    assert!(
+        e.rel_rms < 1e-4,
+        "not additive: {:.5} % RMS",
+        100.0 * e.rel_rms
+    );
+    let (d, _) = metrics::compare(&ic, &ib, None);
+    assert!(d.rel_rms > 0.05, "the environment added little");
+}
+
+#[test]
+fn under_an_environment_the_index_matched_default_is_the_full_half_space_profile() {
+    let s = common::scene(
+        "[[lights]]\nkind = \"environment\"\n[material]\npreset = \"skimmilk\"\neta = 1.0\n",
+    );
+    assert_eq!(s.material.model, translucent::physics::Model::Halfspace);
+    let s = common::scene("[material]\npreset = \"skimmilk\"\neta = 1.0\n");
+    assert_eq!(
+        s.material.model,
+        translucent::physics::Model::HalfspaceSingle
+    );
+    let s = common::scene("[[lights]]\nkind = \"environment\"\n[material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n");
+    assert_eq!(
+        s.material.model,
+        translucent::physics::Model::HalfspaceSingle
+    );
+}

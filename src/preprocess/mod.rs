@@ -99,6 +99,13 @@ pub fn choose(
             (crate::physics::Model::HalfspaceSingle, true) => {
                 "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1)"
             }
+            (crate::physics::Model::Halfspace, false)
+                if scene.environment.is_some()
+                    && scene.resolved.material.model.is_none()
+                    && m.eta == 1.0 =>
+            {
+                "exact half-space profile of every order (eta = 1; under an environment the per-frame single scattering would see its sun alone)"
+            }
             (crate::physics::Model::Dipole, true) => {
                 "the classical dipole (the half-space models need eta = 1)"
             }
