@@ -147,7 +147,7 @@ fn a_sun_alone_lights_like_the_directional_light_of_its_irradiance() {
     let towards = glam::DVec3::new(-0.4, 0.6, 0.5).normalize();
     let e = sun_only_map(&dir.join("sun.exr"), towards, 1000.0);
     let d = -towards;
-    let common_part = "[output]\nwidth = 64\nheight = 64\nexposure = 1.0\n[material]\nsigma_s_prime = [1.0, 0.8, 0.6]\nsigma_a = [0.02, 0.05, 0.1]\neta = 1.0\n[mesh]\nbuiltin = \"sphere\"\nradius = 8.0\nsegments = 48\n";
+    let common_part = "[output]\nwidth = 64\nheight = 64\nexposure = 1.0\n[material]\nsigma_s_prime = [1.0, 0.8, 0.6]\nsigma_a = [0.02, 0.05, 0.1]\neta = 1.0\nmodel = \"halfspace\"\n[mesh]\nbuiltin = \"sphere\"\nradius = 8.0\nsegments = 48\n";
     let env = scene_in(
         &format!("{common_part}[[lights]]\nkind = \"environment\"\nfile = \"sun.exr\"\n"),
         &dir,

@@ -126,13 +126,7 @@ pub fn cpu_estimate(
     texels: &[usize],
 ) -> Vec<[f64; 3]> {
     let bvh = Bvh::new(&scene.mesh.positions, &scene.mesh.indices);
-    let (Some(env), Some(light)) = (
-        &scene.environment,
-        scene
-            .lights
-            .iter()
-            .find(|l| l.kind == crate::scene::desc::LightKind::Environment),
-    ) else {
+    let Some((env, light)) = scene.environment_light() else {
         return vec![[0.0; 3]; texels.len()];
     };
     let scale = light.radiance.as_dvec3();

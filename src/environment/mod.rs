@@ -454,6 +454,20 @@ pub fn decode(bytes: &[u8]) -> Result<(u32, u32, Vec<[f32; 3]>)> {
     }
 }
 
+/// The pixels within `r` of pixel `i` (itself included) of a `w` x `h` map, across its left
+/// and right edges but not past its top and bottom rows.
+fn neighbours(i: usize, w: u32, h: u32, r: i64) -> impl Iterator<Item = usize> {
+    let (x, y) = ((i as u32 % w) as i64, (i as u32 / w) as i64);
+    (-r..=r).flat_map(move |dy| {
+        (-r..=r).filter_map(move |dx| {
+            let ny = y + dy;
+            (0..h as i64)
+                .contains(&ny)
+                .then(|| (ny as u32 * w + (x + dx).rem_euclid(w as i64) as u32) as usize)
+        })
+    })
+}
+
 /// Finds the sun of a map (see [`SUN_CONTRAST`], [`MAX_SUN_SOLID_ANGLE`]): its pixels are those
 /// joined to the brightest one above the geometric mean of the peak and the map's mean
 /// luminance. Returns it and the map with those pixels set to the mean of the sky around them.
@@ -483,19 +497,10 @@ fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]
     let mut region = Vec::new();
     while let Some(i) = stack.pop() {
         region.push(i);
-        let (x, y) = ((i as u32 % w) as i64, (i as u32 / w) as i64);
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let ny = y + dy;
-                if ny < 0 || ny >= h as i64 {
-                    continue;
-                }
-                let nx = (x + dx).rem_euclid(w as i64);
-                let j = (ny as u32 * w + nx as u32) as usize;
-                if !inside[j] && lum[j] > threshold {
-                    inside[j] = true;
-                    stack.push(j);
-                }
+        for j in neighbours(i, w, h, 1) {
+            if !inside[j] && lum[j] > threshold {
+                inside[j] = true;
+                stack.push(j);
             }
         }
     }
@@ -509,16 +514,8 @@ fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]
     // The sky around: the pixels within two of the region, not in it.
     let mut ring = vec![false; lum.len()];
     for &i in &region {
-        let (x, y) = ((i as u32 % w) as i64, (i as u32 / w) as i64);
-        for dy in -2..=2 {
-            for dx in -2..=2 {
-                let ny = y + dy;
-                if ny < 0 || ny >= h as i64 {
-                    continue;
-                }
-                let j = (ny as u32 * w + (x + dx).rem_euclid(w as i64) as u32) as usize;
-                ring[j] = !inside[j];
-            }
+        for j in neighbours(i, w, h, 2) {
+            ring[j] = !inside[j];
         }
     }
     let (mut sky, mut sky_w) = ([0.0f64; 3], 0.0);

@@ -138,6 +138,24 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
+    /// Calls `f(w, d_omega)` at the centres of an `nt` x `np` latitude-longitude grid.
+    fn sphere_quadrature(nt: usize, np: usize, mut f: impl FnMut(DVec3, f64)) {
+        for i in 0..nt {
+            let (t0, t1) = (PI * i as f64 / nt as f64, PI * (i + 1) as f64 / nt as f64);
+            let theta = 0.5 * (t0 + t1);
+            let d_omega = (t0.cos() - t1.cos()) * 2.0 * PI / np as f64;
+            for j in 0..np {
+                let phi = 2.0 * PI * (j as f64 + 0.5) / np as f64;
+                let w = DVec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                );
+                f(w, d_omega);
+            }
+        }
+    }
+
     #[test]
     fn known_low_bands() {
         let w = DVec3::new(0.3, -0.5, 0.7).normalize();
@@ -175,27 +193,15 @@ mod tests {
         };
         let q = glam::DQuat::from_euler(glam::EulerRot::YXZ, 0.7, -0.4, 1.1);
         let project = |g: &dyn Fn(DVec3) -> f64| -> Vec<f64> {
-            let (nt, np) = (300, 600);
             let mut c = vec![0.0; k];
             let mut y = vec![0.0; k];
-            for i in 0..nt {
-                let (t0, t1) = (PI * i as f64 / nt as f64, PI * (i + 1) as f64 / nt as f64);
-                let theta = 0.5 * (t0 + t1);
-                let d = (t0.cos() - t1.cos()) * 2.0 * PI / np as f64;
-                for j in 0..np {
-                    let phi = 2.0 * PI * (j as f64 + 0.5) / np as f64;
-                    let w = DVec3::new(
-                        theta.sin() * phi.cos(),
-                        theta.sin() * phi.sin(),
-                        theta.cos(),
-                    );
-                    eval(order, w, &mut y);
-                    let v = g(w) * d;
-                    for (ck, yk) in c.iter_mut().zip(&y) {
-                        *ck += v * yk;
-                    }
+            sphere_quadrature(300, 600, |w, d| {
+                eval(order, w, &mut y);
+                let v = g(w) * d;
+                for (ck, yk) in c.iter_mut().zip(&y) {
+                    *ck += v * yk;
                 }
-            }
+            });
             c
         };
         let c = project(&f);
@@ -216,28 +222,16 @@ mod tests {
         // Quadrature over a fine latitude-longitude grid.
         let order = MAX_ORDER;
         let k = coefficients(order);
-        let (nt, np) = (200, 400);
         let mut gram = vec![0.0; k * k];
         let mut y = vec![0.0; k];
-        for i in 0..nt {
-            let (t0, t1) = (PI * i as f64 / nt as f64, PI * (i + 1) as f64 / nt as f64);
-            let theta = 0.5 * (t0 + t1);
-            let d_omega = (t0.cos() - t1.cos()) * 2.0 * PI / np as f64;
-            for j in 0..np {
-                let phi = 2.0 * PI * (j as f64 + 0.5) / np as f64;
-                let w = DVec3::new(
-                    theta.sin() * phi.cos(),
-                    theta.sin() * phi.sin(),
-                    theta.cos(),
-                );
-                eval(order, w, &mut y);
-                for a in 0..k {
-                    for b in 0..k {
-                        gram[a * k + b] += y[a] * y[b] * d_omega;
-                    }
+        sphere_quadrature(200, 400, |w, d_omega| {
+            eval(order, w, &mut y);
+            for a in 0..k {
+                for b in 0..k {
+                    gram[a * k + b] += y[a] * y[b] * d_omega;
                 }
             }
-        }
+        });
         for a in 0..k {
             for b in 0..k {
                 let expect = if a == b { 1.0 } else { 0.0 };

@@ -105,13 +105,7 @@ pub fn environment_irradiance(
     rng: &mut crate::truth::rng::Rng,
 ) -> [f64; 3] {
     let mut e = [0.0; 3];
-    let (Some(env), Some(light)) = (
-        &scene.environment,
-        scene
-            .lights
-            .iter()
-            .find(|l| l.kind == crate::scene::desc::LightKind::Environment),
-    ) else {
+    let Some((env, light)) = scene.environment_light() else {
         return e;
     };
     let q = light.rotation.as_dquat();

@@ -785,6 +785,15 @@ impl Scene {
         })
     }
 
+    /// The environment light and its map, when the scene has one.
+    pub fn environment_light(&self) -> Option<(&crate::environment::Environment, &Light)> {
+        let light = self
+            .lights
+            .iter()
+            .find(|l| l.kind == LightKind::Environment)?;
+        Some((self.environment.as_deref()?, light))
+    }
+
     /// Centre and radius of the object's bounding sphere.
     pub fn bounds(&self) -> (Vec3, f32) {
         self.mesh.bounding_sphere()
