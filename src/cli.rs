@@ -1294,6 +1294,14 @@ fn open_and_prepare(
             println!("# {r}");
         }
         println!("# {}", estimate.describe());
+        if scene.environment.is_some() {
+            println!(
+                "# environment transfer: about {:.1} s ({} texels x {} rays; cached with the preprocessing)",
+                crate::environment::prt::estimate_seconds(estimate.texels, scene.prt),
+                estimate.texels,
+                scene.prt.rays
+            );
+        }
     }
     estimate.check(&gpu.info)?;
     let bars = Bars::new();

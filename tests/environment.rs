@@ -28,8 +28,8 @@ fn scene_in(text: &str, base: &Path) -> anyhow::Result<Scene> {
 
 const SKY: &str = "[[lights]]\nkind = \"environment\"\n";
 
-/// The illumination map of one frame of `scene`.
-fn illumination(scene: &Scene, pre: &preprocess::Preprocessed) -> Vec<[f32; 4]> {
+/// The illumination map of one frame of `scene`, and the seconds its transfer took.
+fn illumination(scene: &Scene, pre: &preprocess::Preprocessed) -> (Vec<[f32; 4]>, f64) {
     let gpu = common::gpu();
     let map = {
         let mut r = Renderer::new(
@@ -44,10 +44,12 @@ fn illumination(scene: &Scene, pre: &preprocess::Preprocessed) -> Vec<[f32; 4]> 
         .unwrap();
         r.render(1).unwrap();
         let texels = (pre.atlas.width * pre.atlas.height) as usize;
-        r.captured(texels, pre.nodes.positions.len())
+        let map = r
+            .captured(texels, pre.nodes.positions.len())
             .unwrap()
             .unwrap()
-            .irradiance
+            .irradiance;
+        (map, r.transfer_seconds())
     };
     common::assert_no_validation_messages(&gpu);
     map
@@ -63,7 +65,16 @@ fn per_texel_irradiance_is_within_three_percent_of_ray_traced_irradiance() {
         "{} texels",
         reference.texels.len()
     );
-    let e = reference.error_of(&pre.atlas, &illumination(&scene, &pre));
+    let (map, seconds) = illumination(&scene, &pre);
+    let e = reference.error_of(&pre.atlas, &map);
+    // The printed estimate of the transfer's time holds.
+    let estimate =
+        translucent::environment::prt::estimate_seconds(pre.atlas.texels.len() as u64, scene.prt);
+    let f = preprocess::ESTIMATE_TIME_FACTOR;
+    assert!(
+        seconds < f * estimate && seconds > estimate / f,
+        "transfer {seconds:.2} s, estimated {estimate:.2} s"
+    );
     println!(
         "bunny under the sky, order {}: {:.2} / {:.2} / {:.2} % RMS per texel (reference noise {:.2} %)",
         scene.prt.order,
@@ -83,7 +94,7 @@ fn per_texel_irradiance_is_within_three_percent_of_ray_traced_irradiance() {
     // The measure can fail: the constant band alone (order 1) misses the sky's gradient.
     let mut flat = scene.clone();
     flat.prt.order = 1;
-    let e1 = reference.error_of(&pre.atlas, &illumination(&flat, &pre));
+    let e1 = reference.error_of(&pre.atlas, &illumination(&flat, &pre).0);
     assert!(
         e1.rel_rms[2] > 0.06,
         "order 1 is as good as order {}: {:?}",
