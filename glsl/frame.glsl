@@ -14,11 +14,11 @@
 #define PI 3.14159265358979
 
 struct Light {
-    vec4 position;         // xyz: position in mm (point, spot); unused for directional;
-                           // w: the shadow map's depth range in mm (sun)
+    vec4 position;         // xyz: position in mm (point, spot); unused for directional
     vec4 direction;        // xyz: direction the light travels (directional, spot axis, sun)
     vec4 radiance;         // rgb: colour * intensity (irradiance at normal incidence, at 1 mm for point/spot)
-    vec4 params;           // x: cos(spot half-angle), tan(angular radius) of a sun,
+    vec4 params;           // x: cos(spot half-angle); a sun: its penumbra's half-width in
+                           //    map texels per unit of map depth between blocker and receiver,
                            // y: normal-offset bias (mm), z: depth bias, w: kind
     uvec4 layers;          // x: first shadow-map layer, y: layers (1, or 6 cube faces for a point light)
 };

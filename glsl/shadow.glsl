@@ -49,11 +49,11 @@ float shadow_visibility(sampler2DArrayShadow maps, uint index, vec3 x, vec3 n) {
 // Taps of the sun's blocker search and filter: (2 SUN_TAPS + 1)^2 each.
 #define SUN_TAPS 2
 
-// Visibility of a sun (a disc of angular radius atan(params.x) at infinity, `index` a
-// LIGHT_SUN) from x: percentage-closer soft shadows (Fernando 2005) on its orthographic map.
-// Blockers are searched over the widest penumbra the disc can cast on x (occluders up to the
-// map's near plane); their mean depth gives the penumbra's half-width at x,
-// (depth(x) - depth(blockers)) x range x tan(radius), over which the comparisons are averaged
+// Visibility of a sun (a disc at infinity, `index` a LIGHT_SUN) from x: percentage-closer soft
+// shadows (Fernando 2005) on its orthographic map. Blockers are searched over the widest
+// penumbra the disc can cast on x (occluders up to the map's near plane); their mean depth
+// gives the penumbra's half-width at x, (depth(x) - depth(blockers)) x params.x texels (the
+// map's depth range x tan(angular radius) / texel), over which the comparisons are averaged
 // (at least the 3 x 3 texels of `shadow_visibility`).
 float sun_visibility(sampler2DArrayShadow maps, sampler2DArray depths, uint index, vec3 x, vec3 n) {
     Light l = frame.lights[index];
@@ -65,9 +65,8 @@ float sun_visibility(sampler2DArrayShadow maps, sampler2DArray depths, uint inde
         return 1.0;
     }
     vec2 texel = 1.0 / vec2(textureSize(maps, 0).xy);
-    float texel_mm = l.params.y / 1.5;
     float ref = ndc.z - l.params.z;
-    float per_depth = l.position.w * l.params.x / texel_mm; // texels of half-width per unit depth
+    float per_depth = l.params.x;
     float search = max(ref * per_depth, 1.0);
     float blockers = 0.0;
     float count = 0.0;

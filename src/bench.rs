@@ -445,11 +445,7 @@ impl BenchReport {
                 kernel_size: pre.ops.kernel_size,
                 image: [scene.width, scene.height],
                 environment: scene.environment.as_ref().map(|e| e.source.clone()),
-                sh_coefficients: if scene.environment.is_some() {
-                    crate::environment::sh::coefficients(scene.prt.order)
-                } else {
-                    0
-                },
+                sh_coefficients: scene.environment_coefficients(),
             },
         }
     }

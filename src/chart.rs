@@ -627,6 +627,47 @@ pub struct PrtRow {
     pub illum_ms: f64,
 }
 
+/// The axes of `translucent prt`'s panels: order against a value.
+type OrderChart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A labelled line of `points` on an order chart.
+fn order_line<'a, DB: DrawingBackend + 'a>(
+    chart: &mut OrderChart<'a, DB>,
+    points: Vec<(f64, f64)>,
+    colour: RGBColor,
+    width: u32,
+    label: &str,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .draw_series(LineSeries::new(points, colour.stroke_width(width)))
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?
+        .label(label)
+        .legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(width))
+        });
+    Ok(())
+}
+
+/// The series' legend box of an order chart.
+fn legend<'a, DB: DrawingBackend + 'a>(chart: &mut OrderChart<'a, DB>) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))
+}
+
 fn draw_prt<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[PrtRow]) -> Result<()>
 where
     DB::ErrorType: 'static,
@@ -664,52 +705,36 @@ where
         ("G", RGBColor(40, 150, 40)),
         ("B", RGBColor(40, 80, 200)),
     ];
+    let at = |f: &dyn Fn(&PrtRow) -> f64| -> Vec<(f64, f64)> {
+        rows.iter().map(|r| (r.order as f64, f(r))).collect()
+    };
     for (c, (name, col)) in channels.into_iter().enumerate() {
+        let points = at(&|r| 100.0 * r.rms[c]);
+        order_line(&mut chart, points.clone(), col, 2, &format!("{name} error"))?;
         chart
-            .draw_series(LineSeries::new(
-                rows.iter().map(|r| (r.order as f64, 100.0 * r.rms[c])),
-                col.stroke_width(2),
-            ))
-            .map_err(err)?
-            .label(format!("{name} error"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col.stroke_width(2)));
-        chart
-            .draw_series(
-                rows.iter()
-                    .map(|r| Circle::new((r.order as f64, 100.0 * r.rms[c]), 3, col.filled())),
-            )
+            .draw_series(points.into_iter().map(|p| Circle::new(p, 3, col.filled())))
             .map_err(err)?;
     }
     let dark = RGBColor(40, 40, 40);
+    let cpu = at(&|r| 100.0 * r.cpu_rms[1]);
+    order_line(
+        &mut chart,
+        cpu.clone(),
+        dark,
+        1,
+        "G, harmonics + ray-traced sun (no shadow map)",
+    )?;
     chart
-        .draw_series(LineSeries::new(
-            rows.iter().map(|r| (r.order as f64, 100.0 * r.cpu_rms[1])),
-            dark.stroke_width(1),
-        ))
-        .map_err(err)?
-        .label("G, harmonics + ray-traced sun (no shadow map)")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], dark.stroke_width(1)));
-    chart
-        .draw_series(
-            rows.iter()
-                .map(|r| Cross::new((r.order as f64, 100.0 * r.cpu_rms[1]), 4, dark)),
-        )
+        .draw_series(cpu.into_iter().map(|p| Cross::new(p, 4, dark)))
         .map_err(err)?;
-    let grey = RGBColor(130, 130, 130);
-    chart
-        .draw_series(LineSeries::new(
-            rows.iter().map(|r| (r.order as f64, 100.0 * r.noise[1])),
-            grey.stroke_width(1),
-        ))
-        .map_err(err)?
-        .label("reference noise (G)")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], grey.stroke_width(1)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    order_line(
+        &mut chart,
+        at(&|r| 100.0 * r.noise[1]),
+        RGBColor(130, 130, 130),
+        1,
+        "reference noise (G)",
+    )?;
+    legend(&mut chart)?;
     let c_max = rows
         .iter()
         .flat_map(|r| [r.illum_ms, r.transfer_s])
@@ -727,29 +752,21 @@ where
         .y_desc("illumination pass (ms per frame) / transfer (s, once)")
         .draw()
         .map_err(err)?;
-    for (name, col, f) in [
-        (
-            "illum pass, ms",
-            RGBColor(200, 30, 90),
-            (|r: &PrtRow| r.illum_ms) as fn(&PrtRow) -> f64,
-        ),
-        ("transfer, s", RGBColor(40, 120, 200), |r: &PrtRow| {
-            r.transfer_s
-        }),
-    ] {
-        cost.draw_series(LineSeries::new(
-            rows.iter().map(|r| (r.order as f64, f(r))),
-            col.stroke_width(2),
-        ))
-        .map_err(err)?
-        .label(name)
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col.stroke_width(2)));
-    }
-    cost.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    order_line(
+        &mut cost,
+        at(&|r| r.illum_ms),
+        RGBColor(200, 30, 90),
+        2,
+        "illum pass, ms",
+    )?;
+    order_line(
+        &mut cost,
+        at(&|r| r.transfer_s),
+        RGBColor(40, 120, 200),
+        2,
+        "transfer, s",
+    )?;
+    legend(&mut cost)?;
     root.present().map_err(err)?;
     Ok(())
 }

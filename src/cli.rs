@@ -1487,7 +1487,9 @@ fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
         let e = reference.error_of(&pre.atlas, &cap.irradiance);
         let ms = crate::graph::timing::Stats::of(&times).median_ms;
         let k = sh::coefficients(order);
-        let mib = (atlas_texels * k.div_ceil(8) * 16) as f64 / (1u64 << 20) as f64;
+        let mib = crate::passes::data::counts(&s, &pre, options.mode)
+            .bytes(crate::layout::Item::EnvironmentTransfer) as f64
+            / (1u64 << 20) as f64;
         let pct = |v: [f64; 3]| {
             format!(
                 "{:6.2} {:6.2} {:6.2}",

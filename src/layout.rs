@@ -179,6 +179,15 @@ impl Item {
     }
 }
 
+/// Spherical-harmonic coefficients of the environment transfer per element (eight f16 in an
+/// RGBA32UI element).
+pub const TRANSFER_COEFFICIENTS_PER_ELEMENT: usize = 8;
+
+/// Transfer elements per atlas texel for `coefficients` coefficients (0 for none).
+pub fn transfer_elements(coefficients: usize) -> usize {
+    coefficients.div_ceil(TRANSFER_COEFFICIENTS_PER_ELEMENT)
+}
+
 /// Kernel elements per covered texel for a `kernel_size` x `kernel_size` kernel: two taps to
 /// an element.
 pub fn kernel_pairs(kernel_size: u32) -> u32 {

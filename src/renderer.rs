@@ -149,8 +149,6 @@ pub struct Renderer {
     /// The uniforms that follow from the material (fixed for a renderer).
     material_uniforms: MaterialUniforms,
     last_lights: Option<Vec<Light>>,
-    /// Order of the environment's transfer (0 without an environment).
-    sh_order: u32,
     /// Seconds the transfer took to compute.
     transfer_seconds: f64,
     window: Option<(Arc<Image>, passes::overlay::Text)>,
@@ -222,6 +220,18 @@ impl Renderer {
         options: &Options,
         transfer: Option<&crate::environment::prt::Transfer>,
     ) -> Result<SubsurfaceData> {
+        // The uniforms take the order from the scene: the transfer must be the scene's.
+        if let Some(t) = transfer {
+            if scene.environment.is_none() || t.settings != scene.prt {
+                anyhow::bail!(
+                    "an environment transfer of {:?} for a scene whose environment asks for {:?}",
+                    t.settings,
+                    scene.environment.as_ref().map(|_| scene.prt)
+                );
+            }
+        } else if scene.environment.is_some() {
+            anyhow::bail!("a scene with an environment light uploaded without its transfer");
+        }
         // Refuse before allocating anything what the device cannot hold.
         passes::data::Requirements::of(scene, pre, options.mode).check(&gpu.info)?;
         SubsurfaceData::upload(
@@ -519,7 +529,6 @@ impl Renderer {
             display_readback,
             capture,
             shadow_map_size: s,
-            sh_order: data.sh_order,
             transfer_seconds: data.transfer_seconds,
             last_lights: None,
             window,
@@ -655,7 +664,6 @@ impl Renderer {
             &self.material_uniforms,
             lights,
             self.shadow_map_size,
-            self.sh_order,
         )?;
         if !self.uniforms.write_mapped(bytemuck::bytes_of(&uniforms)) {
             anyhow::bail!("the uniform buffer is not host-visible");

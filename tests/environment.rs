@@ -403,6 +403,14 @@ fn the_transfer_is_cached_with_the_preprocessing() {
     other.prt.order = 2;
     let o = translucent::renderer::environment_transfer(&other, &pre, Some(&dir)).unwrap();
     assert_eq!(o.coefficients.len(), pre.atlas.texels.len() * 4);
+    // The uniforms take the order from the scene: a transfer of another order is refused.
+    let gpu = common::gpu();
+    let wrong = match Renderer::upload_with(&gpu, &scene, &pre, &Options::default(), Some(&o)) {
+        Ok(_) => panic!("a transfer of order 2 was uploaded for a scene of order 4"),
+        Err(e) => format!("{e:#}"),
+    };
+    assert!(wrong.contains("environment transfer of"), "{wrong}");
+    common::assert_no_validation_messages(&gpu);
     for f in std::fs::read_dir(&dir).unwrap() {
         std::fs::write(f.unwrap().path(), b"garbage").unwrap();
     }

@@ -88,6 +88,8 @@ pub struct Environment {
     cdf: Vec<f64>,
     /// Hash of the pixels (keys of cached results).
     pub hash: u64,
+    /// The brightest channel of the work map's brightest pixel.
+    pub peak_radiance: f32,
 }
 
 /// Luminance of linear sRGB.
@@ -230,10 +232,8 @@ impl Environment {
                 pixels[i]
             );
         }
-        let max = pixels
-            .iter()
-            .flat_map(|p| p.iter())
-            .fold(0f32, |a, &c| a.max(c)) as f64;
+        let peak = |px: &[[f32; 3]]| px.iter().flatten().fold(0f32, |a, &c| a.max(c));
+        let max = peak(&pixels) as f64;
         if max > crate::scene::MAX_RADIANCE {
             bail!(
                 "a pixel of radiance {max:e} exceeds {:e}: the passes' f32 sums would overflow",
@@ -261,9 +261,8 @@ impl Environment {
         for y in 0..ph {
             let d_omega = pixel_solid_angle(y, pw, ph);
             for x in 0..pw {
-                let w = direction((x as f64 + 0.5) / pw as f64, (y as f64 + 0.5) / ph as f64);
                 let p = projected[(y * pw + x) as usize];
-                residual.push((w, p.map(|c| c as f64 * d_omega)));
+                residual.push((direction_of(x, y, pw, ph), p.map(|c| c as f64 * d_omega)));
             }
         }
         let mut cdf = Vec::with_capacity(radiance.len());
@@ -279,6 +278,7 @@ impl Environment {
         if total <= 0.0 {
             bail!("every pixel is black: the environment gives no light");
         }
+        let peak_radiance = peak(&radiance);
         let mut env = Environment {
             source: source.to_string(),
             width,
@@ -289,17 +289,18 @@ impl Environment {
             base: Vec::new(),
             cdf,
             hash: hash.finish(),
+            peak_radiance,
         };
         env.base = env.sh_coefficients(sh::MAX_ORDER, Quat::IDENTITY);
         Ok(env)
     }
 
-    /// Radiance arriving from map direction `w` (the pixel it falls in).
-    pub fn radiance_towards(&self, w: DVec3) -> [f64; 3] {
-        let (u, v) = coordinates(w);
-        let x = ((u * self.width as f64) as u32).min(self.width - 1);
-        let y = ((v * self.height as f64) as u32).min(self.height - 1);
-        self.radiance[(y * self.width + x) as usize].map(|c| c as f64)
+    /// The direction the sun's light travels once the map is turned by `rotation` (map frame
+    /// -> world): what an environment light's `direction` holds; straight down without a sun.
+    pub fn sun_travel(&self, rotation: Quat) -> glam::Vec3 {
+        self.sun
+            .map(|s| -(rotation * s.direction.as_vec3()))
+            .unwrap_or(glam::Vec3::NEG_Y)
     }
 
     /// A direction drawn by brightness from three uniform numbers: (direction in the map's

@@ -171,8 +171,6 @@ pub struct SubsurfaceData {
     pub texture: Arc<Image>,
     /// The environment's transfer per atlas texel (one zero element without an environment).
     pub transfer: Arc<Buffer>,
-    /// Its spherical-harmonic order (0 without an environment).
-    pub sh_order: u32,
     /// Seconds its computation took (0 without an environment).
     pub transfer_seconds: f64,
 }
@@ -516,11 +514,7 @@ pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::
 /// Transfer elements per atlas texel: eight f16 coefficients to an element, 0 without an
 /// environment light.
 pub fn transfer_per_texel(scene: &Scene) -> u64 {
-    if scene.environment.is_some() {
-        crate::environment::sh::coefficients(scene.prt.order).div_ceil(8) as u64
-    } else {
-        0
-    }
+    crate::layout::transfer_elements(scene.environment_coefficients()) as u64
 }
 
 /// Device memory a renderer needs, per resource, computed before anything is allocated.
@@ -822,32 +816,26 @@ impl SubsurfaceData {
         // Dense over the atlas (the illumination pass finds a fragment's texel by its
         // coordinates), eight f16 coefficients to an element; zero on uncovered texels.
         let transfer_seconds = transfer.map_or(0.0, |t| t.seconds);
-        let (transfer, sh_order) = match transfer {
+        let transfer = match transfer {
             Some(tr) => {
                 let k = crate::environment::sh::coefficients(tr.settings.order);
-                let per = k.div_ceil(8);
+                let per = crate::layout::transfer_elements(k);
+                let per_element = crate::layout::TRANSFER_COEFFICIENTS_PER_ELEMENT;
                 let mut dense = vec![[0u32; 4]; (atlas.width * atlas.height) as usize * per];
                 for (t, texel) in atlas.texels.iter().enumerate() {
                     let base = (texel.y * atlas.width + texel.x) as usize * per;
                     let row = &tr.coefficients[t * k..(t + 1) * k];
                     for (j, c) in row.iter().enumerate() {
-                        let e = &mut dense[base + j / 8][(j % 8) / 2];
+                        let e = &mut dense[base + j / per_element][(j % per_element) / 2];
                         *e |= (crate::gpu::half::to_f16(*c) as u32) << (16 * (j % 2));
                     }
                 }
-                (
-                    upload(gpu, Item::EnvironmentTransfer, &dense, texel_usage)?,
-                    tr.settings.order,
-                )
+                upload(gpu, Item::EnvironmentTransfer, &dense, texel_usage)?
             }
-            None => (
-                upload(gpu, Item::EnvironmentTransfer, &[[0u32; 4]], texel_usage)?,
-                0,
-            ),
+            None => upload(gpu, Item::EnvironmentTransfer, &[[0u32; 4]], texel_usage)?,
         };
         Ok(SubsurfaceData {
             transfer,
-            sh_order,
             transfer_seconds,
             vertices,
             indices,

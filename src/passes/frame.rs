@@ -78,13 +78,12 @@ impl FrameUniforms {
     /// Uniforms for `scene` (its material's part given as `material`) with its lights as given
     /// and `shadow_map_size`-texel shadow maps. An environment light becomes its sun (a
     /// directional light, black without one) and its map's spherical-harmonic coefficients of
-    /// `sh_order` (the transfer's), turned and scaled as the light says.
+    /// the scene's transfer order, turned and scaled as the light says.
     pub fn new(
         scene: &Scene,
         material: &MaterialUniforms,
         lights: &[Light],
         shadow_map_size: u32,
-        sh_order: u32,
     ) -> Result<FrameUniforms> {
         let (center, radius) = scene.bounds();
         let aspect = scene.width as f32 / scene.height as f32;
@@ -114,8 +113,7 @@ impl FrameUniforms {
             }
             let shadow = shadows[0];
             let mut radiance = light.radiance;
-            let mut position = light.position.extend(1.0).to_array();
-            let mut cos_cone = light.cos_cone;
+            let mut penumbra = light.cos_cone;
             let kind = match light.kind {
                 LightKind::Directional => 0.0,
                 LightKind::Point => 1.0,
@@ -126,41 +124,40 @@ impl FrameUniforms {
                     };
                     let sun = env.sun.map_or([0.0; 3], |s| s.irradiance);
                     radiance *= glam::DVec3::from_array(sun).as_vec3();
-                    // The sun's disc for its soft shadow: tan of its angular radius, and the
-                    // depth range of its orthographic map (`scene::shadow`: 2 radii).
-                    cos_cone = env.sun.map_or(0.0, |s| s.angular_radius.tan() as f32);
-                    position[3] = 2.0 * radius.max(1e-3);
-                    if sh_order > 0 {
-                        let c = env.coefficients(sh_order, light.rotation);
-                        for (u, c) in u.environment.iter_mut().zip(&c) {
-                            *u = [0, 1, 2, 3].map(|ch| {
-                                if ch < 3 {
-                                    (c[ch] * light.radiance[ch] as f64) as f32
-                                } else {
-                                    0.0
-                                }
-                            });
-                        }
+                    // The sun's disc for its soft shadow: the penumbra's half-width in map
+                    // texels per unit of map depth between blocker and receiver.
+                    penumbra = env.sun.map_or(0.0, |s| {
+                        shadow.depth_range_mm * s.angular_radius.tan() as f32 / shadow.texel_mm
+                    });
+                    let c = env.coefficients(scene.prt.order, light.rotation);
+                    for (u, c) in u.environment.iter_mut().zip(&c) {
+                        let r = light.radiance.as_dvec3();
+                        *u = [
+                            (c[0] * r.x) as f32,
+                            (c[1] * r.y) as f32,
+                            (c[2] * r.z) as f32,
+                            0.0,
+                        ];
                     }
                     3.0
                 }
             };
             *slot = GpuLight {
-                position,
+                position: light.position.extend(1.0).to_array(),
                 direction: light.direction.extend(0.0).to_array(),
                 radiance: radiance.extend(0.0).to_array(),
-                params: [cos_cone, 1.5 * shadow.texel_mm, shadow.depth_bias, kind],
+                params: [penumbra, 1.5 * shadow.texel_mm, shadow.depth_bias, kind],
                 layers: [layer as u32, shadows.len() as u32, 0, 0],
             };
             layer += shadows.len();
         }
-        let environment = lights.iter().any(|l| l.kind == LightKind::Environment);
-        let sh = if environment {
-            crate::environment::sh::coefficients(sh_order) as u32
-        } else {
-            0
-        };
-        u.counts = [lights.len() as u32, layer as u32, sh, sh.div_ceil(8)];
+        let sh = scene.environment_coefficients();
+        u.counts = [
+            lights.len() as u32,
+            layer as u32,
+            sh as u32,
+            crate::layout::transfer_elements(sh) as u32,
+        ];
         Ok(u)
     }
 }

@@ -510,7 +510,7 @@ impl Scene {
             ] {
                 if given && !applies {
                     bail!(
-                        "{} does not apply to a {} light (position: point and spot; direction: directional and spot; cone_deg: spot; file and rotate_deg: environment)",
+                        "{} does not apply to a {} light (position: point and spot; direction: directional and spot; cone_deg: spot; file, rotate_deg, sh_order and rays: environment)",
                         name(key),
                         format!("{:?}", l.kind).to_lowercase()
                     );
@@ -554,7 +554,7 @@ impl Scene {
                     prt.validate().with_context(|| name(""))?;
                     let yaw = *l.rotate_deg.get_or_insert(0.0);
                     finite(&name("rotate_deg"), &[yaw])?;
-                    let peak = map.radiance.iter().flatten().fold(0f32, |a, &c| a.max(c)) as f64
+                    let peak = map.peak_radiance as f64
                         * color.iter().fold(0.0f64, |a, &c| a.max(c))
                         * intensity;
                     if peak > MAX_RADIANCE {
@@ -564,10 +564,7 @@ impl Scene {
                         );
                     }
                     let rotation = glam::Quat::from_rotation_y((yaw as f32).to_radians());
-                    let direction = map
-                        .sun
-                        .map(|s| -(rotation * s.direction.as_vec3()))
-                        .unwrap_or(Vec3::NEG_Y);
+                    let direction = map.sun_travel(rotation);
                     environment = Some(std::sync::Arc::new(map));
                     Light {
                         kind: l.kind,
@@ -783,6 +780,13 @@ impl Scene {
             warnings,
             notes,
         })
+    }
+
+    /// Spherical-harmonic coefficients of the environment's transfer (0 without one).
+    pub fn environment_coefficients(&self) -> usize {
+        self.environment
+            .as_ref()
+            .map_or(0, |_| crate::environment::sh::coefficients(self.prt.order))
     }
 
     /// The environment light and its map, when the scene has one.

@@ -26,6 +26,9 @@ pub struct ShadowProjection {
     pub texel_mm: f32,
     /// Depth bias in shadow-map depth units.
     pub depth_bias: f32,
+    /// Distance along the light that one unit of map depth spans, mm (orthographic maps: the
+    /// depth is linear; perspective maps: 0, their depth is not).
+    pub depth_range_mm: f32,
 }
 
 fn any_perpendicular(d: Vec3) -> Vec3 {
@@ -59,6 +62,7 @@ pub fn shadow_projections(
                 view_proj: proj * view,
                 texel_mm: texel,
                 depth_bias: 0.5 * texel / (2.0 * radius),
+                depth_range_mm: 2.0 * radius,
             }]
         }
         LightKind::Spot => {
@@ -78,6 +82,7 @@ pub fn shadow_projections(
                 view_proj: Mat4::perspective_rh(2.0 * half, 1.0, near, far) * view,
                 texel_mm: 2.0 * dist * half.tan() / size as f32,
                 depth_bias: 0.0,
+                depth_range_mm: 0.0,
             }]
         }
         LightKind::Point => {
@@ -102,6 +107,7 @@ pub fn shadow_projections(
                     view_proj: proj * Mat4::look_at_rh(light.position, light.position + dir, up),
                     texel_mm: 2.0 * dist.max(near) * half.tan() / size as f32,
                     depth_bias: 0.0,
+                    depth_range_mm: 0.0,
                 })
                 .collect()
         }

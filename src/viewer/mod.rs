@@ -414,10 +414,7 @@ impl Running {
             .chain(self.scene.lights.iter_mut())
         {
             if l.kind == crate::scene::desc::LightKind::Environment {
-                l.direction = env
-                    .sun
-                    .map(|s| -(l.rotation * s.direction.as_vec3()))
-                    .unwrap_or(Vec3::NEG_Y);
+                l.direction = env.sun_travel(l.rotation);
             }
         }
         self.status = format!("environment {}", env.source);
