@@ -21,22 +21,33 @@ uint shadow_layer(Light l, vec3 x) {
     return l.layers.x;
 }
 
+// Where x, lifted along its geometric normal n by the normal-offset bias, falls in `layer` of
+// light l's shadow map: its map coordinates and the depth to compare, less the depth bias.
+// False where the map does not see it (behind a perspective map's eye, outside its square or
+// beyond its far plane): lit.
+bool shadow_coordinates(Light l, uint layer, vec3 x, vec3 n, out vec2 uv, out float ref) {
+    vec4 clip = frame.shadow_view_proj[layer] * vec4(x + n * l.params.y, 1.0);
+    if (clip.w <= 0.0) {
+        return false;
+    }
+    vec3 ndc = clip.xyz / clip.w;
+    uv = ndc.xy * 0.5 + 0.5;
+    ref = ndc.z - l.params.z;
+    return all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)))
+        && ndc.z <= 1.0;
+}
+
 // Visibility of light `index` from x with geometric normal n: normal-offset bias, a constant
 // depth bias and 3x3 percentage-closer filtering of nearest-texel comparisons.
 float shadow_visibility(sampler2DArrayShadow maps, uint index, vec3 x, vec3 n) {
     Light l = frame.lights[index];
     uint layer = shadow_layer(l, x);
-    vec4 clip = frame.shadow_view_proj[layer] * vec4(x + n * l.params.y, 1.0);
-    if (clip.w <= 0.0) {
-        return 1.0;
-    }
-    vec3 ndc = clip.xyz / clip.w;
-    vec2 uv = ndc.xy * 0.5 + 0.5;
-    if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0))) || ndc.z > 1.0) {
+    vec2 uv;
+    float ref;
+    if (!shadow_coordinates(l, layer, x, n, uv, ref)) {
         return 1.0;
     }
     vec2 texel = 1.0 / vec2(textureSize(maps, 0).xy);
-    float ref = ndc.z - l.params.z;
     float sum = 0.0;
     for (int dy = -1; dy <= 1; ++dy) {
         for (int dx = -1; dx <= 1; ++dx) {
@@ -58,14 +69,12 @@ float shadow_visibility(sampler2DArrayShadow maps, uint index, vec3 x, vec3 n) {
 float sun_visibility(sampler2DArrayShadow maps, sampler2DArray depths, uint index, vec3 x, vec3 n) {
     Light l = frame.lights[index];
     uint layer = l.layers.x;
-    vec4 clip = frame.shadow_view_proj[layer] * vec4(x + n * l.params.y, 1.0);
-    vec3 ndc = clip.xyz / clip.w;
-    vec2 uv = ndc.xy * 0.5 + 0.5;
-    if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0))) || ndc.z > 1.0) {
+    vec2 uv;
+    float ref;
+    if (!shadow_coordinates(l, layer, x, n, uv, ref)) {
         return 1.0;
     }
     vec2 texel = 1.0 / vec2(textureSize(maps, 0).xy);
-    float ref = ndc.z - l.params.z;
     float per_depth = l.params.x;
     float search = max(ref * per_depth, 1.0);
     float blockers = 0.0;

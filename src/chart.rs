@@ -634,6 +634,34 @@ type OrderChart<'a, DB> = ChartContext<
     Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
 >;
 
+/// A panel of `translucent prt`'s chart: orders 1.. up to `max.0`, values 0 up to `max.1`.
+fn order_panel<'a, DB: DrawingBackend + 'a>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    max: (f64, f64),
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<OrderChart<'a, DB>>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 16))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.5..max.0, 0.0..max.1.max(1e-3))
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
 /// A labelled line of `points` on an order chart.
 fn order_line<'a, DB: DrawingBackend + 'a>(
     chart: &mut OrderChart<'a, DB>,
@@ -687,19 +715,13 @@ where
         .flat_map(|r| r.rms.iter().chain(&r.noise))
         .fold(0.0f64, |a, &b| a.max(100.0 * b))
         * 1.1;
-    let mut chart = ChartBuilder::on(&left)
-        .caption("per-texel irradiance vs ray-traced", ("sans-serif", 16))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.5..x_max, 0.0..y_max.max(1e-3))
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("order (bands 0..order-1)")
-        .y_desc("relative RMS error (%)")
-        .draw()
-        .map_err(err)?;
+    let mut chart = order_panel(
+        &left,
+        "per-texel irradiance vs ray-traced",
+        (x_max, y_max),
+        "order (bands 0..order-1)",
+        "relative RMS error (%)",
+    )?;
     let channels = [
         ("R", RGBColor(200, 40, 40)),
         ("G", RGBColor(40, 150, 40)),
@@ -740,18 +762,13 @@ where
         .flat_map(|r| [r.illum_ms, r.transfer_s])
         .fold(0.0f64, f64::max)
         * 1.15;
-    let mut cost = ChartBuilder::on(&right)
-        .caption("cost", ("sans-serif", 16))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.5..x_max, 0.0..c_max.max(1e-3))
-        .map_err(err)?;
-    cost.configure_mesh()
-        .x_desc("order")
-        .y_desc("illumination pass (ms per frame) / transfer (s, once)")
-        .draw()
-        .map_err(err)?;
+    let mut cost = order_panel(
+        &right,
+        "cost",
+        (x_max, c_max),
+        "order",
+        "illumination pass (ms per frame) / transfer (s, once)",
+    )?;
     order_line(
         &mut cost,
         at(&|r| r.illum_ms),
