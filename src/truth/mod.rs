@@ -257,6 +257,15 @@ impl<'a> Tracer<'a> {
         );
         std::array::from_fn(|c| {
             let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
+            // Delta lights use no random numbers; an environment one direction per step, from
+            // one stream of the ray and the channel.
+            let mut rng = Rng::new(&[
+                0x73696e67,
+                d.x.to_bits(),
+                d.y.to_bits(),
+                d.z.to_bits(),
+                c as u64,
+            ]);
             let (mut depth, mut from, mut before) = (0i32, 0.0f64, 0.0f64);
             let mut sum = 0.0;
             for cr in &crossings {
@@ -270,16 +279,6 @@ impl<'a> Tracer<'a> {
                         let u = (k as f64 + 0.5) / steps as f64 * total;
                         let s = -(1.0 - u).ln() / sigma_t;
                         let x = o + d * (from + s);
-                        // Delta lights use no random numbers; an environment one direction
-                        // per step, from a stream of the ray and the step.
-                        let mut rng = Rng::new(&[
-                            0x73696e67,
-                            d.x.to_bits(),
-                            d.y.to_bits(),
-                            d.z.to_bits(),
-                            k as u64,
-                            c as u64,
-                        ]);
                         part += self.next_event(x, d, c, depth, &mut rng, scratch);
                     }
                     sum += (-before).exp() * albedo * part * total / steps as f64;
