@@ -15,6 +15,9 @@ layout(location = 1) in vec3 in_normal;
 layout(location = 2) in vec2 in_uv;
 layout(location = 3) in vec2 in_atlas;
 layout(location = 4) in vec3 in_global;
+// Slope k of the exit lobe 1 + k (mu - 2/3) measured by the walks (0 elsewhere: the profile's
+// lobe in the uniforms applies).
+layout(location = 5) in vec3 in_exit_slope;
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_display;
@@ -73,7 +76,8 @@ void main() {
     if (TEXTURED) {
         b *= texture(albedo_texture, in_uv).rgb;
     }
-    vec3 l = fresnel_transmittance(frame.material.x, cos_o) * exit_lobe(cos_o) * b / PI;
+    vec3 lobe = exit_lobe(cos_o) * max(1.0 + in_exit_slope * (cos_o - 2.0 / 3.0), vec3(0.0));
+    vec3 l = fresnel_transmittance(frame.material.x, cos_o) * lobe * b / PI;
     if (SINGLE) {
         l += texelFetch(single, ivec2(gl_FragCoord.xy), 0).rgb;
     }

@@ -10,6 +10,7 @@ layout(location = 2) in vec2 in_uv;
 layout(location = 3) in vec2 in_atlas;
 layout(location = 4) in uvec3 in_nodes;
 layout(location = 5) in vec3 in_weights;
+layout(location = 6) in vec3 in_exit_slope;
 
 layout(set = 0, binding = 1) uniform samplerBuffer node_radiosity;
 
@@ -18,12 +19,14 @@ layout(location = 1) out vec3 out_normal;
 layout(location = 2) out vec2 out_uv;
 layout(location = 3) out vec2 out_atlas;
 layout(location = 4) out vec3 out_global;
+layout(location = 5) out vec3 out_exit_slope;
 
 void main() {
     out_position = in_position;
     out_normal = in_normal;
     out_uv = in_uv;
     out_atlas = in_atlas;
+    out_exit_slope = in_exit_slope;
     out_global = in_weights.x * texelFetch(node_radiosity, int(in_nodes.x)).rgb
         + in_weights.y * texelFetch(node_radiosity, int(in_nodes.y)).rgb
         + in_weights.z * texelFetch(node_radiosity, int(in_nodes.z)).rgb;

@@ -147,9 +147,9 @@ pub struct ViewArgs {
     /// Folder for screenshots (key `p`).
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Starting blending mode.
-    #[arg(long, value_enum, default_value_t = Blend::Optimized)]
-    pub mode: Blend,
+    /// Starting blending mode (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
     /// A script of viewer actions, as a file or inline text, e.g.
     /// "frames 3; light 40 0; screenshot lit; quit" (see `src/viewer/script.rs`).
     #[arg(long)]
@@ -283,9 +283,9 @@ pub struct BenchArgs {
     /// Output folder for bench.json.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Blending mode.
-    #[arg(long, value_enum, default_value_t = Blend::Optimized)]
-    pub mode: Blend,
+    /// Blending mode (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
     /// How the global pass reads its matrix: texel buffers or storage buffers.
     #[arg(long, value_enum, default_value_t = GlobalLayout::Texel)]
     pub global_layout: GlobalLayout,
@@ -359,6 +359,9 @@ pub struct PreprocessArgs {
     /// Largest fraction of each row of F that pruning may drop (e.g. 0.005).
     #[arg(long)]
     pub prune: Option<f64>,
+    /// Random walks per node and channel filling F (model volume).
+    #[arg(long)]
+    pub walk_paths: Option<u32>,
     /// Target relative error of the render.
     #[arg(long, default_value_t = 0.02)]
     pub target_error: f64,
@@ -377,6 +380,7 @@ impl PreprocessArgs {
             kernel_size: self.kernel,
             node_spacing_mm: self.node_spacing_mm,
             prune_tolerance: self.prune,
+            walk_paths: self.walk_paths,
         }
     }
 
@@ -409,9 +413,9 @@ pub struct RenderArgs {
     /// Frames to render and time (the images are the last frame's).
     #[arg(long, default_value_t = 10)]
     pub frames: usize,
-    /// Blending of local and global responses: local, global, simple or optimized.
-    #[arg(long, value_enum, default_value_t = Blend::Optimized)]
-    pub mode: Blend,
+    /// Blending of local and global responses: local, global, simple or optimized (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
     /// Move the lights a full turn around the object over the frames (no preprocessing).
     #[arg(long)]
     pub orbit_light: bool,
@@ -494,7 +498,9 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
     let resolved = scene.resolved.to_toml();
     let scene_warnings = scene.warnings.clone();
-    let mode = args.mode;
+    let mode = args
+        .mode
+        .unwrap_or_else(|| Blend::for_model(scene.material.model));
     let mut renderer = Renderer::cached(
         &gpu,
         scene,
@@ -669,7 +675,9 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     let scene = args.input.load()?;
     output::create_dir(&args.out)?;
     let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
-    let mode = args.mode;
+    let mode = args
+        .mode
+        .unwrap_or_else(|| Blend::for_model(scene.material.model));
     let mut renderer = Renderer::cached(
         &gpu,
         scene.clone(),
@@ -794,6 +802,7 @@ const MAX_REFERENCE_SAMPLES: f64 = 5e7;
 fn reference(args: &ReferenceArgs) -> Result<()> {
     use crate::reference::{metrics, Reference, ReferenceSettings};
     let scene = args.input.load()?;
+    Reference::supports(scene.material.model)?;
     let mut settings = ReferenceSettings::for_scene(&scene);
     if let Some(s) = args.spacing_mm {
         if !(s.is_finite() && s > 0.0) {
@@ -1072,6 +1081,10 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     use crate::reference::{Reference, ReferenceSettings};
     frame_count("--frames", args.frames, 1)?;
     let scene = args.input.load()?;
+    Reference::supports(scene.material.model)?;
+    for m in args.models.iter().flatten() {
+        Reference::supports(*m)?;
+    }
     output::create_dir(&args.out)?;
     let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
     println!("automatic setting:");
@@ -1346,6 +1359,9 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
     let (pre, _) =
         preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
+    let mode = args
+        .mode
+        .unwrap_or_else(|| Blend::for_model(scene.material.model));
     crate::viewer::run(
         event_loop,
         crate::viewer::ViewConfig {
@@ -1354,7 +1370,7 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
             overrides: args.pre.overrides(),
             target_error: args.pre.target_error,
             cache: args.pre.cache_dir(),
-            mode: args.mode,
+            mode,
             out: args.out.clone(),
             script,
             vsync: !args.no_vsync,

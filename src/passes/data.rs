@@ -74,6 +74,9 @@ pub struct AtlasVertex {
     pub nodes: [u32; 3],
     /// Their weights (location 5).
     pub weights: [f32; 3],
+    /// Slope of the exit lobe per channel, interpolated from the nodes' (location 6; 0 where
+    /// the profile's lobe applies, see `preprocess::walk::exit_slope`).
+    pub exit_slope: [f32; 3],
 }
 
 const _: () = assert!(std::mem::size_of::<AtlasVertex>() as u64 == Item::AtlasVertices.bytes());
@@ -87,7 +90,7 @@ pub const ATLAS_VERTEX_BINDINGS: [vk::VertexInputBindingDescription; 1] =
     }];
 
 /// Attributes of [`AtlasVertex`].
-pub const ATLAS_VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 6] = [
+pub const ATLAS_VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 7] = [
     vk::VertexInputAttributeDescription {
         location: 0,
         binding: 0,
@@ -123,6 +126,12 @@ pub const ATLAS_VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 6] = [
         binding: 0,
         format: vk::Format::R32G32B32_SFLOAT,
         offset: 52,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 6,
+        binding: 0,
+        format: vk::Format::R32G32B32_SFLOAT,
+        offset: 64,
     },
 ];
 
@@ -644,9 +653,15 @@ impl SubsurfaceData {
                 let v = v as usize;
                 let mut nodes = [0u32; 3];
                 let mut weights = [0f32; 3];
+                let mut exit_slope = [0f32; 3];
                 for (k, (n, w)) in pre.nodes.prolong[v].iter().take(3).enumerate() {
                     nodes[k] = *n;
                     weights[k] = *w;
+                    if let Some(s) = ops.exit_slopes.get(*n as usize) {
+                        for c in 0..3 {
+                            exit_slope[c] += w * s[c];
+                        }
+                    }
                 }
                 AtlasVertex {
                     position: mesh.positions[v].to_array(),
@@ -655,6 +670,7 @@ impl SubsurfaceData {
                     atlas: [uv.x as f32, uv.y as f32],
                     nodes,
                     weights,
+                    exit_slope,
                 }
             })
             .collect();

@@ -60,7 +60,15 @@ impl MaterialUniforms {
         let profiles = m.profiles();
         let exit_lobe = std::array::from_fn(|i| {
             let mu = (i as f64 + 0.5) / EXIT_LOBE_SAMPLES as f64;
-            let f = profiles.each_ref().map(|p| p.exit_lobe(mu) as f32);
+            // The walks measure each node's lobe (the vertices' exit slope); the profile's
+            // applies otherwise.
+            let f = profiles.each_ref().map(|p| {
+                if m.model.walks() {
+                    1.0
+                } else {
+                    p.exit_lobe(mu) as f32
+                }
+            });
             [f[0], f[1], f[2], 1.0]
         });
         let (s, a) = (m.sigma_s_prime, m.sigma_a);

@@ -19,6 +19,12 @@ pub enum Model {
     /// The exact half-space profile of orders >= 2 and single scattering computed per frame
     /// along each view ray (the `thickness` and `single` passes); eta = 1 only.
     HalfspaceSingle,
+    /// As `halfspace-single`, but the global response F from random walks inside the object
+    /// (`preprocess::walk`): the light of orders >= 2 that crosses thin parts, goes around
+    /// concavities and reaches the far side as the volume carries it, not by the half-space
+    /// profile at the Euclidean distance; the kernels and the near-field fit keep the
+    /// half-space profile. eta = 1 only.
+    Volume,
 }
 
 impl Model {
@@ -38,12 +44,18 @@ impl Model {
             Model::Dipole => "dipole",
             Model::Halfspace => "halfspace",
             Model::HalfspaceSingle => "halfspace-single",
+            Model::Volume => "volume",
         }
     }
 
     /// Whether single scattering is its own pass.
     pub fn has_single_pass(self) -> bool {
-        self == Model::HalfspaceSingle
+        matches!(self, Model::HalfspaceSingle | Model::Volume)
+    }
+
+    /// Whether the global response comes from random walks in the mesh.
+    pub fn walks(self) -> bool {
+        self == Model::Volume
     }
 }
 
@@ -201,16 +213,18 @@ impl Material {
                 self.sigma_a[c],
                 self.eta,
             )),
-            Model::Halfspace | Model::HalfspaceSingle => Profile::Tabulated(Tabulated::new(
-                HalfSpaceTable::shipped(),
-                self.sigma_s_prime[c],
-                self.sigma_a[c],
-                if self.model.has_single_pass() {
-                    Orders::Multiple
-                } else {
-                    Orders::All
-                },
-            )),
+            Model::Halfspace | Model::HalfspaceSingle | Model::Volume => {
+                Profile::Tabulated(Tabulated::new(
+                    HalfSpaceTable::shipped(),
+                    self.sigma_s_prime[c],
+                    self.sigma_a[c],
+                    if self.model.has_single_pass() {
+                        Orders::Multiple
+                    } else {
+                        Orders::All
+                    },
+                ))
+            }
         })
     }
 

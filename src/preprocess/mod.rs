@@ -8,6 +8,7 @@ pub mod cache;
 pub mod nodes;
 pub mod operators;
 pub mod settings;
+pub mod walk;
 
 use crate::physics::Material;
 use crate::scene::{mesh::Mesh, Scene};
@@ -338,7 +339,7 @@ impl Preprocessed {
     pub fn summary(&self) -> Vec<String> {
         let a = &self.atlas;
         let o = &self.ops;
-        vec![
+        let mut lines = vec![
             format!("charts: {}", a.charts.len()),
             format!(
                 "atlas: {} x {} texels of {:.3} mm, {} covered ({:.0} % of the atlas), gutter {} texels",
@@ -365,6 +366,21 @@ impl Preprocessed {
                 100.0 * o.prune.mean_dropped
             ),
             format!("kernels: {0} x {0} RGB per texel", o.kernel_size),
+        ];
+        if let Some(w) = &o.walks {
+            lines.push(format!(
+                "walks: {} per node and channel, {} in all, {:.1} collisions each, {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light",
+                w.paths_per_node,
+                w.paths,
+                w.events as f64 / w.paths.max(1) as f64,
+                w.reentries,
+                w.truncated,
+                w.left[0],
+                w.left[1],
+                w.left[2]
+            ));
+        }
+        lines.extend([
             format!(
                 "seam taps: {} (texels of neighbouring charts within the kernel's disc, on {} texels)",
                 o.seams.nnz(),
@@ -377,7 +393,8 @@ impl Preprocessed {
                 "time: atlas {:.2} s, nodes {:.2} s, operators {:.2} s (kernels {:.2} s, global F {:.2} s, near-field fit {:.2} s)",
                 self.times.atlas_s, self.times.nodes_s, self.times.operators_s, o.seconds[0], o.seconds[1], o.seconds[2]
             ),
-        ]
+        ]);
+        lines
     }
 
     /// Runs every stage for `mesh` in `material` with `choice`.
@@ -398,14 +415,7 @@ impl Preprocessed {
         let nodes = Nodes::build(mesh, s.node_spacing_mm);
         progress("nodes", 1, 1);
         let t2 = Instant::now();
-        let ops = Operators::build(
-            &atlas,
-            &nodes,
-            material,
-            s.kernel_size,
-            s.prune_tolerance,
-            progress,
-        );
+        let ops = Operators::build(mesh, &atlas, &nodes, material, &s, progress);
         let t3 = Instant::now();
         Preprocessed {
             settings: s,

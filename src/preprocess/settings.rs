@@ -38,6 +38,8 @@ pub struct Settings {
     pub prune_tolerance: f64,
     /// Chart normal bound, degrees.
     pub chart_angle_deg: f64,
+    /// Random walks per node and channel filling F (`model = "volume"`; 0 otherwise).
+    pub walk_paths: u32,
 }
 
 /// Values given by the user instead of derived ones.
@@ -51,6 +53,8 @@ pub struct SettingsOverrides {
     pub node_spacing_mm: Option<f64>,
     /// Pruning tolerance (fraction).
     pub prune_tolerance: Option<f64>,
+    /// Random walks per node and channel (`model = "volume"`).
+    pub walk_paths: Option<u32>,
 }
 
 /// What the derivation needs to know about the object and the image.
@@ -99,6 +103,12 @@ pub fn validate(o: &SettingsOverrides) -> anyhow::Result<()> {
         anyhow::ensure!(
             (0.0..0.5).contains(&t),
             "pruning tolerance {t} must lie in [0, 0.5)"
+        );
+    }
+    if let Some(n) = o.walk_paths {
+        anyhow::ensure!(
+            (16..=1 << 20).contains(&n),
+            "walks per node {n} must lie between 16 and 1048576"
         );
     }
     Ok(())
@@ -210,6 +220,17 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
         }
     };
 
+    let walk_paths = if !material.model.walks() {
+        0
+    } else if let Some(n) = o.walk_paths {
+        reasons.push(format!("{n} walks per node and channel: given"));
+        n
+    } else {
+        let (n, why) = walk_paths(material, scale.target_error);
+        reasons.push(why);
+        n
+    };
+
     Choice {
         settings: Settings {
             texel_mm: texel,
@@ -217,9 +238,39 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             node_spacing_mm: spacing,
             prune_tolerance: prune,
             chart_angle_deg: 30.0,
+            walk_paths,
         },
         reasons,
     }
+}
+
+/// Walks per node and channel for the volumetric F: under uniform light a node's radiosity of
+/// orders >= 2 gathers about N R_ms exits (R_ms the half-space reflectance of those orders), so
+/// its relative noise is 1 / sqrt(N R_ms), and it weighs R_ms / R_all in the node's light
+/// (single scattering, its own pass, is exact). The noise of the light is then the target
+/// error when N = R_ms / (R_all^2 target^2), worst channel, within [256, 16384].
+pub fn walk_paths(material: &Material, target_error: f64) -> (u32, String) {
+    let multiple = Material {
+        model: crate::physics::Model::HalfspaceSingle,
+        ..*material
+    }
+    .total_reflectance();
+    let all = Material {
+        model: crate::physics::Model::Halfspace,
+        ..*material
+    }
+    .total_reflectance();
+    let need = (0..3)
+        .map(|c| multiple[c] / (all[c] * all[c] * target_error * target_error).max(1e-300))
+        .fold(0.0f64, f64::max);
+    let n = need.ceil().clamp(256.0, 16384.0) as u32;
+    (
+        n,
+        format!(
+            "{n} walks per node and channel: orders >= 2 at {:.1} % noise of each node's light under uniform light (the target error)",
+            100.0 * target_error
+        ),
+    )
 }
 
 #[cfg(test)]
@@ -297,6 +348,7 @@ mod tests {
             kernel_size: Some(5),
             node_spacing_mm: Some(3.0),
             prune_tolerance: Some(0.0),
+            walk_paths: None,
         };
         let s = derive(&Material::preset("skimmilk").unwrap(), &scale(), &o).settings;
         assert_eq!(

@@ -408,6 +408,18 @@ pub fn b_at(scene: &Scene, settings: ReferenceSettings, points: &[DVec3]) -> Vec
 pub const SINGLE_STEPS: u32 = 48;
 
 impl Reference {
+    /// Refuses a model this reference does not integrate: the volume model's F is itself a
+    /// Monte Carlo of the medium in the mesh, so its independent check is `truth`, not an
+    /// integral of a radial profile.
+    pub fn supports(model: crate::physics::Model) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            !model.walks(),
+            "the exact-model reference integrates a radial profile; model {} fills F by random walks in the mesh, whose independent check is volumetric truth (`translucent truth`, eta = 1): compare with that instead",
+            model.name()
+        );
+        Ok(())
+    }
+
     /// Computes the reference image and vertex values of `scene`: the profile integrated over
     /// the lit surface (the exit lobe and Fresnel at the pixel), plus, for the models with a
     /// single-scattering pass, the exact single scattering along the view ray.

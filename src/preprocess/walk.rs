@@ -1,0 +1,365 @@
+//! The global response filled by random walks inside the object (`model = "volume"`): F_pq is
+//! the light that enters the surface within node p's support and leaves it within node q's,
+//! traced through the actual mesh instead of read off a half-space profile at the Euclidean
+//! distance. Thin parts, the far side of an object, concavities and air gaps are then right by
+//! construction (DISCO, Goesele et al. 2004, filled the same node-to-node operator from
+//! measurement), up to the noise of the walks and the node basis.
+//!
+//! For each node p and channel: N paths start at points y drawn with density phi_p(y) / A_p
+//! over the render triangles (A_p = integral of phi_p, phi_p linear over each triangle: the
+//! triangle by its integral, the point by rejection), heading into the medium along the
+//! inward normal (the normal incidence of the tabulated profile that the kernels and the
+//! near-field fit use, so that F and the kernels agree where the surface is flat). Free flights
+//! are exact (pdf sigma_t e^(-sigma_t s)), scattering isotropic on the reduced coefficients
+//! (as the half-space table and the dipole assume) with analog absorption. The first time a
+//! flight reaches the surface the path leaves there: light that leaves and enters the object
+//! again elsewhere (a concavity lit by the object itself) is not in the method's irradiance
+//! either. A path leaving at x after at least `min_order` scattering events (2 when single
+//! scattering is its own pass) adds phi_q(x) to every node q of the triangle it leaves
+//! through. With A_p / N of flux per path (unit irradiance weighted by phi_p),
+//!
+//!   F_pq = A_p / (N A_q) sum over the paths of phi_q(x_exit):
+//!
+//! the phi_q-weighted mean radiosity over q's support per unit irradiance of p (the
+//! half-space F is the value at q's centre; for a radiosity linear across the support the
+//! two agree). Paths are independent streams keyed by (seed, node, channel), so the result
+//! does not depend on the number of threads.
+
+use crate::geometry::bvh::Bvh;
+use crate::physics::Material;
+use crate::scene::mesh::Mesh;
+use crate::truth::rng::Rng;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+use super::nodes::Nodes;
+
+/// Collisions after which a walk is cut and counted (`WalkReport::truncated`).
+pub const MAX_WALK_EVENTS: u64 = 10_000_000;
+
+/// Seed of every walk's random stream.
+pub const WALK_SEED: u64 = 0x7761_6c6b;
+
+/// What the walks did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WalkReport {
+    /// Paths per node and channel.
+    pub paths_per_node: u32,
+    /// Paths traced in all.
+    pub paths: u64,
+    /// Collisions in all.
+    pub events: u64,
+    /// Paths cut by [`MAX_WALK_EVENTS`].
+    pub truncated: u64,
+    /// Times a path that left entered the object again.
+    pub reentries: u64,
+    /// Fraction of the entering flux that left after `min_order` or more events, per channel
+    /// (over every node, weighted by area).
+    pub left: [f64; 3],
+}
+
+/// Where paths of one node start: the render triangles its basis function covers, with the
+/// integral of phi_p over each and the weights at the three corners.
+struct Sources {
+    /// Per node: (triangle, corner weights), and the cumulative integral.
+    triangles: Vec<Vec<(u32, [f64; 3])>>,
+    cumulative: Vec<Vec<f64>>,
+}
+
+/// The weight phi_p at each corner of triangle `tri` for every node p touching it.
+fn corner_weights(mesh: &Mesh, nodes: &Nodes, tri: usize) -> Vec<(u32, [f64; 3])> {
+    let mut out: Vec<(u32, [f64; 3])> = Vec::with_capacity(6);
+    for k in 0..3 {
+        let v = mesh.indices[3 * tri + k] as usize;
+        for &(p, w) in &nodes.prolong[v] {
+            match out.iter_mut().find(|e| e.0 == p) {
+                Some(e) => e.1[k] += w as f64,
+                None => {
+                    let mut c = [0.0; 3];
+                    c[k] = w as f64;
+                    out.push((p, c));
+                }
+            }
+        }
+    }
+    out
+}
+
+fn triangle(mesh: &Mesh, tri: usize) -> [DVec3; 3] {
+    std::array::from_fn(|k| mesh.positions[mesh.indices[3 * tri + k] as usize].as_dvec3())
+}
+
+impl Sources {
+    fn new(mesh: &Mesh, nodes: &Nodes) -> Sources {
+        let n = nodes.positions.len();
+        let mut triangles: Vec<Vec<(u32, [f64; 3])>> = vec![Vec::new(); n];
+        for tri in 0..mesh.triangle_count() {
+            for (p, w) in corner_weights(mesh, nodes, tri) {
+                if w.iter().any(|&x| x > 0.0) {
+                    triangles[p as usize].push((tri as u32, w));
+                }
+            }
+        }
+        let cumulative = triangles
+            .iter()
+            .map(|list| {
+                let mut acc = 0.0;
+                list.iter()
+                    .map(|&(tri, w)| {
+                        let [a, b, c] = triangle(mesh, tri as usize);
+                        acc += 0.5 * (b - a).cross(c - a).length() * (w[0] + w[1] + w[2]) / 3.0;
+                        acc
+                    })
+                    .collect()
+            })
+            .collect();
+        Sources {
+            triangles,
+            cumulative,
+        }
+    }
+
+    /// Integral of phi_p over the surface.
+    fn area(&self, p: usize) -> f64 {
+        self.cumulative[p].last().copied().unwrap_or(0.0)
+    }
+
+    /// A point of the surface drawn with density phi_p / A_p: (triangle, barycentrics).
+    fn sample(&self, p: usize, rng: &mut Rng) -> (usize, [f64; 3]) {
+        let cum = &self.cumulative[p];
+        let total = cum.last().copied().unwrap_or(0.0);
+        let i = cum
+            .partition_point(|&c| c <= rng.uniform() * total)
+            .min(cum.len() - 1);
+        let (tri, w) = self.triangles[p][i];
+        let top = w[0].max(w[1]).max(w[2]);
+        loop {
+            let (u, v) = (rng.uniform(), rng.uniform());
+            let (u, v) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            let b = [1.0 - u - v, u, v];
+            let phi = b[0] * w[0] + b[1] * w[1] + b[2] * w[2];
+            if rng.uniform() * top <= phi {
+                return (tri as usize, b);
+            }
+        }
+    }
+}
+
+/// Per channel: (sigma_t, albedo) of the reduced, isotropically scattering medium.
+fn medium(material: &Material) -> [(f64, f64); 3] {
+    std::array::from_fn(|c| {
+        let (s, a) = (material.sigma_s_prime[c], material.sigma_a[c]);
+        (s + a, s / (s + a))
+    })
+}
+
+/// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
+/// walks did, `paths` paths per node and channel, counting exits after `min_order` or more
+/// scattering events.
+pub fn walk_response(
+    mesh: &Mesh,
+    nodes: &Nodes,
+    material: &Material,
+    paths: u32,
+    min_order: u32,
+    progress: super::operators::Progress<'_>,
+) -> (Walked, WalkReport) {
+    let n = nodes.positions.len();
+    let sources = Sources::new(mesh, nodes);
+    let bvh = Bvh::new(&mesh.positions, &mesh.indices);
+    let orientation = if mesh.signed_volume() < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let (_, radius) = mesh.bounding_sphere();
+    let eps = 1e-6 * (radius as f64).max(1e-3);
+    let media = medium(material);
+    let done = std::sync::atomic::AtomicU64::new(0);
+    // Per source p: its column (receiver, deposit per channel) and the counters.
+    let columns: Vec<(Vec<(u32, [f64; 6])>, [u64; 4], [f64; 3])> = (0..n)
+        .into_par_iter()
+        .map_init(
+            || (vec![[0.0f64; 6]; n], vec![false; n], Vec::<u32>::new()),
+            |(acc, seen, touched), p| {
+                let mut counters = [0u64; 4]; // paths, events, truncated, re-entries
+                let mut left = [0.0; 3];
+                if sources.area(p) > 0.0 {
+                    for (c, &(sigma_t, albedo)) in media.iter().enumerate() {
+                        let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
+                        for _ in 0..paths {
+                            counters[0] += 1;
+                            let (tri, b) = sources.sample(p, &mut rng);
+                            let [v0, v1, v2] = triangle(mesh, tri);
+                            let normal = (v1 - v0).cross(v2 - v0).normalize() * orientation;
+                            let mut d = -normal;
+                            let mut x = v0 * b[0] + v1 * b[1] + v2 * b[2] + d * eps;
+                            let mut order = 0u32;
+                            let mut events = 0u64;
+                            loop {
+                                let s = -(1.0 - rng.uniform()).ln() / sigma_t;
+                                if let Some(hit) = bvh.intersect(x, d, s) {
+                                    if order >= min_order {
+                                        left[c] += 1.0;
+                                        let [a, b, cc] = triangle(mesh, hit.triangle as usize);
+                                        let mu = ((b - a).cross(cc - a).normalize() * orientation)
+                                            .dot(d)
+                                            .clamp(0.0, 1.0);
+                                        for (q, w) in
+                                            corner_weights(mesh, nodes, hit.triangle as usize)
+                                        {
+                                            let phi = hit.bary[0] * w[0]
+                                                + hit.bary[1] * w[1]
+                                                + hit.bary[2] * w[2];
+                                            if !seen[q as usize] {
+                                                seen[q as usize] = true;
+                                                touched.push(q);
+                                            }
+                                            acc[q as usize][c] += phi;
+                                            acc[q as usize][3 + c] += phi * mu;
+                                        }
+                                    }
+                                    // On through the air (eta = 1: straight on): into the
+                                    // object again where the line meets it, gone otherwise.
+                                    // A hit within a few eps is the exit's own edge
+                                    // (rounding), and one through a face turned away
+                                    // is not an entry: neither is taken.
+                                    let out = x + d * (hit.t + eps);
+                                    match bvh.intersect(out, d, f64::INFINITY) {
+                                        Some(h)
+                                            if h.t > 10.0 * eps && {
+                                                let [a, b, c] = triangle(mesh, h.triangle as usize);
+                                                (b - a).cross(c - a).dot(d) * orientation < 0.0
+                                            } =>
+                                        {
+                                            x = out + d * (h.t + eps);
+                                            counters[3] += 1;
+                                            continue;
+                                        }
+                                        _ => break,
+                                    }
+                                }
+                                x += d * s;
+                                order += 1;
+                                events += 1;
+                                if rng.uniform() >= albedo {
+                                    break;
+                                }
+                                if events >= MAX_WALK_EVENTS {
+                                    counters[2] += 1;
+                                    break;
+                                }
+                                let (u1, u2) = (rng.uniform(), rng.uniform());
+                                let cos = 1.0 - 2.0 * u1;
+                                let sin = (1.0 - cos * cos).max(0.0).sqrt();
+                                let phi = 2.0 * PI * u2;
+                                d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+                            }
+                            counters[1] += events;
+                        }
+                    }
+                }
+                touched.sort_unstable();
+                let scale = sources.area(p) / paths.max(1) as f64;
+                let column = touched
+                    .drain(..)
+                    .map(|q| {
+                        seen[q as usize] = false;
+                        let v = std::mem::take(&mut acc[q as usize]);
+                        (q, v.map(|x| x * scale))
+                    })
+                    .collect();
+                let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if k.is_multiple_of(64) {
+                    progress("walks", k, n as u64);
+                }
+                (column, counters, left.map(|l| l * scale))
+            },
+        )
+        .collect();
+    progress("walks", n as u64, n as u64);
+    let mut report = WalkReport {
+        paths_per_node: paths,
+        ..WalkReport::default()
+    };
+    let mut rows: Vec<Vec<(u32, [f64; 3])>> = vec![Vec::new(); n];
+    // Per receiver: what left through its support, and that weighted by the exit cosine.
+    let mut exits = vec![[0.0f64; 6]; n];
+    let mut entered = 0.0;
+    for (p, (column, counters, left)) in columns.into_iter().enumerate() {
+        report.paths += counters[0];
+        report.events += counters[1];
+        report.truncated += counters[2];
+        report.reentries += counters[3];
+        entered += sources.area(p);
+        for c in 0..3 {
+            report.left[c] += left[c];
+        }
+        for (q, v) in column {
+            for (e, x) in exits[q as usize].iter_mut().zip(v) {
+                *e += x;
+            }
+            let aq = sources.area(q as usize);
+            if aq > 0.0 {
+                rows[q as usize].push((p as u32, [v[0] / aq, v[1] / aq, v[2] / aq]));
+            }
+        }
+    }
+    report.left = report.left.map(|l| l / entered.max(1e-300));
+    let slopes = exits
+        .iter()
+        .map(|e| std::array::from_fn(|c| exit_slope(e[3 + c], e[c])))
+        .collect();
+    (Walked { rows, slopes }, report)
+}
+
+/// The slope k of the linear exit lobe 1 + k (mu - 2/3) (radiance over that of a Lambertian
+/// exit of the same flux; every k keeps the flux, since the integral of (mu - 2/3) 2 mu over
+/// (0, 1) is 0) whose mean exit cosine is `cos_weighted / total`: the mean cosine of that lobe
+/// is 2/3 + k / 18. Bounded to [-3, 1.5], where the lobe stays non-negative; 0 where nothing
+/// left.
+pub fn exit_slope(cos_weighted: f64, total: f64) -> f32 {
+    if total <= 0.0 {
+        return 0.0;
+    }
+    (18.0 * (cos_weighted / total - 2.0 / 3.0)).clamp(-3.0, 1.5) as f32
+}
+
+/// The walks' result.
+pub struct Walked {
+    /// F by receiver rows: (source, value per channel), unpruned.
+    pub rows: Vec<Vec<(u32, [f64; 3])>>,
+    /// Per node, the exit lobe's slope per channel ([`exit_slope`]) of everything that left
+    /// through its support.
+    pub slopes: Vec<[f32; 3]>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::Model;
+
+    /// On a box much larger than the diffusion length the walks return what a half-space
+    /// returns: the tabulated total of orders >= 2 (an independent simulation of the
+    /// half-space, `truth::halfspace`), and of every order.
+    #[test]
+    fn a_large_box_returns_the_half_space_total() {
+        let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 8);
+        let nodes = Nodes::build(&mesh, 250.0);
+        let k = Material::preset("ketchup").unwrap();
+        let m = Material::custom(k.sigma_s_prime, k.sigma_a, 1.0)
+            .unwrap()
+            .with_model(Model::Volume)
+            .unwrap();
+        for (min_order, orders) in [(2, Model::HalfspaceSingle), (1, Model::Halfspace)] {
+            let (_, report) = walk_response(&mesh, &nodes, &m, 4000, min_order, &|_, _, _| {});
+            let want = Material { model: orders, ..m }.total_reflectance();
+            println!("orders >= {min_order}: {:?} vs {:?}", report.left, want);
+        }
+    }
+}
