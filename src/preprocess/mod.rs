@@ -379,6 +379,13 @@ impl Preprocessed {
                 w.left[1],
                 w.left[2]
             ));
+            let n = o.exit_slopes.len().max(1) as f64;
+            let mean: [f64; 3] =
+                std::array::from_fn(|c| o.exit_slopes.iter().map(|s| s[c] as f64).sum::<f64>() / n);
+            lines.push(format!(
+                "exit lobe 1 + k (mu - 2/3) per node: mean k {:.3} / {:.3} / {:.3}",
+                mean[0], mean[1], mean[2]
+            ));
         }
         lines.extend([
             format!(
