@@ -143,6 +143,28 @@ fn bad_scene_files_are_refused_clearly() {
     ]);
     model.arg(dir.join("out"));
     fails_with(model, "model 'halfspace-single' is the profile of an index-matched medium (eta = 1), not eta = 1.3");
+    // The exact-model reference does not integrate the walks' F: refused, naming truth.
+    let mut walked = bin();
+    walked.args([
+        "reference",
+        "assets/scenes/truth/sphere-ketchup.toml",
+        "--model",
+        "volume",
+        "--out",
+    ]);
+    walked.arg(dir.join("ref"));
+    fails_with(walked, "whose independent check is volumetric truth");
+    let mut walks = bin();
+    walks.args([
+        "precompute",
+        "--eta",
+        "1",
+        "--model",
+        "volume",
+        "--walk-paths",
+        "8",
+    ]);
+    fails_with(walks, "walks per node 8 must lie between 16 and 1048576");
     let mut unknown = bin();
     unknown.args(["render", "--model", "multipole"]);
     let o = unknown.output().unwrap();
