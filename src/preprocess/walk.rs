@@ -150,6 +150,10 @@ impl Sources {
     }
 }
 
+/// One source node's walks: (receiver, deposit per channel and the same weighted by the exit
+/// cosine), the counters (paths, collisions, cut, re-entries) and the flux that left.
+type Column = (Vec<(u32, [f64; 6])>, [u64; 4], [f64; 3]);
+
 /// Per channel: (sigma_t, albedo) of the reduced, isotropically scattering medium.
 fn medium(material: &Material) -> [(f64, f64); 3] {
     std::array::from_fn(|c| {
@@ -182,7 +186,7 @@ pub fn walk_response(
     let media = medium(material);
     let done = std::sync::atomic::AtomicU64::new(0);
     // Per source p: its column (receiver, deposit per channel) and the counters.
-    let columns: Vec<(Vec<(u32, [f64; 6])>, [u64; 4], [f64; 3])> = (0..n)
+    let columns: Vec<Column> = (0..n)
         .into_par_iter()
         .map_init(
             || (vec![[0.0f64; 6]; n], vec![false; n], Vec::<u32>::new()),
