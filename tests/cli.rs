@@ -165,6 +165,21 @@ fn bad_scene_files_are_refused_clearly() {
         "8",
     ]);
     fails_with(walks, "walks per node 8 must lie between 16 and 1048576");
+    // Walks need an inside: an open surface is refused before anything is built.
+    let open = dir.join("open.obj");
+    std::fs::write(&open, "v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 3\n").unwrap();
+    let mut sheet = bin();
+    sheet.args([
+        "precompute",
+        "--eta",
+        "1",
+        "--model",
+        "volume",
+        "--no-cache",
+        "--mesh",
+    ]);
+    sheet.arg(&open);
+    fails_with(sheet, "this mesh is not closed");
     let mut unknown = bin();
     unknown.args(["render", "--model", "multipole"]);
     let o = unknown.output().unwrap();

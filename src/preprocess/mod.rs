@@ -86,6 +86,12 @@ pub fn choose(
         );
     }
     settings::validate(overrides)?;
+    if scene.material.model.walks() && !scene.mesh.is_closed() {
+        anyhow::bail!(
+            "model {} walks inside the object, and this mesh is not closed (an open surface has no inside: a walk leaving through a hole would never return); use a closed mesh or another model",
+            scene.material.model.name()
+        );
+    }
     let mut choice = settings::derive(
         &scene.material,
         &object_scale(scene, target_error, DEFAULT_MAX_TEXELS),
