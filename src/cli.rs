@@ -639,7 +639,7 @@ fn precompute(args: &PrecomputeArgs) -> Result<()> {
     }
     println!(
         "{}",
-        preprocess::estimate(&scene.mesh, &choice.settings).describe()
+        preprocess::estimate(&scene.mesh, &scene.material, &choice.settings).describe()
     );
     let bars = Bars::new();
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
@@ -1301,7 +1301,7 @@ fn open_and_prepare(
         ..Default::default()
     })?;
     let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
-    let estimate = preprocess::estimate(&scene.mesh, &choice.settings);
+    let estimate = preprocess::estimate(&scene.mesh, &scene.material, &choice.settings);
     if verbose {
         for r in &choice.reasons {
             println!("# {r}");

@@ -37,6 +37,10 @@ fn estimate_bounds_the_requirements() {
             "ketchup sphere",
         ),
         (
+            "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n[material]\npreset = \"ketchup\"\neta = 1.0\nmodel = \"volume\"\n[output]\nwidth = 64\nheight = 64\n".into(),
+            "ketchup sphere, F from walks",
+        ),
+        (
             "[mesh]\nbuiltin = \"box\"\nsize = [30.0, 10.0, 20.0]\nsegments = 12\n[[lights]]\nkind = \"point\"\nposition = [0.0, 40.0, 10.0]\n[material]\npreset = \"skin1\"\n[output]\nwidth = 64\nheight = 64\n".into(),
             "skin1 box, point light",
         ),
@@ -58,7 +62,7 @@ fn estimate_bounds_the_requirements() {
         let scene = common::scene(text);
         let choice =
             translucent::preprocess::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
-        let e = translucent::preprocess::estimate(&scene.mesh, &choice.settings);
+        let e = translucent::preprocess::estimate(&scene.mesh, &scene.material, &choice.settings);
         let start = std::time::Instant::now();
         let pre = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
         let took = start.elapsed().as_secs_f64();
