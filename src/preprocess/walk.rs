@@ -129,9 +129,8 @@ impl Sources {
     fn sample(&self, p: usize, rng: &mut Rng) -> (usize, [f64; 3]) {
         let cum = &self.cumulative[p];
         let total = cum.last().copied().unwrap_or(0.0);
-        let i = cum
-            .partition_point(|&c| c <= rng.uniform() * total)
-            .min(cum.len() - 1);
+        let u = rng.uniform() * total;
+        let i = cum.partition_point(|&c| c <= u).min(cum.len() - 1);
         let (tri, w) = self.triangles[p][i];
         let top = w[0].max(w[1]).max(w[2]);
         loop {
@@ -472,6 +471,39 @@ mod tests {
         let (_, report) = walk_response(&mesh, &nodes, &m, 64, 1, &|_, _, _| {});
         assert!(report.reentries > 0);
         assert!(report.left.iter().all(|&l| l > 1.01), "{:?}", report.left);
+    }
+
+    /// Start points follow phi_p: each triangle of a node's support is drawn in proportion
+    /// to the integral of phi_p over it (one uniform per draw: the binary search once drew a
+    /// new number at every probe, which skewed the choice).
+    #[test]
+    fn start_points_follow_the_basis_function() {
+        let mesh = Mesh::cuboid(glam::Vec3::new(20.0, 10.0, 4.0), 6);
+        let nodes = Nodes::build(&mesh, 3.0);
+        let sources = Sources::new(&mesh, &nodes);
+        let p = (0..nodes.positions.len())
+            .max_by_key(|&p| sources.triangles[p].len())
+            .unwrap();
+        let tris = &sources.triangles[p];
+        assert!(tris.len() >= 4);
+        let n = 200_000;
+        let mut counts = vec![0u32; mesh.triangle_count()];
+        let mut rng = Rng::new(&[5]);
+        for _ in 0..n {
+            counts[sources.sample(p, &mut rng).0] += 1;
+        }
+        let total = sources.area(p);
+        let mut before = 0.0;
+        for (k, &(tri, _)) in tris.iter().enumerate() {
+            let want = (sources.cumulative[p][k] - before) / total;
+            before = sources.cumulative[p][k];
+            let got = counts[tri as usize] as f64 / n as f64;
+            let sigma = (want * (1.0 - want) / n as f64).sqrt();
+            assert!(
+                (got - want).abs() < 5.0 * sigma + 1e-4,
+                "triangle {tri}: drawn {got:.4}, phi's share {want:.4}"
+            );
+        }
     }
 
     #[test]
