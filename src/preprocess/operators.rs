@@ -724,11 +724,8 @@ impl Operators {
         let clock = std::time::Instant::now();
         let mut exit_slopes = Vec::new();
         let (global, prune, walks) = if material.model.walks() {
-            let min_order = if material.model.has_single_pass() {
-                2
-            } else {
-                1
-            };
+            // Single scattering is its own pass wherever the walks fill F.
+            let min_order = 2;
             let (walked, report) = super::walk::walk_response(
                 mesh,
                 nodes,
@@ -738,14 +735,7 @@ impl Operators {
                 progress,
             );
             exit_slopes = walked.slopes;
-            let (global, prune) = pruned(
-                walked
-                    .rows
-                    .into_iter()
-                    .map(|r| r.into_iter().map(|(p, v)| (p, Rgb(v))).collect())
-                    .collect(),
-                prune_tolerance,
-            );
+            let (global, prune) = pruned(walked.rows, prune_tolerance);
             (global, prune, Some(report))
         } else {
             let (global, prune) =

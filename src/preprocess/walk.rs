@@ -26,7 +26,7 @@
 //! does not depend on the number of threads.
 
 use crate::geometry::bvh::Bvh;
-use crate::physics::Material;
+use crate::physics::{Material, Rgb};
 use crate::scene::mesh::Mesh;
 use crate::truth::rng::Rng;
 use glam::DVec3;
@@ -153,14 +153,6 @@ impl Sources {
 /// cosine), the counters (paths, collisions, cut, re-entries) and the flux that left.
 type Column = (Vec<(u32, [f64; 6])>, [u64; 4], [f64; 3]);
 
-/// Per channel: (sigma_t, albedo) of the reduced, isotropically scattering medium.
-fn medium(material: &Material) -> [(f64, f64); 3] {
-    std::array::from_fn(|c| {
-        let (s, a) = (material.sigma_s_prime[c], material.sigma_a[c]);
-        (s + a, s / (s + a))
-    })
-}
-
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
 /// walks did, `paths` paths per node and channel, counting exits after `min_order` or more
 /// scattering events.
@@ -182,7 +174,8 @@ pub fn walk_response(
     };
     let (_, radius) = mesh.bounding_sphere();
     let eps = 1e-6 * (radius as f64).max(1e-3);
-    let media = medium(material);
+    // The reduced medium, isotropic: the truth's with g = 0.
+    let medium = crate::truth::Medium::new(material, 0.0);
     let done = std::sync::atomic::AtomicU64::new(0);
     // Per source p: its column (receiver, deposit per channel) and the counters.
     let columns: Vec<Column> = (0..n)
@@ -193,7 +186,8 @@ pub fn walk_response(
                 let mut counters = [0u64; 4]; // paths, events, truncated, re-entries
                 let mut left = [0.0; 3];
                 if sources.area(p) > 0.0 {
-                    for (c, &(sigma_t, albedo)) in media.iter().enumerate() {
+                    for c in 0..3 {
+                        let (sigma_t, albedo) = (medium.sigma_t[c], medium.albedo[c]);
                         let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
                         for _ in 0..paths {
                             counters[0] += 1;
@@ -290,7 +284,7 @@ pub fn walk_response(
         paths_per_node: paths,
         ..WalkReport::default()
     };
-    let mut rows: Vec<Vec<(u32, [f64; 3])>> = vec![Vec::new(); n];
+    let mut rows: Vec<Vec<(u32, Rgb)>> = vec![Vec::new(); n];
     // Per receiver: what left through its support, and that weighted by the exit cosine.
     let mut exits = vec![[0.0f64; 6]; n];
     let mut entered = 0.0;
@@ -309,7 +303,7 @@ pub fn walk_response(
             }
             let aq = sources.area(q as usize);
             if aq > 0.0 {
-                rows[q as usize].push((p as u32, [v[0] / aq, v[1] / aq, v[2] / aq]));
+                rows[q as usize].push((p as u32, Rgb([v[0] / aq, v[1] / aq, v[2] / aq])));
             }
         }
     }
@@ -336,7 +330,7 @@ pub fn exit_slope(cos_weighted: f64, total: f64) -> f32 {
 /// The walks' result.
 pub struct Walked {
     /// F by receiver rows: (source, value per channel), unpruned.
-    pub rows: Vec<Vec<(u32, [f64; 3])>>,
+    pub rows: Vec<Vec<(u32, Rgb)>>,
     /// Per node, the exit lobe's slope per channel ([`exit_slope`]) of everything that left
     /// through its support.
     pub slopes: Vec<[f32; 3]>,
@@ -439,7 +433,7 @@ mod tests {
         for (q, row) in walked.rows.iter().enumerate() {
             for &(p, v) in row {
                 for c in 0..3 {
-                    out[p as usize][c] += v[c] * sources.area(q);
+                    out[p as usize][c] += v.0[c] * sources.area(q);
                 }
             }
         }
