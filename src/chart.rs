@@ -2,8 +2,9 @@
 //! automatic setting (one knob at a time: kernel size, texel size, node spacing, pruning
 //! tolerance; every blending mode), each point timed on the device and compared with the
 //! brute-force reference of its model and, where there is one, the volumetric truth; other
-//! models than the scene's (the dipole as the baseline) are swept in optimized blending as
-//! series of their own. Writes `chart.csv`, `chart.svg` and `chart.png` (error against GPU
+//! models than the scene's (the dipole as the baseline) are swept in their own default blending
+//! (optimized; simple for the walks, which have no exact-model reference and a sweep of their
+//! own, [`walk_sweep`]) as series of their own. Writes `chart.csv`, `chart.svg` and `chart.png` (error against GPU
 //! frame time, one series per blending mode of the scene's model and one per other model, the
 //! Pareto front, the automatic setting marked).
 
@@ -51,7 +52,8 @@ pub struct Point {
     /// Spread of the round medians: (highest - lowest) / lowest. Drawn as the point's error
     /// bar; not used for the front.
     pub gpu_spread: f64,
-    /// Relative RMS error against the exact model (`reference`), worst channel.
+    /// Relative RMS error against the exact model (`reference`), worst channel (NaN for a
+    /// model without one: the walks).
     pub rel_rms: f64,
     /// Relative RMS error against volumetric truth after 4x4 binning with the truth's noise
     /// removed, worst channel (NaN where the scene has no truth: eta != 1).
@@ -120,12 +122,44 @@ pub fn sweep(
     out
 }
 
+/// The settings of the walks' series (`model = "volume"`): the automatic one, a quarter and
+/// (unless `quick`) four times the walks (their noise against their preprocessing time; the
+/// frame barely moves), and the two knobs that move its frame most, a texel twice as large
+/// and nodes twice as far apart. Not the whole [`sweep`]: every point walks again, a minute per
+/// point for the bunny.
+pub fn walk_sweep(
+    auto: &crate::preprocess::settings::Settings,
+    quick: bool,
+) -> Vec<(String, SettingsOverrides)> {
+    let base = sweep(auto, true)[0].1;
+    let mut out = vec![("auto".to_string(), base)];
+    if quick {
+        return out;
+    }
+    let mut vary = |label: &str, change: &dyn Fn(&mut SettingsOverrides)| {
+        let mut o = base;
+        change(&mut o);
+        out.push((label.to_string(), o));
+    };
+    let walks = auto.walk_paths.max(1) as f64;
+    let scaled = |f: f64| Some(((walks * f).round() as u32).clamp(16, 1 << 20));
+    vary("walks x0.25", &|o| o.walk_paths = scaled(0.25));
+    vary("walks x4", &|o| o.walk_paths = scaled(4.0));
+    vary("texel x2", &|o| o.texel_mm = Some(auto.texel_mm * 2.0));
+    vary("nodes x2", &|o| {
+        o.node_spacing_mm = Some(auto.node_spacing_mm * 2.0)
+    });
+    out
+}
+
 /// One model of a sweep: the scene under it, the blending modes to time, what to compare with.
 pub struct ModelRun<'a> {
     /// The scene, its material under the model.
     pub scene: &'a Scene,
     /// Blending modes to time.
     pub modes: Vec<Blend>,
+    /// Its own settings instead of the sweep's (the walks: [`walk_sweep`]).
+    pub settings: Option<Vec<(String, SettingsOverrides)>>,
     /// The model's exact reference and the truth.
     pub against: Baselines<'a>,
 }
@@ -194,7 +228,7 @@ pub fn measure(
         let mut i = 0;
         for run in runs {
             let scene = run.scene;
-            for (label, o) in sweep.settings {
+            for (label, o) in run.settings.as_deref().unwrap_or(sweep.settings) {
                 let choice = preprocess::choose(scene, o, sweep.target_error)?;
                 let (pre, _) = preprocess::prepare(scene, &choice, Some(sweep.cache_dir), &quiet)?;
                 for &mode in &run.modes {
@@ -291,27 +325,29 @@ pub fn mark_pareto(points: &mut [Point]) {
 }
 
 /// Per point, whether it is on the front with the ties scaled by `ties` (1 for the front;
-/// 2 for "within the tolerance of the front").
+/// 2 for "within the tolerance of the front"). A point without that error (NaN: the walks
+/// against an exact model they have none of) is on no front and beats no point.
 pub fn front(points: &[Point], error: impl Fn(&Point) -> f64, ties: f64) -> Vec<bool> {
     let copy: Vec<(f64, f64)> = points.iter().map(|p| (p.gpu_ms, error(p))).collect();
     let (dt, de) = (TIME_TIE * ties, ERROR_TIE * ties);
     copy.iter()
         .enumerate()
         .map(|(i, &(t, e))| {
-            !copy.iter().enumerate().any(|(j, q)| {
-                j != i
-                    && q.0 <= t * (1.0 + dt)
-                    && q.1 <= e * (1.0 + de)
-                    && (q.0 < t * (1.0 - dt) || q.1 < e * (1.0 - de))
-            })
+            !e.is_nan()
+                && !copy.iter().enumerate().any(|(j, q)| {
+                    j != i
+                        && q.0 <= t * (1.0 + dt)
+                        && q.1 <= e * (1.0 + de)
+                        && (q.0 < t * (1.0 - dt) || q.1 < e * (1.0 - de))
+                })
         })
         .collect()
 }
 
 /// What each point's render is compared with.
 pub struct Baselines<'a> {
-    /// The exact model (`reference`), RGBA.
-    pub reference: &'a [f32],
+    /// The exact model (`reference`), RGBA; none for the walks.
+    pub reference: Option<&'a [f32]>,
     /// Volumetric truth, its per-pixel standard deviation and the image size, if the scene has
     /// a truth.
     pub truth: Option<(&'a [f32], &'a [f32], u32, u32)>,
@@ -328,7 +364,13 @@ pub fn point(
     against: &Baselines<'_>,
     auto: bool,
 ) -> Point {
-    let (err, _) = metrics::compare(render, against.reference, None);
+    let (rel_rms, p99) = against.reference.map_or((f64::NAN, f64::NAN), |r| {
+        let (err, _) = metrics::compare(render, r, None);
+        (
+            err.rel_rms,
+            err.channels.iter().map(|c| c.p99).fold(0.0, f64::max),
+        )
+    });
     let rel_rms_truth = against.truth.map_or(f64::NAN, |(t, noise, w, h)| {
         metrics::compare_binned(render, t, Some(noise), w, h, TRUTH_BIN).worst()
     });
@@ -345,9 +387,9 @@ pub fn point(
         nonzeros: pre.ops.global_nonzeros(mode),
         gpu_ms: f64::NAN,
         gpu_spread: 0.0,
-        rel_rms: err.rel_rms,
+        rel_rms,
         rel_rms_truth,
-        p99: err.channels.iter().map(|c| c.p99).fold(0.0, f64::max),
+        p99,
         auto,
         pareto: false,
         pareto_model: false,
@@ -407,12 +449,13 @@ fn colour(series: &str) -> RGBColor {
         "optimized" => RGBColor(200, 30, 90),
         "dipole" => RGBColor(110, 110, 110),
         "halfspace" => RGBColor(20, 170, 170),
+        "volume" => RGBColor(170, 130, 0),
         _ => RGBColor(120, 60, 200),
     }
 }
 
 /// The series of a point: its blending mode for the first model's points (the scene's own),
-/// its model for the others' (swept in optimized blending).
+/// its model for the others' (each swept in its own default blending).
 fn series_of<'a>(p: &'a Point, primary: &str) -> &'a str {
     if p.model == primary {
         &p.mode
@@ -470,6 +513,13 @@ fn panel<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
+    // Points without this panel's error (the walks against an exact model) are not drawn.
+    let points: Vec<Point> = points
+        .iter()
+        .filter(|p| !(what.error)(p).is_nan())
+        .cloned()
+        .collect();
+    let points = &points[..];
     let xmax = points
         .iter()
         .map(|p| p.gpu_ms * (1.0 + p.gpu_spread))
@@ -515,11 +565,15 @@ where
             .filter(|p| series_of(p, primary) == name)
             .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
             .collect();
-        // The first model's series are its modes; every other model's is its optimized one.
+        // The first model's series are its modes; every other model's is its default one.
         let label = if Blend::ALL.iter().any(|b| b.name() == name) {
             format!("{primary}, {name}")
         } else {
-            format!("{name}, optimized")
+            let mode = points
+                .iter()
+                .find(|p| p.model == name)
+                .map_or("optimized", |p| p.mode.as_str());
+            format!("{name}, {mode}")
         };
         // Each point's spread (its round medians) as a horizontal bar.
         chart
@@ -874,6 +928,55 @@ mod tests {
         let on = super::front(&pts, |p| p.rel_rms, 1.0);
         let near = super::front(&pts, |p| p.rel_rms, 2.0);
         assert!(!on[5] && near[5]);
+    }
+
+    /// A point without the panel's error (the walks have no exact model: NaN) is on no front
+    /// and pushes no other point off it; against the truth it competes like any other.
+    #[test]
+    fn points_without_an_error_are_on_no_front() {
+        let mut pts = vec![
+            p("a", 10.0, 0.05),
+            p("b", 20.0, 0.02),
+            p("w", 5.0, f64::NAN),
+        ];
+        pts[2].model = "volume".into();
+        for (q, t) in pts.iter_mut().zip([0.08, 0.06, 0.03]) {
+            q.rel_rms_truth = t;
+        }
+        mark_pareto(&mut pts);
+        let model: Vec<bool> = pts.iter().map(|p| p.pareto_model).collect();
+        assert_eq!(model, vec![true, true, false]);
+        // Against the truth the walks (fastest and closest here) beat both.
+        let truth: Vec<bool> = pts.iter().map(|p| p.pareto).collect();
+        assert_eq!(truth, vec![false, false, true]);
+    }
+
+    /// The walks' sweep: the automatic setting with its walk count, then walks x0.25 and x4,
+    /// texel x2 and nodes x2; the automatic one alone when quick.
+    #[test]
+    fn walk_sweep_scales_the_walks() {
+        let auto = crate::preprocess::settings::Settings {
+            texel_mm: 0.5,
+            kernel_size: 7,
+            node_spacing_mm: 2.0,
+            prune_tolerance: 0.01,
+            chart_angle_deg: 60.0,
+            walk_paths: 2576,
+        };
+        let quick = walk_sweep(&auto, true);
+        assert_eq!(quick.len(), 1);
+        assert_eq!(quick[0].1.walk_paths, Some(2576));
+        let full = walk_sweep(&auto, false);
+        let labels: Vec<&str> = full.iter().map(|(l, _)| l.as_str()).collect();
+        assert_eq!(
+            labels,
+            ["auto", "walks x0.25", "walks x4", "texel x2", "nodes x2"]
+        );
+        assert_eq!(full[1].1.walk_paths, Some(644));
+        assert_eq!(full[2].1.walk_paths, Some(10304));
+        assert_eq!(full[3].1.texel_mm, Some(1.0));
+        assert_eq!(full[3].1.walk_paths, Some(2576));
+        assert_eq!(full[4].1.node_spacing_mm, Some(4.0));
     }
 
     /// The committed charts (docs/chart-*.csv) mark as front exactly the points no other point

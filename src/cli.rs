@@ -242,9 +242,10 @@ pub struct ChartArgs {
     /// scenes with eta = 1 only); 0 leaves the truth out.
     #[arg(long, default_value_t = 128)]
     pub truth_spp: u32,
-    /// Models to chart besides the scene's, each in optimized blending, e.g. "dipole,halfspace";
-    /// by default every other model that applies (at eta = 1: the dipole and both half-space
-    /// models; elsewhere the dipole only).
+    /// Models to chart besides the scene's, each in its default blending (optimized; simple
+    /// for `volume`, against the truth alone), e.g. "dipole,halfspace"; by default every other
+    /// model that applies (at eta = 1: the dipole, both half-space models and, on a closed
+    /// mesh, the walks; elsewhere the dipole only).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub models: Option<Vec<crate::physics::Model>>,
 }
@@ -1081,10 +1082,9 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     use crate::reference::{Reference, ReferenceSettings};
     frame_count("--frames", args.frames, 1)?;
     let scene = args.input.load()?;
+    // The scene's own model leads the chart and needs its exact model; the others are
+    // compared with the truth alone where they have none (the walks).
     Reference::supports(scene.material.model)?;
-    for m in args.models.iter().flatten() {
-        Reference::supports(*m)?;
-    }
     output::create_dir(&args.out)?;
     let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
     println!("automatic setting:");
@@ -1126,7 +1126,7 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         ..Default::default()
     })?;
     let baselines = crate::chart::Baselines {
-        reference: &reference.radiance,
+        reference: Some(&reference.radiance),
         truth: truth
             .as_ref()
             .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
@@ -1137,10 +1137,21 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     let own = scene.material.model;
     let others: Vec<Model> = match &args.models {
         Some(m) => m.iter().copied().filter(|m| *m != own).collect(),
-        None => [Model::Dipole, Model::Halfspace, Model::HalfspaceSingle]
-            .into_iter()
-            .filter(|m| *m != own && scene.material.with_model(*m).is_ok())
-            .collect(),
+        // The walks where they apply: eta = 1 (the material takes the model) and a closed
+        // mesh (`preprocess::choose` refuses the rest).
+        None => [
+            Model::Dipole,
+            Model::Halfspace,
+            Model::HalfspaceSingle,
+            Model::Volume,
+        ]
+        .into_iter()
+        .filter(|m| {
+            *m != own
+                && scene.material.with_model(*m).is_ok()
+                && (!m.walks() || scene.mesh.is_closed())
+        })
+        .collect(),
     };
     let mut other_scenes = Vec::new();
     for m in &others {
@@ -1149,22 +1160,46 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             .material
             .with_model(*m)
             .with_context(|| format!("--models {}", m.name()))?;
+        if m.walks() {
+            anyhow::ensure!(
+                truth.is_some(),
+                "--models {}: the walks' only independent check is the volumetric truth, and this chart has none (--truth-spp 0)",
+                m.name()
+            );
+            println!(
+                "model {}: against the truth alone (no exact-model reference)",
+                m.name()
+            );
+            other_scenes.push((s, None));
+            continue;
+        }
         let r = Reference::compute(&s, ReferenceSettings::for_scene(&s));
         println!("reference of model {}: {} samples", m.name(), r.samples);
-        other_scenes.push((s, r));
+        other_scenes.push((s, Some(r)));
     }
     let mut runs = vec![crate::chart::ModelRun {
         scene: &scene,
         modes: Blend::ALL.to_vec(),
+        settings: None,
         against: baselines,
     }];
     let truth_baseline = runs[0].against.truth;
     for (s, r) in &other_scenes {
+        let model = s.material.model;
+        // The walks' own automatic setting (their walk count), and their shorter sweep.
+        let settings = if model.walks() {
+            let own = preprocess::choose(s, &SettingsOverrides::default(), args.target_error)
+                .with_context(|| format!("--models {}", model.name()))?;
+            Some(crate::chart::walk_sweep(&own.settings, args.quick))
+        } else {
+            None
+        };
         runs.push(crate::chart::ModelRun {
             scene: s,
-            modes: vec![Blend::Optimized],
+            modes: vec![Blend::for_model(model)],
+            settings,
             against: crate::chart::Baselines {
-                reference: &r.radiance,
+                reference: r.as_ref().map(|r| &r.radiance[..]),
                 truth: truth_baseline,
             },
         });
