@@ -330,6 +330,8 @@ pub struct BenchReport {
     pub device_gbps: f64,
     /// Where `device_gbps` comes from.
     pub device_bandwidth_source: String,
+    /// How the global pass ran: layout and lanes per row (`passes::compute::GlobalVariant`).
+    pub global_variant: String,
     /// What was rendered.
     pub scene: SceneSize,
     /// Device memory per resource and in total.
@@ -436,6 +438,7 @@ impl BenchReport {
             ),
             device_copies,
             memory,
+            global_variant: String::new(),
             scene: SceneSize {
                 vertices: scene.mesh.positions.len(),
                 nodes: pre.nodes.positions.len(),

@@ -287,9 +287,14 @@ pub struct BenchArgs {
     /// Blending mode (default: the model's, `Blend::for_model`).
     #[arg(long, value_enum)]
     pub mode: Option<Blend>,
-    /// How the global pass reads its matrix: texel buffers or storage buffers.
-    #[arg(long, value_enum, default_value_t = GlobalLayout::Texel)]
+    /// How the global pass reads its matrix: texel buffers, storage buffers, or whichever of
+    /// them (and of one lane or the derived lanes per row) runs fastest here, measured.
+    #[arg(long, value_enum, default_value_t = GlobalLayout::Auto)]
     pub global_layout: GlobalLayout,
+    /// Lanes that sum one row of the global pass: a power of two up to the device's subgroup
+    /// size (default: derived from the subgroup size and the rows' mean length, and printed).
+    #[arg(long)]
+    pub global_lanes: Option<u32>,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -508,6 +513,8 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         &pre,
         Options {
             mode,
+            // The global pass's variant measured on this device (tune_global).
+            global_layout: GlobalLayout::Auto,
             ..Default::default()
         },
         args.pre.cache_dir().as_deref(),
@@ -686,10 +693,12 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
         Options {
             mode,
             global_layout: args.global_layout,
+            global_lanes: args.global_lanes,
             ..Default::default()
         },
         args.pre.cache_dir().as_deref(),
     )?;
+    let global_variant = renderer.global_variant();
     let total = args.warmup + args.frames;
     let mut timings = Vec::with_capacity(args.frames);
     for f in 0..total {
@@ -711,7 +720,9 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     let copies = crate::bench::measure_device_copy(&gpu, largest, 7)?;
     check_validation(&gpu)?;
     let memory = crate::passes::data::Requirements::of(&scene, &pre, mode);
-    let b = crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, copies, memory, mode);
+    let mut b =
+        crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, copies, memory, mode);
+    b.global_variant = global_variant.to_string();
     output::write_atomic(&args.out.join("bench.json"), |p| {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&b)?)?)
     })?;
@@ -734,6 +745,10 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
             b.scene.sh_coefficients
         );
     }
+    println!(
+        "global pass: {} (subgroup {})",
+        b.global_variant, gpu.info.subgroup_size
+    );
     println!(
         "device bandwidth (this run): {:.1} GB/s ({})",
         b.device_gbps, b.device_bandwidth_source

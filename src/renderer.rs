@@ -75,6 +75,9 @@ pub struct Options {
     pub capture: bool,
     /// How the global pass reads its matrix.
     pub global_layout: compute::GlobalLayout,
+    /// Lanes per row of the global pass (None: chosen from the device's subgroup size and the
+    /// rows' mean length, [`compute::GlobalVariant::lanes_for`]).
+    pub global_lanes: Option<u32>,
     /// Render for a window (the viewer): add the `overlay` pass that writes the window image,
     /// and read the image back to the host only on request ([`Renderer::request_readback`]).
     pub window: Option<WindowOutput>,
@@ -146,6 +149,8 @@ pub struct Renderer {
     capture: Option<CaptureBuffers>,
     /// Edge of the shadow maps, texels.
     shadow_map_size: u32,
+    /// How the global pass runs.
+    global_variant: compute::GlobalVariant,
     /// The uniforms that follow from the material (fixed for a renderer).
     material_uniforms: MaterialUniforms,
     last_lights: Option<Vec<Light>>,
@@ -239,7 +244,7 @@ impl Renderer {
             scene,
             pre,
             options.mode,
-            options.global_layout == compute::GlobalLayout::Storage,
+            options.global_layout,
             transfer,
         )
         .context("uploading the preprocessing")
@@ -253,6 +258,24 @@ impl Renderer {
         options: Options,
     ) -> Result<Renderer> {
         let (w, h) = (scene.width, scene.height);
+        let mean_pairs = data.global_pairs as f64 / data.node_count.max(1) as f64;
+        let global_variant = if options.global_layout == compute::GlobalLayout::Auto {
+            let tuned = compute::tune_global(gpu, data, options.global_lanes)?;
+            tracing::info!("global pass measured: {}", tuned.summary());
+            tuned.best
+        } else {
+            compute::GlobalVariant::choose(
+                &gpu.info,
+                options.global_layout,
+                options.global_lanes,
+                mean_pairs,
+            )
+            .map_err(anyhow::Error::msg)?
+        };
+        tracing::info!(
+            "global pass: {global_variant} ({mean_pairs:.0} entry pairs per row, subgroup {})",
+            gpu.info.subgroup_size
+        );
         let uniforms = Arc::new(Buffer::new(
             gpu,
             "frame uniforms",
@@ -379,7 +402,7 @@ impl Renderer {
             rows(global_rows, global_entries),
             node_irradiance,
             node_radiosity,
-            options.global_layout,
+            global_variant,
         );
         let single_pass = scene.material.model.has_single_pass();
         let single = if single_pass {
@@ -529,11 +552,17 @@ impl Renderer {
             display_readback,
             capture,
             shadow_map_size: s,
+            global_variant,
             transfer_seconds: data.transfer_seconds,
             last_lights: None,
             window,
             readback_requested: false,
         })
+    }
+
+    /// How the global pass runs (its layout and lanes per row).
+    pub fn global_variant(&self) -> compute::GlobalVariant {
+        self.global_variant
     }
 
     /// Pass names in execution order.

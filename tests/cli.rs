@@ -342,6 +342,13 @@ fn bench_writes_per_pass_bounds() {
         .as_str()
         .unwrap()
         .contains("vkCmdCopyBuffer"));
+    // The global pass's variant, measured on this device (texel buffers win on lavapipe by
+    // 20x: storage-buffer reads are slow there).
+    let variant = b["global_variant"].as_str().unwrap();
+    assert!(
+        variant.starts_with("texel buffers,") && variant.contains("per row"),
+        "{variant}"
+    );
     let passes = b["passes"].as_array().unwrap();
     assert_eq!(passes.len(), 8);
     for p in passes {

@@ -135,6 +135,11 @@ pub struct DeviceInfo {
     pub max_image_dimension_2d: u32,
     /// Sum of the device-local heaps, bytes.
     pub device_local_bytes: u64,
+    /// `subgroupSize`: invocations that run in lockstep.
+    pub subgroup_size: u32,
+    /// Whether compute shaders may shuffle within a subgroup (`subgroupShuffleXor`): the global
+    /// pass sums a row over several lanes only where they can.
+    pub subgroup_shuffle: bool,
     /// Why the device cannot be used, if it cannot.
     pub unsupported: Option<String>,
 }
@@ -301,7 +306,10 @@ fn describe(
     pd: vk::PhysicalDevice,
 ) -> (DeviceInfo, vk::PhysicalDeviceProperties) {
     let mut driver_props = vk::PhysicalDeviceDriverProperties::default();
-    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver_props);
+    let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default()
+        .push_next(&mut driver_props)
+        .push_next(&mut subgroup);
     unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
     let props = props2.properties;
     let name = props
@@ -333,6 +341,13 @@ fn describe(
         max_texel_buffer_elements: props.limits.max_texel_buffer_elements as u64,
         max_image_dimension_2d: props.limits.max_image_dimension2_d,
         device_local_bytes,
+        subgroup_size: subgroup.subgroup_size,
+        subgroup_shuffle: subgroup
+            .supported_stages
+            .contains(vk::ShaderStageFlags::COMPUTE)
+            && subgroup
+                .supported_operations
+                .contains(vk::SubgroupFeatureFlags::SHUFFLE),
         unsupported: unsupported_reason(instance, pd, &props),
     };
     (info, props)
@@ -788,6 +803,8 @@ mod tests {
             max_texel_buffer_elements: 1 << 27,
             max_image_dimension_2d: 16384,
             device_local_bytes: 1 << 31,
+            subgroup_size: 32,
+            subgroup_shuffle: true,
             unsupported: unsupported.map(Into::into),
         }
     }

@@ -77,6 +77,18 @@ impl BindingSet {
     }
 }
 
+/// Map entries for `count` 32-bit specialization constants, `constant_id` 0.. in order, packed.
+fn specialization_entries(count: usize) -> Vec<vk::SpecializationMapEntry> {
+    (0..count)
+        .map(|i| {
+            vk::SpecializationMapEntry::default()
+                .constant_id(i as u32)
+                .offset(4 * i as u32)
+                .size(4)
+        })
+        .collect()
+}
+
 /// Checks `set` and the push-constant size against what the shaders declare.
 fn check_interface(
     name: &str,
@@ -278,6 +290,18 @@ impl Pipeline {
         spv: &[u8],
         bindings: BindingSet,
     ) -> GpuResult<Pipeline> {
+        Self::compute_specialized::<P>(gpu, name, spv, bindings, &[])
+    }
+
+    /// [`Pipeline::compute`] with `constants` as the shader's 32-bit specialization constants,
+    /// `constant_id` 0, 1, ... in order.
+    pub fn compute_specialized<P: bytemuck::Pod>(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        spv: &[u8],
+        bindings: BindingSet,
+        constants: &[u32],
+    ) -> GpuResult<Pipeline> {
         let push_bytes = std::mem::size_of::<P>() as u32;
         check_interface(name, &[spv], &bindings, push_bytes)?;
         let mut p = Self::layout_and_set(
@@ -289,10 +313,17 @@ impl Pipeline {
             vk::PipelineBindPoint::COMPUTE,
         )?;
         let module = shader_module(gpu, spv)?;
-        let stage = vk::PipelineShaderStageCreateInfo::default()
+        let entries = specialization_entries(constants.len());
+        let specialization = vk::SpecializationInfo::default()
+            .map_entries(&entries)
+            .data(bytemuck::cast_slice(constants));
+        let mut stage = vk::PipelineShaderStageCreateInfo::default()
             .stage(vk::ShaderStageFlags::COMPUTE)
             .module(module)
             .name(c"main");
+        if !entries.is_empty() {
+            stage = stage.specialization_info(&specialization);
+        }
         let info = [vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(p.layout)];
@@ -336,14 +367,7 @@ impl Pipeline {
             .stage(vk::ShaderStageFlags::VERTEX)
             .module(vertex)
             .name(c"main")];
-        let entries: Vec<vk::SpecializationMapEntry> = (0..desc.fragment_constants.len())
-            .map(|i| {
-                vk::SpecializationMapEntry::default()
-                    .constant_id(i as u32)
-                    .offset(4 * i as u32)
-                    .size(4)
-            })
-            .collect();
+        let entries = specialization_entries(desc.fragment_constants.len());
         let specialization = vk::SpecializationInfo::default()
             .map_entries(&entries)
             .data(bytemuck::cast_slice(desc.fragment_constants));

@@ -174,6 +174,10 @@ pub struct SubsurfaceData {
     pub global_rows: Arc<Buffer>,
     /// Global entries.
     pub global_entries: Arc<Buffer>,
+    /// Entry pairs of the global matrix (its rows' mean length sets the lanes per row).
+    pub global_pairs: u32,
+    /// Whether the global rows and entries can also be bound as storage buffers.
+    pub global_storage: bool,
     /// Number of nodes.
     pub node_count: u32,
     /// The texture (white 1x1 without one).
@@ -629,14 +633,15 @@ impl Requirements {
 
 impl SubsurfaceData {
     /// Uploads the preprocessing of `scene` for blending `mode`, with the environment's
-    /// `transfer` where the scene has an environment light; with `global_storage` the global
-    /// matrix is also usable as storage buffers (see `GlobalLayout::Storage`).
+    /// `transfer` where the scene has an environment light; the global matrix is also usable
+    /// as storage buffers for `GlobalLayout::Storage` (refused where it exceeds
+    /// `maxStorageBufferRange`) and for `GlobalLayout::Auto` where it fits.
     pub fn upload(
         gpu: &Arc<Gpu>,
         scene: &Scene,
         pre: &Preprocessed,
         mode: Blend,
-        global_storage: bool,
+        global_layout: super::compute::GlobalLayout,
         transfer: Option<&crate::environment::prt::Transfer>,
     ) -> GpuResult<SubsurfaceData> {
         let atlas = &pre.atlas;
@@ -809,12 +814,22 @@ impl SubsurfaceData {
             }
             rows.push(entries.len() as u32);
         }
-        // Storage usage only when asked: it subjects the buffers to maxStorageBufferRange.
+        // Storage usage only when asked or measured: it subjects the buffers to
+        // maxStorageBufferRange.
+        let global_storage = match global_layout {
+            super::compute::GlobalLayout::Texel => false,
+            super::compute::GlobalLayout::Storage => true,
+            super::compute::GlobalLayout::Auto => {
+                (entries.len() as u64 * 16).max(rows.len() as u64 * 4)
+                    <= gpu.info.max_storage_buffer_range
+            }
+        };
         let global_usage = if global_storage {
             texel_usage | vk::BufferUsageFlags::STORAGE_BUFFER
         } else {
             texel_usage
         };
+        let global_pairs = entries.len() as u32;
         let global_rows = upload(gpu, Item::GlobalRows, &rows, global_usage)?;
         let global_entries = upload(gpu, Item::GlobalEntries, &entries, global_usage)?;
 
@@ -871,6 +886,8 @@ impl SubsurfaceData {
             gather_entries,
             global_rows,
             global_entries,
+            global_pairs,
+            global_storage,
             node_count: pre.nodes.positions.len() as u32,
             texture: Arc::new(texture),
         })
@@ -930,6 +947,8 @@ mod tests {
             max_texel_buffer_elements: 1 << 27,
             max_image_dimension_2d: 16384,
             device_local_bytes: bytes,
+            subgroup_size: 8,
+            subgroup_shuffle: true,
             unsupported: None,
         }
     }

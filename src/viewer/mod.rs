@@ -255,6 +255,8 @@ fn renderer_options(mode: Blend, linear: bool) -> Options {
     Options {
         mode,
         window: Some(WindowOutput { linear }),
+        // The global pass's variant measured on this device (tune_global).
+        global_layout: crate::passes::compute::GlobalLayout::Auto,
         ..Default::default()
     }
 }
