@@ -515,6 +515,7 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
             mode,
             // The global pass's variant measured on this device (tune_global).
             global_layout: GlobalLayout::Auto,
+            readback_on_request: true,
             ..Default::default()
         },
         args.pre.cache_dir().as_deref(),
@@ -527,6 +528,10 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
             0.0
         };
         let lights = renderer.orbit_lights(angle);
+        // The readback runs only in frames whose image is written.
+        if args.save_frames || f + 1 == args.frames {
+            renderer.request_readback();
+        }
         timings.push(renderer.frame(&lights)?);
         if args.save_frames {
             let o = renderer.output(Vec::new())?;
@@ -694,6 +699,8 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
             mode,
             global_layout: args.global_layout,
             global_lanes: args.global_lanes,
+            // No image is written: no readback, as in the viewer's frames.
+            readback_on_request: true,
             ..Default::default()
         },
         args.pre.cache_dir().as_deref(),

@@ -78,6 +78,11 @@ pub struct Options {
     /// Lanes per row of the global pass (None: chosen from the device's subgroup size and the
     /// rows' mean length, [`compute::GlobalVariant::lanes_for`]).
     pub global_lanes: Option<u32>,
+    /// Read the image back to the host only in frames that ask for it
+    /// ([`Renderer::request_readback`]), not in every frame: `bench`, which writes no image,
+    /// and `render`, which writes the last frame's (a window renderer always reads back on
+    /// request).
+    pub readback_on_request: bool,
     /// Render for a window (the viewer): add the `overlay` pass that writes the window image,
     /// and read the image back to the host only on request ([`Renderer::request_readback`]).
     pub window: Option<WindowOutput>,
@@ -157,6 +162,9 @@ pub struct Renderer {
     /// Seconds the transfer took to compute.
     transfer_seconds: f64,
     window: Option<(Arc<Image>, passes::overlay::Text)>,
+    /// Whether the readback runs only when requested (a window renderer, or
+    /// [`Options::readback_on_request`]).
+    readback_on_request: bool,
     readback_requested: bool,
 }
 
@@ -555,6 +563,7 @@ impl Renderer {
             global_variant,
             transfer_seconds: data.transfer_seconds,
             last_lights: None,
+            readback_on_request: options.readback_on_request || window.is_some(),
             window,
             readback_requested: false,
         })
@@ -583,7 +592,7 @@ impl Renderer {
     }
 
     /// Renders one frame with `lights` and returns its timing. Every pass runs (but the
-    /// readback of a window renderer, which runs on request).
+    /// readback of a renderer that reads back on request, which runs when requested).
     pub fn frame(&mut self, lights: &[Light]) -> Result<FrameTiming> {
         self.run(lights, false)
     }
@@ -609,14 +618,16 @@ impl Renderer {
                     .map(PassName::as_str),
             );
         }
-        if self.window.is_some() && !std::mem::take(&mut self.readback_requested) {
+        if self.readback_on_request && !std::mem::take(&mut self.readback_requested) {
             skip.push(PassName::Readback.as_str());
         }
         self.graph.run_frame_skipping(&skip)
     }
 
-    /// For a window renderer: read the next frame's images back to the host, for
-    /// [`Renderer::output`] (a screenshot). Other renderers read back every frame.
+    /// For a renderer that reads back on request (a window renderer, or
+    /// [`Options::readback_on_request`]): read the next frame's images back to the host, for
+    /// [`Renderer::output`] (a screenshot, the image `render` writes). Other renderers read
+    /// back every frame.
     pub fn request_readback(&mut self) {
         self.readback_requested = true;
     }
@@ -739,6 +750,8 @@ impl Renderer {
         let lights = self.scene.lights.clone();
         let mut timings = Vec::with_capacity(frames);
         for _ in 0..frames.max(1) {
+            // The last frame is the image returned (every frame without on-request readback).
+            self.request_readback();
             timings.push(self.frame(&lights)?);
         }
         self.output(timings)

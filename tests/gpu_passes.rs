@@ -67,6 +67,7 @@ fn capture_with(
                 capture: true,
                 global_layout,
                 global_lanes,
+                readback_on_request: false,
                 window: None,
             },
         )

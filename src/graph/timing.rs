@@ -99,7 +99,8 @@ pub struct TimingReport {
 }
 
 impl TimingReport {
-    /// Summarises `frames` (each with one time per pass of `names`).
+    /// Summarises `frames` (each with one time per pass of `names`); a pass that ran in none
+    /// of them (the readback of a renderer that wrote no image) is left out.
     pub fn new(
         device: &str,
         driver: &str,
@@ -109,6 +110,7 @@ impl TimingReport {
         let passes = names
             .iter()
             .enumerate()
+            .filter(|(i, _)| frames.is_empty() || frames.iter().any(|f| !f.pass_ms[*i].is_nan()))
             .map(|(i, name)| PassStats {
                 name: name.clone(),
                 stats: Stats::of(&frames.iter().map(|f| f.pass_ms[i]).collect::<Vec<_>>()),
@@ -176,5 +178,22 @@ mod tests {
         let json = serde_json::to_value(&r).unwrap();
         assert_eq!(json["passes"][1]["name"], "shade");
         assert_eq!(json["passes"][1]["median_ms"], 3.0);
+    }
+
+    /// A pass that ran in no frame (bench's readback) is not reported; one that ran in some
+    /// frames is summarised over those.
+    #[test]
+    fn passes_that_never_ran_are_left_out() {
+        let frame = |b: f64| FrameTiming {
+            pass_ms: vec![1.0, b, f64::NAN],
+            pass_start_ms: vec![0.0, 1.0, 1.0],
+            gpu_ms: 2.0,
+            wall_ms: 2.5,
+        };
+        let names = ["shadow", "composite", "readback"].map(String::from);
+        let r = TimingReport::new("dev", "drv", &names, &[frame(1.0), frame(f64::NAN)]);
+        let listed: Vec<&str> = r.passes.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(listed, ["shadow", "composite"]);
+        assert_eq!(r.passes[1].stats.median_ms, 1.0);
     }
 }
