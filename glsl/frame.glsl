@@ -6,6 +6,7 @@
 #define MAX_LIGHTS 8
 #define MAX_SHADOW_LAYERS 48
 #define EXIT_LOBE_SAMPLES 16
+#define INCIDENCE_SAMPLES 16
 #define MAX_SH_COEFFICIENTS 36
 #define LIGHT_DIRECTIONAL 0u
 #define LIGHT_POINT 1u
@@ -37,6 +38,8 @@ layout(std140, set = 0, binding = 0) uniform Frame {
     mat4 shadow_view_proj[MAX_SHADOW_LAYERS]; // world (mm) -> shadow-map clip space, per layer
     mat4 shadow_inverse[MAX_SHADOW_LAYERS];   // shadow-map clip space -> world (mm), per layer
     vec4 exit_lobe[EXIT_LOBE_SAMPLES]; // rgb: exit radiance / Lambertian at cosines (i + 0.5) / 16
+    vec4 incidence[INCIDENCE_SAMPLES]; // rgb: the model's light entering at cosine (k / 15)^2
+                                       // relative to normal incidence (1 for the dipole)
     vec4 environment[MAX_SH_COEFFICIENTS]; // rgb: the environment's SH coefficients, turned, scaled
 } frame;
 
@@ -47,6 +50,16 @@ vec3 exit_lobe(float mu) {
     int i = min(int(floor(x)), EXIT_LOBE_SAMPLES - 2);
     float f = x - float(i);
     return mix(frame.exit_lobe[i].rgb, frame.exit_lobe[i + 1].rgb, f);
+}
+
+// The light a half-space gives back (the model's orders) when it enters at cosine mu, relative
+// to normal incidence, at which the profile is tabulated: linear in sqrt(mu) between the
+// samples. Mirrors physics::incidence::interpolate.
+vec3 incidence_factor(float mu) {
+    float x = sqrt(clamp(mu, 0.0, 1.0)) * float(INCIDENCE_SAMPLES - 1);
+    int i = min(int(floor(x)), INCIDENCE_SAMPLES - 2);
+    float f = x - float(i);
+    return mix(frame.incidence[i].rgb, frame.incidence[i + 1].rgb, f);
 }
 
 // Direction towards the light (normalised) and the irradiance it delivers at x, before the

@@ -1,6 +1,8 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// Irradiance entering the surface: E = sum over lights of L F_t(eta, cos) max(0, N.w_i) V,
+// Irradiance entering the surface: E = sum over lights of L F_t(eta, cos) f(cos) max(0, N.w_i) V
+// (f: incidence_factor, the model's light at this incidence relative to normal incidence; not
+// for the environment, whose sky transfer is one scalar per texel: its sun goes without it too),
 // plus the environment's: its spherical-harmonic coefficients dotted with the texel's transfer
 // (visibility x cosine x Fresnel, precomputed; its sun is one of the lights).
 // Alpha 1 marks texels whose centre a triangle covers (the dilation pass fills the rest).
@@ -39,7 +41,7 @@ void main() {
         light_at(frame.lights[i], in_position, wi, irradiance);
         float cos_i = dot(n, wi);
         if (cos_i > 0.0) {
-            e += irradiance * cos_i * fresnel_transmittance(eta, cos_i)
+            e += irradiance * cos_i * fresnel_transmittance(eta, cos_i) * incidence_factor(cos_i)
                 * shadow_visibility(shadow_maps, i, in_position, n);
         }
     }

@@ -32,6 +32,7 @@ pub struct FrameUniforms {
     shadow_view_proj: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
     shadow_inverse: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
     exit_lobe: [[f32; 4]; EXIT_LOBE_SAMPLES],
+    incidence: [[f32; 4]; INCIDENCE_SAMPLES],
     environment: [[f32; 4]; MAX_SH_COEFFICIENTS],
 }
 
@@ -44,6 +45,9 @@ pub const MAX_SH_COEFFICIENTS: usize =
 /// exit cosine at the centres of equal bins over (0, 1].
 pub const EXIT_LOBE_SAMPLES: usize = 16;
 
+/// Samples of the incidence factor in the uniforms (`INCIDENCE_SAMPLES` in glsl/frame.glsl).
+pub const INCIDENCE_SAMPLES: usize = crate::physics::incidence::SAMPLES;
+
 /// The part of [`FrameUniforms`] that follows from the material alone (index, coefficients,
 /// the profile's exit lobe): computed once per renderer, not per frame.
 #[derive(Debug, Clone, Copy)]
@@ -52,6 +56,7 @@ pub struct MaterialUniforms {
     sigma_s: [f32; 4],
     sigma_t: [f32; 4],
     exit_lobe: [[f32; 4]; EXIT_LOBE_SAMPLES],
+    incidence: [[f32; 4]; INCIDENCE_SAMPLES],
 }
 
 impl MaterialUniforms {
@@ -71,9 +76,15 @@ impl MaterialUniforms {
             });
             [f[0], f[1], f[2], 1.0]
         });
+        let factors = m.incidence_factors();
+        let incidence = std::array::from_fn(|k| {
+            let f = |c: usize| factors.as_ref().map_or(1.0, |f| f[c][k] as f32);
+            [f(0), f(1), f(2), 1.0]
+        });
         let (s, a) = (m.sigma_s_prime, m.sigma_a);
         let t = [0, 1, 2].map(|c| (s[c] + a[c]) as f32);
         MaterialUniforms {
+            incidence,
             material: [m.eta as f32, 0.0, 0.0, 0.0],
             sigma_s: [s[0] as f32, s[1] as f32, s[2] as f32, 0.0],
             sigma_t: [t[0], t[1], t[2], 0.0],
@@ -104,6 +115,7 @@ impl FrameUniforms {
         u.sigma_s = material.sigma_s;
         u.sigma_t = material.sigma_t;
         u.exit_lobe = material.exit_lobe;
+        u.incidence = material.incidence;
         let mut layer = 0usize;
         // An environment's sun goes last (the illumination pass treats it apart).
         let ordered = lights
@@ -176,11 +188,11 @@ mod tests {
 
     #[test]
     fn uniform_layout_matches_std140() {
-        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 vec4 + 36 vec4.
+        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 + 16 + 36 vec4.
         assert_eq!(std::mem::size_of::<GpuLight>(), 80);
         assert_eq!(
             std::mem::size_of::<FrameUniforms>(),
-            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16 + 36 * 16
+            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16 + 16 * 16 + 36 * 16
         );
     }
 }

@@ -1,6 +1,7 @@
 //! Physics of diffuse subsurface scattering: the dipole profile, Fresnel terms, materials.
 
 pub mod dipole;
+pub mod incidence;
 pub mod material;
 pub mod profile;
 pub mod rgb;

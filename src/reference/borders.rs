@@ -94,12 +94,14 @@ impl TexelReference {
         // A texel's mean position lies off the surface where it straddles facets (by up to
         // texel^2 times the curvature): start its shadow rays a quarter texel out.
         let eps = 0.25 * pre.atlas.texel_mm;
+        let incidence = scene.material.incidence_factors();
         let texels = &pre.atlas.texels;
         let irradiance = texels
             .iter()
             .map(|t| {
                 let n = t.normal.as_dvec3().normalize_or_zero();
-                irradiance(scene, &bvh, t.position.as_dvec3(), n, n, eps).map(|c| c as f32)
+                irradiance(scene, &bvh, (t.position.as_dvec3(), n, n), eps, &incidence)
+                    .map(|c| c as f32)
             })
             .collect();
         let points: Vec<_> = texels.iter().map(|t| t.position.as_dvec3()).collect();

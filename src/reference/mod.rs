@@ -129,8 +129,19 @@ pub fn environment_irradiance(
     e
 }
 
-/// Irradiance entering the surface at `x` with shading normal `n` and face normal `f`.
-pub fn irradiance(scene: &Scene, bvh: &Bvh, x: DVec3, n: DVec3, f: DVec3, eps: f64) -> [f64; 3] {
+/// The model's incidence factors for [`irradiance`] (`Material::incidence_factors`), computed
+/// once per scene.
+pub type IncidenceFactors = Option<[[f64; crate::physics::incidence::SAMPLES]; 3]>;
+
+/// Irradiance entering the surface at `x` with shading normal `n` and face normal `f`, the
+/// lights' scaled by the model's `incidence` factors (the environment's not, as on the GPU).
+pub fn irradiance(
+    scene: &Scene,
+    bvh: &Bvh,
+    (x, n, f): (DVec3, DVec3, DVec3),
+    eps: f64,
+    incidence: &IncidenceFactors,
+) -> [f64; 3] {
     let mut e = [0.0; 3];
     if scene.environment.is_some() {
         // A stream per point, whichever thread computes it.
@@ -150,7 +161,10 @@ pub fn irradiance(scene: &Scene, bvh: &Bvh, x: DVec3, n: DVec3, f: DVec3, eps: f
         }
         let k = scale * cos * fresnel_transmittance(scene.material.eta, cos);
         for c in 0..3 {
-            e[c] += l.radiance[c] as f64 * k;
+            let factor = incidence
+                .as_ref()
+                .map_or(1.0, |f| crate::physics::incidence::interpolate(&f[c], cos));
+            e[c] += l.radiance[c] as f64 * k * factor;
         }
     }
     e
@@ -160,6 +174,7 @@ fn samples(scene: &Scene, bvh: &Bvh, spacing: f64) -> (Vec<Sample>, usize) {
     let m = &scene.mesh;
     let (_, radius) = scene.bounds();
     let eps = 1e-5 * radius as f64;
+    let incidence = scene.material.incidence_factors();
     let per_triangle: Vec<Vec<Sample>> = m
         .indices
         .par_chunks(3)
@@ -186,7 +201,7 @@ fn samples(scene: &Scene, bvh: &Bvh, spacing: f64) -> (Vec<Sample>, usize) {
                         let w = [1.0 - u - v, u, v];
                         let x = p[0] * w[0] + p[1] * w[1] + p[2] * w[2];
                         let nn = (n[0] * w[0] + n[1] * w[1] + n[2] * w[2]).normalize_or(face);
-                        let e = irradiance(scene, bvh, x, nn, face, eps);
+                        let e = irradiance(scene, bvh, (x, nn, face), eps, &incidence);
                         out.push(Sample {
                             position: x,
                             weight: e.map(|c| c * a),

@@ -76,7 +76,7 @@ pub fn simulate(albedo: f64, radii: &[f64], paths: u64, seed: u64) -> Exits {
             let mut h = vec![0u64; 2 * (m + 1) + 2 * LOBE_BINS];
             let n = CHUNK.min(paths - c * CHUNK);
             for _ in 0..n {
-                if let Some((r, mu, events)) = trace(albedo, &mut rng) {
+                if let Some((r, mu, events)) = trace(albedo, 1.0, &mut rng) {
                     let bin = radii.partition_point(|&x| x < r);
                     let cos_bin = ((mu * LOBE_BINS as f64) as usize).min(LOBE_BINS - 1);
                     h[bin] += 1;
@@ -122,10 +122,33 @@ pub fn simulate(albedo: f64, radii: &[f64], paths: u64, seed: u64) -> Exits {
     }
 }
 
-/// One path: its exit radius, exit cosine and scattering events, or none if it was absorbed.
-fn trace(albedo: f64, rng: &mut Rng) -> Option<(f64, f64, u32)> {
+/// Fractions of the power entering at incidence cosine `mu` that leave again: every order and
+/// orders >= 2 (`paths` paths; deterministic for a given `seed`). The independent check of
+/// [`crate::physics::incidence`].
+pub fn reflectance_at(albedo: f64, mu: f64, paths: u64, seed: u64) -> (f64, f64) {
+    const CHUNK: u64 = 1 << 14;
+    let (all, multiple) = (0..paths.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let mut rng = Rng::new(&[seed, albedo.to_bits(), mu.to_bits(), c]);
+            let (mut all, mut multiple) = (0u64, 0u64);
+            for _ in 0..CHUNK.min(paths - c * CHUNK) {
+                if let Some((_, _, events)) = trace(albedo, mu, &mut rng) {
+                    all += 1;
+                    multiple += (events >= 2) as u64;
+                }
+            }
+            (all, multiple)
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (all as f64 / paths as f64, multiple as f64 / paths as f64)
+}
+
+/// One path entering at incidence cosine `mu`: its exit radius, exit cosine and scattering
+/// events, or none if it was absorbed.
+fn trace(albedo: f64, mu: f64, rng: &mut Rng) -> Option<(f64, f64, u32)> {
     let (mut x, mut y, mut z) = (0.0f64, 0.0f64, 0.0f64);
-    let (mut dx, mut dy, mut dz) = (0.0f64, 0.0f64, 1.0f64);
+    let (mut dx, mut dy, mut dz) = ((1.0 - mu * mu).max(0.0).sqrt(), 0.0f64, mu);
     let mut events = 0u32;
     loop {
         let t = -(1.0 - rng.uniform()).ln();
@@ -211,5 +234,28 @@ mod tests {
             assert!(m.iter().zip(a).all(|(m, a)| m <= a));
         }
         assert!(high.all.total > low.all.total && high.multiple.total > 2.0 * low.multiple.total);
+    }
+
+    /// Oblique incidence against Chandrasekhar's exact half-space reflectance (every order)
+    /// and its orders >= 2 (single scattering's closed form taken out): within 4 standard
+    /// errors of 400 000 paths.
+    #[test]
+    fn oblique_incidence_matches_the_h_function() {
+        use crate::physics::incidence::HFunction;
+        for (albedo, mu) in [(0.99, 0.5), (0.99, 0.15), (0.75, 0.5), (0.3, 0.3)] {
+            let paths = 400_000;
+            let (all, multiple) = reflectance_at(albedo, mu, paths, 7);
+            let h = HFunction::new(albedo);
+            for (got, want, what) in [
+                (all, h.reflectance(mu), "all orders"),
+                (multiple, h.multiple(mu), "orders >= 2"),
+            ] {
+                let sigma = (want * (1.0 - want) / paths as f64).sqrt();
+                assert!(
+                    (got - want).abs() < 4.0 * sigma + 1e-4,
+                    "albedo {albedo}, mu {mu}, {what}: Monte Carlo {got} vs {want}"
+                );
+            }
+        }
     }
 }
