@@ -6,9 +6,9 @@
 //! diffuse reflectance at incidence cosine mu is exact in Chandrasekhar's H function:
 //! R(mu) = 1 - H(mu) sqrt(1 - w) (Chandrasekhar, Radiative Transfer, 1960, ch. IV), and single
 //! scattering has the closed form R1(mu) = (w / 2) (1 - mu ln(1 + 1 / mu)). Orders >= 2 are
-//! the difference. For skim milk's red (w = 0.998) at 60 degrees: all orders +3.8 %, orders
-//! >= 2 -5.2 % (single scattering grows faster than the total); towards grazing incidence
-//! orders >= 2 fall to 0.78 of normal incidence. A model whose multiple scattering is the
+//! the difference. For skim milk's red (w = 0.998) at 60 degrees: all orders +3.8 %, the
+//! orders from 2 on -5.2 % (single scattering grows faster than the total); towards grazing
+//! incidence they fall to 0.78 of normal incidence. A model whose multiple scattering is the
 //! normal-incidence profile and whose single scattering is exact per frame (`halfspace-single`,
 //! `volume`) is therefore too bright where light grazes the surface unless it takes this
 //! factor; the half-space tracer at oblique incidence checks it (`truth::halfspace`).
