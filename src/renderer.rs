@@ -376,6 +376,7 @@ impl Renderer {
                 shadow_maps,
                 transfer,
                 environment: scene.environment.is_some(),
+                incidence: scene.material.takes_incidence_factor(),
             },
             map,
         );

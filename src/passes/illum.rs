@@ -29,6 +29,9 @@ pub struct IllumInputs {
     /// Whether the scene has an environment light (the last light of the uniforms is then its
     /// sun, and the transfer is read).
     pub environment: bool,
+    /// Whether the model scales the lights' irradiance by its oblique-incidence factor
+    /// (`Material::incidence_factors`); compiled out otherwise.
+    pub incidence: bool,
 }
 
 /// Declares `illum`, writing `map`.
@@ -64,7 +67,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                     color_formats: &[FORMAT],
                     depth_format: vk::Format::UNDEFINED,
                     cull: vk::CullModeFlags::NONE,
-                    fragment_constants: &[inputs.environment as u32],
+                    fragment_constants: &[inputs.environment as u32, inputs.incidence as u32],
                     depth_bias: None,
                 },
                 set,

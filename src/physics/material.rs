@@ -206,6 +206,11 @@ impl Material {
         Ok(Material { model, ..self })
     }
 
+    /// Whether [`Material::incidence_factors`] has factors (without computing them).
+    pub fn takes_incidence_factor(&self) -> bool {
+        self.model == Model::HalfspaceSingle
+    }
+
     /// Per channel, the light of orders >= 2 that a half-space gives back when it enters at
     /// incidence cosine mu, relative to normal incidence (at which the profile is tabulated),
     /// sampled at `incidence::sample_mu`: exact for the half-space (Chandrasekhar's H
@@ -220,7 +225,7 @@ impl Material {
     /// 11.5 %) but broke the 15 mm ketchup sphere (red 7.4 -> 11.9 %) and the grazed cube
     /// (10.8 -> 14.4 %).
     pub fn incidence_factors(&self) -> Option<[[f64; incidence::SAMPLES]; 3]> {
-        if self.model != Model::HalfspaceSingle {
+        if !self.takes_incidence_factor() {
             return None;
         }
         Some([0, 1, 2].map(|c| {
