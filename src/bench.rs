@@ -85,7 +85,7 @@ pub fn measure_device_copy(
     max_bytes: u64,
     repeats: usize,
 ) -> crate::gpu::GpuResult<Vec<CopyPoint>> {
-    use crate::gpu::{resources::Buffer, VkCall};
+    use crate::gpu::resources::Buffer;
     use ash::vk;
     use gpu_allocator::MemoryLocation;
     let sizes = copy_sizes(max_bytes);
@@ -107,69 +107,27 @@ pub fn measure_device_copy(
         usage,
         MemoryLocation::GpuOnly,
     )?;
-    let d = &gpu.device;
-    let info = vk::QueryPoolCreateInfo::default()
-        .query_type(vk::QueryType::TIMESTAMP)
-        .query_count(2);
-    let queries = unsafe { d.create_query_pool(&info, None) }.vk("vkCreateQueryPool")?;
-    let result = (|| {
-        let mut points = Vec::with_capacity(sizes.len());
-        for &bytes in &sizes {
-            let mut times = Vec::with_capacity(repeats);
-            for rep in 0..repeats + 2 {
-                gpu.one_shot(|cmd| unsafe {
-                    d.cmd_reset_query_pool(cmd, queries, 0, 2);
-                    d.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::TOP_OF_PIPE, queries, 0);
-                    // The previous copy's writes (and the host's) complete before this one.
-                    let barrier = [vk::MemoryBarrier2::default()
-                        .src_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
-                        .src_access_mask(vk::AccessFlags2::MEMORY_WRITE)
-                        .dst_stage_mask(vk::PipelineStageFlags2::COPY)
-                        .dst_access_mask(
-                            vk::AccessFlags2::TRANSFER_READ | vk::AccessFlags2::TRANSFER_WRITE,
-                        )];
-                    d.cmd_pipeline_barrier2(
-                        cmd,
-                        &vk::DependencyInfo::default().memory_barriers(&barrier),
-                    );
-                    let region = [vk::BufferCopy::default().size(bytes)];
-                    d.cmd_copy_buffer(cmd, src.raw, dst.raw, &region);
-                    d.cmd_write_timestamp2(
-                        cmd,
-                        vk::PipelineStageFlags2::BOTTOM_OF_PIPE,
-                        queries,
-                        1,
-                    );
-                })?;
-                let mut stamps = [0u64; 2];
-                unsafe {
-                    d.get_query_pool_results(
-                        queries,
-                        0,
-                        &mut stamps,
-                        vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
-                    )
-                }
-                .vk("vkGetQueryPoolResults")?;
-                if rep >= 2 {
-                    times.push(
-                        stamps[1].saturating_sub(stamps[0]) as f64
-                            * gpu.info.timestamp_period_ns
-                            * 1e-6,
-                    );
-                }
+    let mut points = Vec::with_capacity(sizes.len());
+    for &bytes in &sizes {
+        let mut times = Vec::with_capacity(repeats);
+        for rep in 0..repeats + 2 {
+            let region = [vk::BufferCopy::default().size(bytes)];
+            let ms = gpu.time_one_shot(|cmd| unsafe {
+                gpu.device.cmd_copy_buffer(cmd, src.raw, dst.raw, &region);
+            })?;
+            // Two untimed copies first: first touch of the pages, caches.
+            if rep >= 2 {
+                times.push(ms);
             }
-            let median_ms = Stats::of(&times).median_ms.max(1e-9);
-            points.push(CopyPoint {
-                bytes,
-                median_ms,
-                gbps: 2.0 * bytes as f64 / (median_ms * 1e-3) / 1e9,
-            });
         }
-        Ok(points)
-    })();
-    unsafe { d.destroy_query_pool(queries, None) };
-    result
+        let median_ms = Stats::of(&times).median_ms.max(1e-9);
+        points.push(CopyPoint {
+            bytes,
+            median_ms,
+            gbps: 2.0 * bytes as f64 / (median_ms * 1e-3) / 1e9,
+        });
+    }
+    Ok(points)
 }
 
 /// The least time in which `bytes` (read plus written) can move: at the best bandwidth that

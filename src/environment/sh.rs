@@ -66,7 +66,7 @@ pub fn eval(order: u32, w: DVec3, out: &mut [f64]) {
 }
 
 /// Nodes and weights of n-point Gauss-Legendre quadrature on [-1, 1].
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+pub(crate) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
     (0..n)
         .map(|i| {
             let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();

@@ -728,6 +728,54 @@ impl Gpu {
         result
     }
 
+    /// Records `record` into a one-shot command buffer between two timestamps, submits it,
+    /// waits, and returns the device time in ms. The order is begin timestamp, a full memory
+    /// barrier (the previous work's writes, and the host's, complete first), the work, end
+    /// timestamp: lavapipe latches a begin timestamp written right before a dispatch after it.
+    pub fn time_one_shot(&self, record: impl FnOnce(vk::CommandBuffer)) -> GpuResult<f64> {
+        let info = vk::QueryPoolCreateInfo::default()
+            .query_type(vk::QueryType::TIMESTAMP)
+            .query_count(2);
+        let queries =
+            unsafe { self.device.create_query_pool(&info, None) }.vk("vkCreateQueryPool")?;
+        let d = &self.device;
+        let result = self
+            .one_shot(|cmd| unsafe {
+                d.cmd_reset_query_pool(cmd, queries, 0, 2);
+                d.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::TOP_OF_PIPE, queries, 0);
+                let barrier = [vk::MemoryBarrier2::default()
+                    .src_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+                    .src_access_mask(vk::AccessFlags2::MEMORY_WRITE)
+                    .dst_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+                    .dst_access_mask(
+                        vk::AccessFlags2::MEMORY_READ | vk::AccessFlags2::MEMORY_WRITE,
+                    )];
+                d.cmd_pipeline_barrier2(
+                    cmd,
+                    &vk::DependencyInfo::default().memory_barriers(&barrier),
+                );
+                record(cmd);
+                d.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::BOTTOM_OF_PIPE, queries, 1);
+            })
+            .and_then(|_| {
+                let mut stamps = [0u64; 2];
+                unsafe {
+                    d.get_query_pool_results(
+                        queries,
+                        0,
+                        &mut stamps,
+                        vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                    )
+                }
+                .vk("vkGetQueryPoolResults")?;
+                Ok(stamps[1].saturating_sub(stamps[0]) as f64
+                    * self.info.timestamp_period_ns
+                    * 1e-6)
+            });
+        unsafe { d.destroy_query_pool(queries, None) };
+        result
+    }
+
     /// Submits one command buffer and blocks until the device has executed it.
     pub fn submit_and_wait(&self, cmd: vk::CommandBuffer) -> GpuResult<()> {
         let fence = unsafe {

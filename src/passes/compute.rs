@@ -362,7 +362,7 @@ pub fn tune_global(
     data: &super::data::SubsurfaceData,
     lanes: Option<u32>,
 ) -> anyhow::Result<TunedGlobal> {
-    use crate::gpu::{resources::Buffer, Binding, BindingSet, TexelView, VkCall};
+    use crate::gpu::{resources::Buffer, Binding, BindingSet, TexelView};
     use ash::vk;
     use gpu_allocator::MemoryLocation;
 
@@ -430,30 +430,12 @@ pub fn tune_global(
         )?);
     }
 
-    let d = &gpu.device;
-    let info = vk::QueryPoolCreateInfo::default()
-        .query_type(vk::QueryType::TIMESTAMP)
-        .query_count(2);
-    let queries = unsafe { d.create_query_pool(&info, None) }.vk("vkCreateQueryPool")?;
     let time = |i: usize| -> anyhow::Result<f64> {
         let v = variants[i];
-        gpu.one_shot(|cmd| unsafe {
-            d.cmd_reset_query_pool(cmd, queries, 0, 2);
-            d.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::TOP_OF_PIPE, queries, 0);
-            // Begin timestamp, then the barrier, then the work (lavapipe latches a begin
-            // written right before a dispatch after it).
-            let barrier = [vk::MemoryBarrier2::default()
-                .src_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
-                .src_access_mask(vk::AccessFlags2::MEMORY_WRITE)
-                .dst_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
-                .dst_access_mask(vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE)];
-            d.cmd_pipeline_barrier2(
-                cmd,
-                &vk::DependencyInfo::default().memory_barriers(&barrier),
-            );
+        Ok(gpu.time_one_shot(|cmd| unsafe {
             pipelines[i].bind(cmd);
             pipelines[i].push(cmd, &data.node_count);
-            d.cmd_dispatch(
+            gpu.device.cmd_dispatch(
                 cmd,
                 data.node_count
                     .saturating_mul(v.lanes)
@@ -462,58 +444,42 @@ pub fn tune_global(
                 1,
                 1,
             );
-            d.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::BOTTOM_OF_PIPE, queries, 1);
-        })?;
-        let mut stamps = [0u64; 2];
-        unsafe {
-            d.get_query_pool_results(
-                queries,
-                0,
-                &mut stamps,
-                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
-            )
-        }
-        .vk("vkGetQueryPoolResults")?;
-        Ok(stamps[1].saturating_sub(stamps[0]) as f64 * gpu.info.timestamp_period_ns * 1e-6)
+        })?)
     };
-    let result = (|| {
-        let mut times: Vec<Vec<f64>> = vec![Vec::new(); variants.len()];
-        let mut live = vec![true; variants.len()];
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); variants.len()];
+    let mut live = vec![true; variants.len()];
+    for i in 0..variants.len() {
+        time(i)?; // warm-up: JIT, first touch of the matrix
+    }
+    for _ in 0..TUNE_ROUNDS {
         for i in 0..variants.len() {
-            time(i)?; // warm-up: JIT, first touch of the matrix
-        }
-        for _ in 0..TUNE_ROUNDS {
-            for i in 0..variants.len() {
-                if live[i] {
-                    times[i].push(time(i)?);
-                }
-            }
-            let best = times
-                .iter()
-                .flatten()
-                .copied()
-                .fold(f64::INFINITY, f64::min);
-            for i in 0..variants.len() {
-                let least = times[i].iter().copied().fold(f64::INFINITY, f64::min);
-                if least > TUNE_DROP * best {
-                    live[i] = false;
-                }
+            if live[i] {
+                times[i].push(time(i)?);
             }
         }
-        let candidates: Vec<(GlobalVariant, f64, usize)> = variants
+        let best = times
             .iter()
-            .zip(&times)
-            .map(|(v, t)| (*v, crate::graph::timing::Stats::of(t).median_ms, t.len()))
-            .collect();
-        let best = candidates
-            .iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|c| c.0)
-            .expect("at least the texel variant");
-        Ok(TunedGlobal { best, candidates })
-    })();
-    unsafe { d.destroy_query_pool(queries, None) };
-    result
+            .flatten()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        for i in 0..variants.len() {
+            let least = times[i].iter().copied().fold(f64::INFINITY, f64::min);
+            if least > TUNE_DROP * best {
+                live[i] = false;
+            }
+        }
+    }
+    let candidates: Vec<(GlobalVariant, f64, usize)> = variants
+        .iter()
+        .zip(&times)
+        .map(|(v, t)| (*v, crate::graph::timing::Stats::of(t).median_ms, t.len()))
+        .collect();
+    let best = candidates
+        .iter()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|c| c.0)
+        .expect("at least the texel variant");
+    Ok(TunedGlobal { best, candidates })
 }
 
 #[cfg(test)]

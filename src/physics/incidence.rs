@@ -31,31 +31,12 @@ pub struct HFunction {
     h: Vec<f64>,
 }
 
-/// Gauss-Legendre nodes and weights on (0, 1), by Newton's iteration on P_n.
+/// Gauss-Legendre nodes and weights on (0, 1) (the [-1, 1] rule of `environment::sh`, mapped).
 fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut x = vec![0.0; n];
-    let mut w = vec![0.0; n];
-    for i in 0..n {
-        let mut z = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-        let mut dp = 0.0;
-        for _ in 0..100 {
-            let (mut p0, mut p1) = (1.0, z);
-            for k in 2..=n {
-                let p2 = ((2 * k - 1) as f64 * z * p1 - (k - 1) as f64 * p0) / k as f64;
-                p0 = p1;
-                p1 = p2;
-            }
-            dp = n as f64 * (z * p1 - p0) / (z * z - 1.0);
-            let dz = p1 / dp;
-            z -= dz;
-            if dz.abs() < 1e-15 {
-                break;
-            }
-        }
-        x[i] = 0.5 * (1.0 - z);
-        w[i] = 1.0 / ((1.0 - z * z) * dp * dp);
-    }
-    (x, w)
+    crate::environment::sh::gauss_legendre(n)
+        .into_iter()
+        .map(|(x, w)| (0.5 * (1.0 + x), 0.5 * w))
+        .unzip()
 }
 
 impl HFunction {
