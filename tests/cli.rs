@@ -705,3 +705,35 @@ fn the_bare_command_renders_like_render() {
     let _ = std::fs::remove_dir_all(&a);
     let _ = std::fs::remove_dir_all(&b);
 }
+
+/// The oblique-incidence factor is said with the derived settings where the model takes it
+/// (halfspace-single, the default at eta = 1), and not for the dipole.
+#[test]
+fn precompute_says_the_incidence_factor() {
+    let run = |eta: &str| {
+        let o = bin()
+            .args([
+                "precompute",
+                "--eta",
+                eta,
+                "--texel-mm",
+                "1.5",
+                "--no-cache",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let matched = run("1");
+    let line = matched
+        .lines()
+        .find(|l| l.contains("oblique incidence"))
+        .unwrap_or_else(|| panic!("no incidence line in\n{matched}"));
+    // Skim milk's red keeps 0.95 of its orders >= 2 at 60 degrees, 0.78 near grazing.
+    assert!(
+        line.contains("x 0.95 /") && line.contains("x 0.78 /"),
+        "{line}"
+    );
+    assert!(!run("1.3").contains("oblique incidence"));
+}

@@ -119,6 +119,14 @@ pub fn choose(
             (_, _) => "given",
         }
     ));
+    if let Some(f) = m.incidence_factors() {
+        let at = |mu: f64| f.map(|f| crate::physics::incidence::interpolate(&f, mu));
+        let (a, b) = (at(0.5), at(0.1));
+        choice.reasons.push(format!(
+            "oblique incidence: orders >= 2 x {:.2} / {:.2} / {:.2} at 60 degrees, x {:.2} / {:.2} / {:.2} near grazing (cos 0.1) of normal incidence (the half-space's, H function)",
+            a[0], a[1], a[2], b[0], b[1], b[2]
+        ));
+    }
     // Not a preprocessing setting, but chosen from the texel like them: said here with them.
     let (_, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
     choice.reasons.push(why);
