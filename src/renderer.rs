@@ -266,7 +266,7 @@ impl Renderer {
         options: Options,
     ) -> Result<Renderer> {
         let (w, h) = (scene.width, scene.height);
-        let mean_pairs = data.global_pairs as f64 / data.node_count.max(1) as f64;
+        let mean_pairs = data.mean_row_pairs();
         let global_variant = if options.global_layout == compute::GlobalLayout::Auto {
             let tuned = compute::tune_global(gpu, data, options.global_lanes)?;
             tracing::info!("global pass measured: {}", tuned.summary());
@@ -750,9 +750,13 @@ impl Renderer {
     pub fn render(&mut self, frames: usize) -> Result<RenderOutput> {
         let lights = self.scene.lights.clone();
         let mut timings = Vec::with_capacity(frames);
-        for _ in 0..frames.max(1) {
-            // The last frame is the image returned (every frame without on-request readback).
-            self.request_readback();
+        let frames = frames.max(1);
+        for f in 0..frames {
+            // The last frame's image is returned (a renderer without on-request readback
+            // reads back every frame anyway).
+            if f + 1 == frames {
+                self.request_readback();
+            }
             timings.push(self.frame(&lights)?);
         }
         self.output(timings)

@@ -352,18 +352,8 @@ fn bench_writes_per_pass_bounds() {
     // Every pass but the readback: bench writes no image, so its frames read nothing back.
     let passes = b["passes"].as_array().unwrap();
     let names: Vec<&str> = passes.iter().map(|p| p["name"].as_str().unwrap()).collect();
-    assert_eq!(
-        names,
-        [
-            "shadow",
-            "illum",
-            "dilate",
-            "local",
-            "gather",
-            "global",
-            "composite"
-        ]
-    );
+    assert_eq!(names, common::FRAME_PASSES[..7]);
+    assert_eq!(common::FRAME_PASSES[7], "readback");
     for p in passes {
         // Every timed pass is a named pass with its traffic (an unknown name would read 0).
         let name = p["name"].as_str().unwrap();

@@ -253,16 +253,7 @@ fn a_point_light_casts_shadows_through_its_cube_map() {
 #[test]
 fn timings_cover_every_pass_and_add_up_to_the_frame() {
     let out = render(bunny_scene(256, 256), 6);
-    let names = [
-        "shadow",
-        "illum",
-        "dilate",
-        "local",
-        "gather",
-        "global",
-        "composite",
-        "readback",
-    ];
+    let names = common::FRAME_PASSES;
     assert_eq!(out.pass_names, names);
     // The first frame carries shader compilation; judge the rest.
     for f in &out.frames[1..] {

@@ -27,11 +27,12 @@ fn dispatch<P: bytemuck::Pod>(
 ) {
     pipeline.bind(rec.cmd);
     pipeline.push(rec.cmd, push);
-    unsafe {
-        rec.gpu
-            .device
-            .cmd_dispatch(rec.cmd, count.div_ceil(GROUP).max(1), 1, 1)
-    };
+    unsafe { rec.gpu.device.cmd_dispatch(rec.cmd, groups(count), 1, 1) };
+}
+
+/// Workgroups of [`GROUP`] invocations for `count` invocations (at least one).
+fn groups(count: u32) -> u32 {
+    count.div_ceil(GROUP).max(1)
 }
 
 /// `dilate`: fills partly covered texels of `map` from rasterised neighbours of their chart;
@@ -253,6 +254,11 @@ impl GlobalVariant {
         }
     }
 
+    /// Invocations for `rows` rows: `lanes` per row.
+    fn invocations(&self, rows: u32) -> u32 {
+        rows.saturating_mul(self.lanes)
+    }
+
     /// Its specialization constants (LANES where the shader has it).
     fn constants(&self) -> Vec<u32> {
         if self.lanes > 1 {
@@ -315,7 +321,7 @@ pub fn global(
                 set,
                 &variant.constants(),
             )?;
-            let invocations = m.row_count.saturating_mul(variant.lanes);
+            let invocations = variant.invocations(m.row_count);
             Ok(Box::new(move |rec| {
                 dispatch(rec, &pipeline, &m.row_count, invocations);
             }))
@@ -367,10 +373,10 @@ pub fn tune_global(
     use gpu_allocator::MemoryLocation;
 
     let nodes = data.node_count.max(1);
-    let mean_pairs = data.global_pairs as f64 / nodes as f64;
-    let derived = GlobalVariant::choose(&gpu.info, GlobalLayout::Texel, lanes, mean_pairs)
-        .map_err(anyhow::Error::msg)?
-        .lanes;
+    let derived =
+        GlobalVariant::choose(&gpu.info, GlobalLayout::Texel, lanes, data.mean_row_pairs())
+            .map_err(anyhow::Error::msg)?
+            .lanes;
     let mut layouts = vec![GlobalLayout::Texel];
     if data.global_storage {
         layouts.push(GlobalLayout::Storage);
@@ -435,15 +441,8 @@ pub fn tune_global(
         Ok(gpu.time_one_shot(|cmd| unsafe {
             pipelines[i].bind(cmd);
             pipelines[i].push(cmd, &data.node_count);
-            gpu.device.cmd_dispatch(
-                cmd,
-                data.node_count
-                    .saturating_mul(v.lanes)
-                    .div_ceil(GROUP)
-                    .max(1),
-                1,
-                1,
-            );
+            gpu.device
+                .cmd_dispatch(cmd, groups(v.invocations(data.node_count)), 1, 1);
         })?)
     };
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); variants.len()];

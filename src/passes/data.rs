@@ -632,6 +632,11 @@ impl Requirements {
 }
 
 impl SubsurfaceData {
+    /// Mean entry pairs per row of the global matrix (its lanes per row follow from it).
+    pub fn mean_row_pairs(&self) -> f64 {
+        self.global_pairs as f64 / self.node_count.max(1) as f64
+    }
+
     /// Uploads the preprocessing of `scene` for blending `mode`, with the environment's
     /// `transfer` where the scene has an environment light; the global matrix is also usable
     /// as storage buffers for `GlobalLayout::Storage` (refused where it exceeds

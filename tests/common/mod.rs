@@ -163,3 +163,16 @@ pub fn cylinder_obj(n: usize, radius: f32, height: f32) -> String {
     }
     text + "\n"
 }
+
+/// The passes of a frame of the default graph (dipole, no environment, no window), in
+/// execution order; the readback last.
+pub const FRAME_PASSES: [&str; 8] = [
+    "shadow",
+    "illum",
+    "dilate",
+    "local",
+    "gather",
+    "global",
+    "composite",
+    "readback",
+];
