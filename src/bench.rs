@@ -234,8 +234,8 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
             let both = b(I::RadianceReadback) + b(I::DisplayReadback);
             (both, both)
         }
-        // The viewer's pass: no bench renders a window.
-        PassName::Overlay => (0, 0),
+        // The viewer's passes: no bench renders a window.
+        PassName::Window | PassName::Ui => (0, 0),
     };
     Traffic { read, written }
 }

@@ -65,8 +65,9 @@ pub enum Command {
     Prt(PrtArgs),
     /// List the Vulkan devices and whether each can run the renderer.
     Devices,
-    /// Open a window: orbit, zoom and pan with the mouse, move the light, switch material and
-    /// blending live (keys listed in the overlay); `--script` drives it without input.
+    /// Open a window: orbit, zoom and pan with the mouse, edit the material, the settings and
+    /// the lights in the panel, save screenshots and the scene; `--script` drives it without
+    /// input.
     View(ViewArgs),
 }
 
@@ -1544,7 +1545,7 @@ fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
         );
         let cpu = reference.error_of_values(&cpu);
         let data = Renderer::upload_with(&gpu, &s, &pre, &options, Some(&transfer))?;
-        let mut r = Renderer::with_data(&gpu, s.clone(), &data, options)?;
+        let mut r = Renderer::with_data(&gpu, s.clone(), &data, options.clone())?;
         let illum = r
             .pass_names()
             .iter()

@@ -67,7 +67,7 @@ pub struct Captured {
 }
 
 /// How to render.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct Options {
     /// Blending of local and global responses.
     pub mode: Blend,
@@ -83,16 +83,28 @@ pub struct Options {
     /// and `render`, which writes the last frame's (a window renderer always reads back on
     /// request).
     pub readback_on_request: bool,
-    /// Render for a window (the viewer): add the `overlay` pass that writes the window image,
-    /// and read the image back to the host only on request ([`Renderer::request_readback`]).
+    /// Render for a window (the viewer): add the `window` pass that writes the window image
+    /// (and the `ui` pass that draws the interface over it), and read the image back to the
+    /// host only on request ([`Renderer::request_readback`]).
     pub window: Option<WindowOutput>,
 }
 
 /// What the viewer's window needs from the graph.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Clone)]
 pub struct WindowOutput {
     /// The swapchain encodes sRGB itself: the window image holds linear values.
     pub linear: bool,
+    /// The interface to draw over the image (the `ui` pass), if any.
+    pub ui: Option<passes::ui::SharedUi>,
+}
+
+impl std::fmt::Debug for WindowOutput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WindowOutput")
+            .field("linear", &self.linear)
+            .field("ui", &self.ui.is_some())
+            .finish()
+    }
 }
 
 /// The environment's per-texel transfer for `scene` (None without an environment light),
@@ -161,7 +173,7 @@ pub struct Renderer {
     last_lights: Option<Vec<Light>>,
     /// Seconds the transfer took to compute.
     transfer_seconds: f64,
-    window: Option<(Arc<Image>, passes::overlay::Text)>,
+    window: Option<Arc<Image>>,
     /// Whether the readback runs only when requested (a window renderer, or
     /// [`Options::readback_on_request`]).
     readback_on_request: bool,
@@ -473,23 +485,25 @@ impl Renderer {
             },
             scene.exposure,
         );
-        // The overlay reads the display before the readback does: the readback, skipped in
+        // The window pass reads the display before the readback does: the readback, skipped in
         // most window frames, is then the display's last user and changes no layout that a
         // pass after it relies on (see `graph::compile::check_skip`).
-        let window = match options.window {
+        let window = match &options.window {
             None => None,
             Some(out) => {
                 let image = Arc::new(Image::new(
                     gpu,
                     "window image",
                     crate::gpu::ImageInfo {
-                        format: passes::overlay::format(out.linear),
+                        format: passes::window::format(out.linear),
                         extent: vk::Extent2D {
                             width: w,
                             height: h,
                         },
                         layers: 1,
-                        usage: vk::ImageUsageFlags::STORAGE | vk::ImageUsageFlags::TRANSFER_SRC,
+                        usage: vk::ImageUsageFlags::STORAGE
+                            | vk::ImageUsageFlags::COLOR_ATTACHMENT
+                            | vk::ImageUsageFlags::TRANSFER_SRC,
                     },
                     false,
                 )?);
@@ -509,11 +523,12 @@ impl Renderer {
                         ),
                     )
                 })?;
-                let text = passes::overlay::Text::new(gpu, w, h)?;
                 let window_id = g.import_image(image.clone(), Access::TransferRead);
-                let text_id = g.import_buffer(text.buffer().clone(), None);
-                passes::overlay::add(&mut g, display, text_id, text.grid(), window_id, out.linear);
-                Some((image, text))
+                passes::window::add(&mut g, display, window_id, out.linear);
+                if let Some(ui) = &out.ui {
+                    passes::ui::add(&mut g, window_id, ui.clone());
+                }
+                Some(image)
             }
         };
         passes::readback::add(
@@ -633,10 +648,10 @@ impl Renderer {
         self.readback_requested = true;
     }
 
-    /// For a window renderer: the image the `overlay` pass writes, in `TRANSFER_SRC_OPTIMAL`
+    /// For a window renderer: the image the `window` and `ui` passes write, in `TRANSFER_SRC_OPTIMAL`
     /// between frames (the viewer blits it to the swapchain).
     pub fn window_image(&self) -> Option<&Arc<Image>> {
-        self.window.as_ref().map(|(i, _)| i)
+        self.window.as_ref()
     }
 
     /// For a window renderer: the window image as RGBA f32 (top row first), read back with a
@@ -684,14 +699,6 @@ impl Renderer {
                 .map(|&h| crate::gpu::half::from_f16(h))
                 .collect()
         })
-    }
-
-    /// For a window renderer: replaces the overlay text (between frames).
-    pub fn set_overlay(&mut self, lines: &[String]) -> Result<()> {
-        match &mut self.window {
-            Some((_, text)) => text.set(lines),
-            None => anyhow::bail!("set_overlay on a renderer without a window"),
-        }
     }
 
     /// Moves the camera; the next frame renders from there (nothing else changes).

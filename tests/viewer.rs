@@ -170,18 +170,32 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
         100.0 * err.rel_rms
     );
 
-    // What the window showed: the lit object, with the overlay's text in the top-left corner.
+    // What the window showed: the lit object, with the panel (the `ui` pass) over its top-left
+    // part and the display itself elsewhere.
     let window = rgb(&dir.join("start-window.png"));
     assert_eq!((window.width(), window.height()), (w, h));
     let lit = lit_fraction(&window);
     assert!(lit > 0.1, "the window is nearly blank: {lit:.3} lit");
-    let text_pixels = window
-        .enumerate_pixels()
-        .filter(|(x, y, p)| *x < 200 && *y < 16 && p.0 == [255, 255, 204])
-        .count();
+    let display = rgb(&dir.join("start.png"));
+    let region_diff = |x0: u32, y0: u32, x1: u32, y1: u32| {
+        let mut sum = 0.0;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let (p, q) = (window.get_pixel(x, y), display.get_pixel(x, y));
+                sum += (0..3)
+                    .map(|c| (p.0[c] as f64 - q.0[c] as f64).abs())
+                    .sum::<f64>()
+                    / 3.0;
+            }
+        }
+        sum / ((x1 - x0) * (y1 - y0)) as f64
+    };
+    let panel = region_diff(10, 10, 200, 100);
+    let outside = region_diff(w - 60, h - 60, w, h);
+    assert!(panel > 10.0, "no panel over the image: {panel:.1} levels");
     assert!(
-        text_pixels > 50,
-        "no overlay text: {text_pixels} glyph pixels"
+        outside < 1.0,
+        "the window differs from the display outside the panel: {outside:.2}"
     );
 
     // The light moved: the image changed.
@@ -236,7 +250,7 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
         "the settings follow the material"
     );
 
-    // Timings of the frames shown, the overlay pass among them.
+    // Timings of the frames shown, the window and interface passes among them.
     let t = json(&dir.join("start-timings.json"));
     let names: Vec<&str> = t["passes"]
         .as_array()
@@ -245,8 +259,84 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
         .map(|p| p["name"].as_str().unwrap())
         .collect();
     assert!(
-        names.contains(&"overlay") && names.contains(&"global"),
+        names.contains(&"window") && names.contains(&"ui") && names.contains(&"global"),
         "{names:?}"
+    );
+}
+
+/// The panel's controls through the script (each control emits the action its command
+/// names): the coefficients, the index and the model, the lights, the settings; the saved
+/// scene file, rendered by `render`, gives the image the viewer showed.
+#[test]
+fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer-panel");
+    let cache = dir.join("cache");
+    let script = "frames 2; screenshot start\n\
+                  sigma-a 0.004 0.01 0.05; eta 1.0; model halfspace; wait; frames 2\n\
+                  light-colour 0 1 0.6 0.4; light-intensity 0 1.5; light-direction 0 1 -1 -0.5\n\
+                  add-light point; frames 2; screenshot edited; save-scene edited\n\
+                  settings texel=0.9; wait; frames 2; screenshot coarse\n\
+                  remove-light 1; light-kind 0 spot; frames 2; screenshot spot; quit";
+    let mut view = common::bin();
+    view.env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["--validate", "view", "--script", script, "--cache"])
+        .arg(&cache)
+        .arg("--out")
+        .arg(&dir);
+    let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(400));
+    assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("save scene: wrote"), "{stdout}");
+
+    let start = json(&dir.join("start.json"));
+    let edited = json(&dir.join("edited.json"));
+    assert_eq!(start["material"], "skimmilk");
+    assert_eq!(edited["material"], "custom");
+    assert_eq!(edited["sigma_a"], serde_json::json!([0.004, 0.01, 0.05]));
+    assert_eq!(edited["sigma_s_prime"], start["sigma_s_prime"]);
+    assert_eq!(edited["eta"], 1.0);
+    assert_eq!(edited["model"], "halfspace");
+    assert_eq!(edited["lights"], 2);
+    let coarse = json(&dir.join("coarse.json"));
+    assert_eq!(coarse["settings"]["texel_mm"], 0.9);
+    assert_eq!(
+        coarse["model"], "halfspace",
+        "the settings keep the material"
+    );
+    assert_eq!(json(&dir.join("spot.json"))["lights"], 1);
+
+    // The new absorption and the warm light changed the image: bluer light is absorbed
+    // more, the light is redder.
+    let (m0, m1) = (
+        mean(&rgb(&dir.join("start.png"))),
+        mean(&rgb(&dir.join("edited.png"))),
+    );
+    assert!(
+        m1[0] / m1[2] > 1.3 * m0[0] / m0[2],
+        "red / blue {:.2} -> {:.2}",
+        m0[0] / m0[2],
+        m1[0] / m1[2]
+    );
+
+    // The saved scene renders the edited view: the same image to 0.1 %.
+    let mut render = common::bin();
+    render
+        .args(["--validate", "render", "--frames", "2", "--cache"])
+        .arg(&cache)
+        .arg("--out")
+        .arg(dir.join("render"))
+        .arg(dir.join("edited.toml"));
+    let o = render.output().unwrap();
+    assert!(o.status.success(), "{}", common::stderr(&o));
+    let (_, _, shot) = translucent::output::read_exr(&dir.join("edited.exr")).unwrap();
+    let (_, _, reference) = translucent::output::read_exr(&dir.join("render/render.exr")).unwrap();
+    let (err, _) = translucent::reference::metrics::compare(&shot, &reference, None);
+    assert!(err.pixels > 1000, "{} covered pixels", err.pixels);
+    assert!(
+        err.rel_rms < 1e-3,
+        "the saved scene renders differently: {:.4} % RMS",
+        100.0 * err.rel_rms
     );
 }
 
@@ -437,9 +527,10 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
     // A screenshot of the starting view.
     let start = screenshot(d, &["p"], &dir, &mut viewer);
 
-    // Left drag orbits the camera; right drag moves the light; '2': global only.
+    // Left drag orbits the camera; right drag moves the light; '2': global only. The drags
+    // stay right of the panel, which takes the pointer where it lies.
     let drag = |button: &str, dx: i32| {
-        let (x0, x1) = (200, 200 + dx);
+        let (x0, x1) = (370, 370 + dx);
         xdotool(
             d,
             &[
@@ -470,7 +561,7 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
         );
     };
     drag("1", 120);
-    drag("3", -100);
+    drag("3", 100);
     let moved = screenshot(d, &["2", "p"], &dir, &mut viewer);
     assert_ne!(start["camera"]["position"], moved["camera"]["position"]);
     assert_eq!(start["camera"]["target"], moved["camera"]["target"]);
@@ -494,6 +585,31 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
         "{} vs {}",
         dist(&zoomed),
         dist(&moved)
+    );
+
+    // The panel's "Save scene" button (its place in the default 512x512 window), clicked: the
+    // scene file appears. Clicked again every 10 s if not (a click can be lost while the
+    // X server hands the pointer over on a loaded machine).
+    let saved = dir.join("scene-000.toml");
+    let start = Instant::now();
+    while !saved.exists() {
+        xdotool(
+            d,
+            &["mousemove", "--window", &window, "130", "86", "click", "1"],
+        );
+        let clicked = Instant::now();
+        while !saved.exists() && clicked.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no scene saved after clicking the panel's Save scene button for a minute"
+        );
+    }
+    let text = std::fs::read_to_string(&saved).unwrap();
+    assert!(
+        text.contains("[camera]") && text.contains("[[lights]]"),
+        "{text}"
     );
 
     // Escape closes it cleanly (validation on: any message would fail the exit code).

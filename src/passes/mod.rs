@@ -7,10 +7,11 @@ pub mod compute;
 pub mod data;
 pub mod frame;
 pub mod illum;
-pub mod overlay;
 pub mod readback;
 pub mod shadow;
 pub mod single;
+pub mod ui;
+pub mod window;
 
 use crate::gpu::{Gpu, Pipeline};
 use crate::graph::RecordContext;
@@ -45,13 +46,15 @@ pub enum PassName {
     Readback,
     /// Intermediate results to the host (`capture`).
     Capture,
-    /// The viewer's overlay.
-    Overlay,
+    /// The display in the viewer's window image.
+    Window,
+    /// The viewer's interface, drawn over the window image.
+    Ui,
 }
 
 impl PassName {
     /// Every pass.
-    pub const ALL: [PassName; 13] = [
+    pub const ALL: [PassName; 14] = [
         PassName::Shadow,
         PassName::Entry,
         PassName::Illum,
@@ -64,7 +67,8 @@ impl PassName {
         PassName::Composite,
         PassName::Readback,
         PassName::Capture,
-        PassName::Overlay,
+        PassName::Window,
+        PassName::Ui,
     ];
 
     /// Whether the pass's results depend on the lights alone (shadow ... global): a frame
@@ -97,7 +101,8 @@ impl PassName {
             PassName::Composite => "composite",
             PassName::Readback => "readback",
             PassName::Capture => "capture",
-            PassName::Overlay => "overlay",
+            PassName::Window => "window",
+            PassName::Ui => "ui",
         }
     }
 

@@ -1,11 +1,13 @@
-//! `translucent view`: a window running the same render graph as `render` (plus the `overlay`
-//! pass), presented through a swapchain, with the camera, the lights, the material and the
-//! blending under the mouse and the keyboard, or under a script (see [`script`]).
+//! `translucent view`: a window running the same render graph as `render` (plus the `window`
+//! and `ui` passes), presented through a swapchain, with the camera, the lights, the material
+//! and the blending under the mouse, the keyboard and an interface panel (egui, drawn by the
+//! `ui` pass and timed like the others; see [`panel`]), or under a script (see [`script`]).
 //!
 //! Controls:
 //!
 //! | input                          | does                                        |
 //! |--------------------------------|---------------------------------------------|
+//! | the panel                      | material, settings, lights, plot, buttons   |
 //! | left drag                      | orbit the camera about the object           |
 //! | right drag, arrow keys         | move the lights about the object            |
 //! | middle drag, shift + left drag | pan                                         |
@@ -14,17 +16,23 @@
 //! | `1` / `2` / `3`                | local only / global only / both             |
 //! | `b`                            | blending of both: simple <-> optimized      |
 //! | `p`, F12                       | screenshot: PNG + EXR + window + timings    |
-//! | `h`                            | hide / show the overlay                     |
+//! | `s`                            | save the scene file that reproduces the view|
+//! | `h`                            | hide / show the panel                       |
 //! | `r`                            | reset camera and lights                     |
 //! | `q`, Esc                       | quit                                        |
 //!
-//! Changing the material re-runs the preprocessing on a background thread (from the cache when
-//! it holds that material): the kernels, F and the blending fit all depend on the material's
-//! coefficients, so they cannot be re-weighted from stored geometry alone without the same
-//! integrals. The window keeps rendering the old material meanwhile and the overlay shows the
-//! stage and its progress; the upload of the new data (a fraction of a second) happens between
-//! two frames. Relighting, camera moves and blending changes need no preprocessing.
+//! Mouse and keys go to the panel where it wants them (the pointer over it, a field being
+//! typed in), to the view otherwise.
+//!
+//! Changing the material or the settings re-runs the preprocessing on a background thread
+//! (from the cache when it holds that material): the kernels, F and the blending fit all
+//! depend on the material's coefficients. The window keeps rendering the old material
+//! meanwhile, the panel shows the stage, its progress and which material is shown, and the
+//! upload of the new data (a fraction of a second) happens between two frames; edits made
+//! while one runs are queued, the latest winning. Relighting, camera moves and blending changes
+//! need no preprocessing.
 
+pub mod panel;
 pub mod script;
 pub mod swapchain;
 
@@ -32,10 +40,12 @@ use crate::gpu::{Gpu, GpuOptions, WindowTarget};
 use crate::graph::timing::{FrameTiming, TimingReport};
 use crate::output;
 use crate::passes::data::SubsurfaceData;
+use crate::passes::ui::{SharedUi, UiLayer};
 use crate::physics::material::{Material, PRESETS};
 use crate::preprocess::{self, operators::Blend, settings::SettingsOverrides, Preprocessed};
 use crate::renderer::{Options, Renderer, WindowOutput};
-use crate::scene::{Camera, Light, Scene};
+use crate::scene::desc::LightKind;
+use crate::scene::{Camera, Light, Scene, MAX_LIGHTS};
 use anyhow::{bail, Context, Result};
 use glam::{Quat, Vec3};
 use script::{Action, Step};
@@ -120,7 +130,10 @@ impl Default for View {
 /// The scene's camera with its frame: the right axis and the distance.
 struct Rig {
     base: Camera,
+    /// The lights before the view's turn (edited by the panel and the script).
     lights: Vec<Light>,
+    /// The scene's lights (what `reset` goes back to).
+    scene_lights: Vec<Light>,
     center: Vec3,
     radius: f32,
     right: Vec3,
@@ -137,6 +150,7 @@ impl Rig {
         Rig {
             base: scene.camera,
             lights: scene.lights.clone(),
+            scene_lights: scene.lights.clone(),
             center,
             radius,
             right,
@@ -187,17 +201,31 @@ impl Rig {
     }
 }
 
-/// What a material's background run produces: the material, its preprocessing and, with an
-/// environment light, the transfer over its atlas.
-type JobResult = (
-    Material,
-    Preprocessed,
-    Option<crate::environment::prt::Transfer>,
-);
+/// What a material's background run produces: its preprocessing and, with an environment
+/// light, the transfer over its atlas.
+type JobResult = (Preprocessed, Option<crate::environment::prt::Transfer>);
+
+/// A material with the settings given for it: what a preprocessing run is for.
+#[derive(Debug, Clone, PartialEq)]
+struct Wanted {
+    /// The preset's name, or None for coefficients of one's own.
+    preset: Option<String>,
+    material: Material,
+    overrides: SettingsOverrides,
+}
+
+impl Wanted {
+    fn label(&self) -> String {
+        match &self.preset {
+            Some(p) => p.clone(),
+            None => format!("custom material ({})", self.material.model.name()),
+        }
+    }
+}
 
 /// A preprocessing run for a new material on a background thread.
 struct Job {
-    material: String,
+    wanted: Wanted,
     started: Instant,
     progress: Arc<Mutex<(String, u64, u64)>>,
     handle: JoinHandle<Result<JobResult>>,
@@ -218,11 +246,22 @@ struct Running {
     mode: Blend,
     both_blend: Blend,
     job: Option<Job>,
-    queued_material: Option<String>,
+    /// What the image shows: the material and the settings it was prepared with.
+    current: Wanted,
+    /// The latest material or settings asked for while a run was going (replaced by newer
+    /// edits; started when the run ends).
+    queued: Option<Wanted>,
     status: String,
     timings: VecDeque<FrameTiming>,
     frame_instants: VecDeque<Instant>,
-    overlay: bool,
+    /// The interface: its renderer and triangles (shared with the `ui` pass), its context,
+    /// its input and the panel's own state.
+    ui_layer: SharedUi,
+    egui: egui::Context,
+    egui_input: egui_winit::State,
+    panel: panel::PanelState,
+    ui_visible: bool,
+    scene_saves: usize,
     size_changed: bool,
     shot: Option<String>,
     shots: usize,
@@ -230,6 +269,8 @@ struct Running {
     cursor: PhysicalPosition<f64>,
     shift: bool,
     frames: u64,
+    /// The panel asked to quit.
+    quit: bool,
     /// The environment maps to switch between (empty without an environment light).
     environments: Vec<Arc<crate::environment::Environment>>,
     /// The one shown.
@@ -242,7 +283,6 @@ struct Running {
 struct App {
     config: Option<ViewConfig>,
     settings: AppSettings,
-    out: PathBuf,
     script: VecDeque<Step>,
     frames_left: u32,
     waiting: bool,
@@ -251,10 +291,13 @@ struct App {
     validation: Option<Arc<crate::gpu::ValidationLog>>,
 }
 
-fn renderer_options(mode: Blend, linear: bool) -> Options {
+fn renderer_options(mode: Blend, linear: bool, ui: &SharedUi) -> Options {
     Options {
         mode,
-        window: Some(WindowOutput { linear }),
+        window: Some(WindowOutput {
+            linear,
+            ui: Some(ui.clone()),
+        }),
         // The global pass's variant measured on this device (tune_global).
         global_layout: crate::passes::compute::GlobalLayout::Auto,
         ..Default::default()
@@ -293,14 +336,14 @@ impl Running {
             &self.gpu,
             self.scene.clone(),
             &self.data,
-            renderer_options(self.mode, self.linear()),
+            renderer_options(self.mode, self.linear(), &self.ui_layer),
         )?);
         Ok(())
     }
 
     fn reupload(&mut self) -> Result<()> {
         self.renderer = None;
-        let options = renderer_options(self.mode, self.linear());
+        let options = renderer_options(self.mode, self.linear(), &self.ui_layer);
         self.data = Renderer::upload_with(
             &self.gpu,
             &self.scene,
@@ -340,20 +383,123 @@ impl Running {
                 }
             }
             Action::NextEnvironment(step) => self.next_environment(step)?,
-            Action::Material(name) => self.request_material(name, app)?,
+            Action::Material(name) => self.request_preset(name, app)?,
             Action::NextMaterial(step) => {
                 let n = PRESETS.len() as i32;
-                let current = self
-                    .queued_material
-                    .as_deref()
-                    .or(self.job.as_ref().map(|j| j.material.as_str()))
-                    .unwrap_or(self.material());
+                let current = self.wanted().preset.clone().unwrap_or_default();
                 let i = PRESETS
                     .iter()
                     .position(|p| p.0 == current)
                     .map_or(0, |i| i as i32);
                 let name = PRESETS[(i + step).rem_euclid(n) as usize].0.to_string();
-                self.request_material(name, app)?;
+                self.request_preset(name, app)?;
+            }
+            Action::SigmaS(v) => {
+                let m = self.wanted().material;
+                self.request_coefficients(v, m.sigma_a, m.eta, Some(m.model), app)?;
+            }
+            Action::SigmaA(v) => {
+                let m = self.wanted().material;
+                self.request_coefficients(m.sigma_s_prime, v, m.eta, Some(m.model), app)?;
+            }
+            Action::Eta(eta) => {
+                let m = self.wanted().material;
+                // The model stays where it applies at the new index; else the index's own.
+                let keep =
+                    (m.model == crate::physics::Model::Dipole || eta == 1.0).then_some(m.model);
+                self.request_coefficients(m.sigma_s_prime, m.sigma_a, eta, keep, app)?;
+            }
+            Action::Model(model) => {
+                let mut w = self.wanted();
+                w.material = w.material.with_model(model).context("model")?;
+                self.request(w, app);
+            }
+            Action::Settings(o) => {
+                crate::preprocess::settings::validate(&o)?;
+                let mut w = self.wanted();
+                w.overrides = o;
+                self.request(w, app);
+            }
+            Action::LightDirection(i, d) => {
+                let d = Vec3::from(d);
+                if !(d.is_finite() && d.length() > 1e-6) {
+                    bail!("light {i}: the direction must be a non-zero vector");
+                }
+                self.edit_light(i, |l, center| {
+                    let travel = d.normalize();
+                    if l.kind == LightKind::Point || l.kind == LightKind::Spot {
+                        let dist = l.position.distance(center);
+                        l.position = center - travel * dist;
+                    }
+                    l.direction = travel;
+                })?;
+            }
+            Action::LightColour(i, c) => {
+                if c.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
+                    bail!("light {i}: colour components must be non-negative");
+                }
+                self.edit_light(i, |l, _| {
+                    l.radiance = Vec3::from(c) * l.radiance.max_element();
+                })?;
+            }
+            Action::LightIntensity(i, v) => {
+                if !(v.is_finite() && v >= 0.0) {
+                    bail!("light {i}: the intensity must be non-negative");
+                }
+                self.edit_light(i, |l, _| {
+                    let peak = l.radiance.max_element();
+                    let colour = if peak > 0.0 {
+                        l.radiance / peak
+                    } else {
+                        Vec3::ONE
+                    };
+                    l.radiance = colour * v;
+                })?;
+            }
+            Action::LightKind(i, kind) => {
+                let radius = self.rig.radius;
+                self.edit_light(i, |l, center| *l = light_of_kind(l, kind, center, radius))?;
+            }
+            Action::AddLight(kind) => {
+                if self.rig.lights.len() >= MAX_LIGHTS {
+                    bail!("a scene has at most {MAX_LIGHTS} lights");
+                }
+                self.bake_light_turn();
+                let first = self
+                    .rig
+                    .lights
+                    .iter()
+                    .find(|l| l.kind != LightKind::Environment)
+                    .copied();
+                let template = first.unwrap_or(Light {
+                    kind: LightKind::Directional,
+                    position: Vec3::ZERO,
+                    direction: Vec3::new(-1.0, -1.0, -1.0).normalize(),
+                    radiance: Vec3::ONE,
+                    cos_cone: -1.0,
+                    rotation: Quat::IDENTITY,
+                });
+                // The new light comes from the other side of the first one's.
+                let q = Quat::from_axis_angle(self.rig.base.up, std::f32::consts::PI);
+                let l = light_of_kind(&template, kind, self.rig.center, self.rig.radius)
+                    .rotated(q, self.rig.center);
+                self.rig.lights.push(l);
+                self.lights_changed()?;
+            }
+            Action::RemoveLight(i) => {
+                if i >= self.rig.lights.len() {
+                    bail!("no light {i} (the scene has {})", self.rig.lights.len());
+                }
+                if self.rig.lights.len() == 1 {
+                    bail!("the last light stays (a scene has at least one)");
+                }
+                self.rig.lights.remove(i);
+                self.lights_changed()?;
+            }
+            Action::SaveScene(name) => {
+                let name = name.unwrap_or_else(|| format!("scene-{:03}", self.scene_saves));
+                self.scene_saves += 1;
+                self.save_scene(&app.out, &name)?;
             }
             Action::Mode(mode) => {
                 if matches!(mode, Blend::Simple | Blend::Optimized) {
@@ -376,8 +522,14 @@ impl Running {
                 self.shots += 1;
                 self.shot = Some(name);
             }
-            Action::ToggleOverlay => self.overlay = !self.overlay,
-            Action::Reset => v = View::default(),
+            Action::ToggleUi => self.ui_visible = !self.ui_visible,
+            Action::Reset => {
+                v = View::default();
+                if self.rig.lights != self.rig.scene_lights {
+                    self.rig.lights = self.rig.scene_lights.clone();
+                    self.lights_changed()?;
+                }
+            }
             Action::Resize(w, h) => {
                 // The Resized event that follows re-creates the swapchain.
                 let _ = self.window.request_inner_size(PhysicalSize::new(w, h));
@@ -427,25 +579,66 @@ impl Running {
         Ok(())
     }
 
-    fn request_material(&mut self, name: String, app: &AppSettings) -> Result<()> {
+    /// The material and settings last asked for (what a new edit starts from).
+    fn wanted(&self) -> Wanted {
+        self.queued
+            .clone()
+            .or_else(|| self.job.as_ref().map(|j| j.wanted.clone()))
+            .unwrap_or_else(|| self.current.clone())
+    }
+
+    fn request_preset(&mut self, name: String, app: &AppSettings) -> Result<()> {
         // Check the name now: a typo is an error, not a silent no-op.
-        Material::preset(&name).with_context(|| format!("material '{name}'"))?;
-        if self.job.is_some() {
-            self.queued_material = Some(name);
-        } else if name != self.material() {
-            self.start_job(name, app);
-        }
+        let material = Material::preset(&name).with_context(|| format!("material '{name}'"))?;
+        let material = match self.scene.environment.is_some() && material.eta == 1.0 {
+            // As the scene file's default under an environment (`Scene::from_desc`).
+            true => material.with_model(crate::physics::Model::Halfspace)?,
+            false => material,
+        };
+        let mut w = self.wanted();
+        w.preset = Some(name);
+        w.material = material;
+        self.request(w, app);
         Ok(())
     }
 
-    fn start_job(&mut self, name: String, app: &AppSettings) {
+    /// Asks for coefficients of one's own; `model` where it applies, else the index's own.
+    fn request_coefficients(
+        &mut self,
+        sigma_s_prime: [f64; 3],
+        sigma_a: [f64; 3],
+        eta: f64,
+        model: Option<crate::physics::Model>,
+        app: &AppSettings,
+    ) -> Result<()> {
+        let mut material = Material::custom(sigma_s_prime, sigma_a, eta).context("the material")?;
+        if let Some(model) = model {
+            material = material.with_model(model).context("the material")?;
+        }
+        let mut w = self.wanted();
+        w.preset = None;
+        w.material = material;
+        self.request(w, app);
+        Ok(())
+    }
+
+    /// Prepares `w` now, or after the run going on (the latest request wins).
+    fn request(&mut self, w: Wanted, app: &AppSettings) {
+        if self.job.is_some() {
+            self.queued = Some(w);
+        } else if w != self.current {
+            self.start_job(w, app);
+        }
+    }
+
+    fn start_job(&mut self, wanted: Wanted, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
         let mut scene = self.scene.clone();
-        let (overrides, target, cache) = (app.overrides, app.target_error, app.cache.clone());
+        let (target, cache) = (app.target_error, app.cache.clone());
         let p = progress.clone();
-        let material = name.clone();
+        let (material, overrides) = (wanted.material, wanted.overrides);
         let handle = std::thread::spawn(move || -> Result<JobResult> {
-            scene.material = Material::preset(&material)?;
+            scene.material = material;
             let choice = preprocess::choose(&scene, &overrides, target)?;
             let report = |stage: &str, done: u64, total: u64| {
                 if let Ok(mut g) = p.lock() {
@@ -455,11 +648,11 @@ impl Running {
             let (pre, _) = preprocess::prepare(&scene, &choice, cache.as_deref(), &report)?;
             report("environment transfer", 0, 1);
             let transfer = crate::renderer::environment_transfer(&scene, &pre, cache.as_deref());
-            Ok((scene.material, pre, transfer))
+            Ok((pre, transfer))
         });
-        self.status = format!("preprocessing {name}...");
+        self.status = format!("preprocessing {}...", wanted.label());
         self.job = Some(Job {
-            material: name,
+            wanted,
             started: Instant::now(),
             progress,
             handle,
@@ -473,23 +666,36 @@ impl Running {
         }
         let job = self.job.take().expect("checked above");
         let seconds = job.started.elapsed().as_secs_f64();
+        let label = job.wanted.label();
         match job.handle.join() {
-            Ok(Ok((material, pre, transfer))) => {
-                self.scene.material = material;
-                self.scene.resolved.material.preset = Some(job.material.clone());
+            Ok(Ok((pre, transfer))) => {
+                let w = job.wanted;
+                self.scene.material = w.material;
+                let md = &mut self.scene.resolved.material;
+                md.preset = w.preset.clone();
+                (md.sigma_s_prime, md.sigma_a, md.eta) = match &w.preset {
+                    Some(_) => (None, None, Some(w.material.eta)),
+                    None => (
+                        Some(w.material.sigma_s_prime),
+                        Some(w.material.sigma_a),
+                        Some(w.material.eta),
+                    ),
+                };
+                md.model = Some(w.material.model);
+                self.current = w;
                 self.pre = pre;
                 self.transfer = transfer;
                 self.reupload()?;
-                self.status = format!("{} ready in {seconds:.1} s", job.material);
+                self.status = format!("{label} ready in {seconds:.1} s");
             }
             Ok(Err(e)) => {
-                tracing::error!("preprocessing {} failed: {e:#}", job.material);
-                self.status = format!("{} failed: {e:#}", job.material);
+                tracing::error!("preprocessing {label} failed: {e:#}");
+                self.status = format!("{label} failed: {e:#}");
             }
-            Err(_) => bail!("the preprocessing thread for {} panicked", job.material),
+            Err(_) => bail!("the preprocessing thread for {label} panicked"),
         }
-        if let Some(next) = self.queued_material.take() {
-            if next != self.material() {
+        if let Some(next) = self.queued.take() {
+            if next != self.current {
                 self.start_job(next, app);
             }
         }
@@ -497,7 +703,144 @@ impl Running {
     }
 
     fn busy(&self) -> bool {
-        self.job.is_some() || self.queued_material.is_some()
+        self.job.is_some() || self.queued.is_some()
+    }
+
+    /// Folds the view's turn of the lights into the lights themselves (before one is edited
+    /// on its own).
+    fn bake_light_turn(&mut self) {
+        if self.view.light_yaw == 0.0 && self.view.light_pitch == 0.0 {
+            return;
+        }
+        let q = self
+            .rig
+            .rotation(self.view.light_yaw, self.view.light_pitch);
+        let center = self.rig.center;
+        for l in &mut self.rig.lights {
+            *l = l.rotated(q, center);
+        }
+        self.view.light_yaw = 0.0;
+        self.view.light_pitch = 0.0;
+    }
+
+    /// Changes light `i` (turned as shown) with `edit(light, object centre)`.
+    fn edit_light(&mut self, i: usize, edit: impl FnOnce(&mut Light, Vec3)) -> Result<()> {
+        let n = self.rig.lights.len();
+        let Some(l) = self.rig.lights.get(i) else {
+            bail!("no light {i} (the scene has {n})");
+        };
+        if l.kind == LightKind::Environment {
+            bail!("light {i} is the environment: turn it with `environment` or [ ]");
+        }
+        self.bake_light_turn();
+        let center = self.rig.center;
+        edit(&mut self.rig.lights[i], center);
+        self.lights_changed()
+    }
+
+    /// After the lights changed: the scene takes them; a new count or kind rebuilds the graph
+    /// (the shadow maps' layers follow the lights).
+    fn lights_changed(&mut self) -> Result<()> {
+        let layout = |ls: &[Light]| ls.iter().map(|l| l.kind).collect::<Vec<_>>();
+        let rebuild = layout(&self.scene.lights) != layout(&self.rig.lights);
+        self.scene.lights = self.rig.lights.clone();
+        if rebuild {
+            self.rebuild()?;
+        }
+        Ok(())
+    }
+
+    /// Writes `<name>.toml` under `out`: the scene as shown (camera, lights, material,
+    /// settings' image size), which `render` reproduces.
+    fn save_scene(&mut self, out: &std::path::Path, name: &str) -> Result<()> {
+        let mut desc = self.scene.resolved.clone();
+        let c = self.rig.camera(&self.view);
+        let f = |v: Vec3| v.as_dvec3().to_array();
+        desc.camera.position = Some(f(c.position));
+        desc.camera.target = Some(f(c.target));
+        desc.camera.up = Some(f(c.up));
+        desc.camera.fov_deg = Some((c.fov_y as f64).to_degrees());
+        let lights = self.rig.lights(&self.view);
+        let given = desc.lights.clone().unwrap_or_default();
+        let mut out_lights = Vec::with_capacity(lights.len());
+        for l in &lights {
+            let intensity = l.radiance.max_element();
+            let colour = if intensity > 0.0 {
+                l.radiance / intensity
+            } else {
+                Vec3::ONE
+            };
+            let mut d = crate::scene::desc::LightDesc {
+                kind: l.kind,
+                position: None,
+                direction: None,
+                color: Some(f(colour)),
+                intensity: Some(intensity as f64),
+                cone_deg: None,
+                file: None,
+                rotate_deg: None,
+                sh_order: None,
+                rays: None,
+            };
+            match l.kind {
+                LightKind::Directional => d.direction = Some(f(l.direction)),
+                LightKind::Point => d.position = Some(f(l.position)),
+                LightKind::Spot => {
+                    d.position = Some(f(l.position));
+                    d.direction = Some(f(l.direction));
+                    d.cone_deg = Some((l.cos_cone.clamp(-1.0, 1.0) as f64).acos().to_degrees());
+                }
+                LightKind::Environment => {
+                    let e = given
+                        .iter()
+                        .find(|g| g.kind == LightKind::Environment)
+                        .context("the environment light has no description")?;
+                    // A scene file turns the map about +Y only.
+                    let (axis, angle) = l.rotation.to_axis_angle();
+                    let yaw = if angle.abs() < 1e-6 {
+                        0.0
+                    } else if axis.x.abs() < 1e-4 && axis.z.abs() < 1e-4 {
+                        (angle * axis.y.signum()).to_degrees() as f64
+                    } else {
+                        bail!(
+                            "the environment is turned about a tilted axis, which a scene \
+                             file cannot say (it turns the map about +Y): reset the light's \
+                             pitch before saving"
+                        );
+                    };
+                    d = crate::scene::desc::LightDesc {
+                        rotate_deg: Some(yaw),
+                        color: e.color,
+                        intensity: e.intensity,
+                        ..e.clone()
+                    };
+                }
+            }
+            out_lights.push(d);
+        }
+        desc.lights = Some(out_lights);
+        desc.output.width = Some(self.scene.width);
+        desc.output.height = Some(self.scene.height);
+        let o = &self.current.overrides;
+        let text = format!(
+            "# Saved by `translucent view`: `translucent render` of this file reproduces the view.\n\
+             # Settings given in the viewer (pass them to render as flags): texel {}, kernel {}, \
+             node spacing {}, pruning {}\n{}",
+            o.texel_mm.map_or("derived".into(), |v| format!("--texel-mm {v}")),
+            o.kernel_size
+                .map_or("derived".into(), |v| format!("--kernel {v}")),
+            o.node_spacing_mm
+                .map_or("derived".into(), |v| format!("--node-spacing-mm {v}")),
+            o.prune_tolerance
+                .map_or("derived".into(), |v| format!("--prune {v}")),
+            desc.to_toml()
+        );
+        output::create_dir(out)?;
+        let path = out.join(format!("{name}.toml"));
+        output::write_atomic(&path, |p| Ok(std::fs::write(p, &text)?))?;
+        println!("save scene: wrote {}", path.display());
+        self.status = format!("saved {name}.toml");
+        Ok(())
     }
 
     fn report(&self) -> Option<TimingReport> {
@@ -523,84 +866,100 @@ impl Running {
         }
     }
 
-    fn overlay_lines(&self) -> Vec<String> {
-        if !self.overlay {
-            return Vec::new();
-        }
+    /// What the panel shows this frame.
+    fn snapshot(&self) -> panel::Snapshot {
         let s = &self.pre.settings;
-        let mode = match self.mode {
-            Blend::Local => "local only".to_string(),
-            Blend::Global => "global only".to_string(),
-            b => format!("both, {} blending", b.name()),
-        };
-        let mut lines = vec![
-            format!(
-                "translucent  {:.1} fps  {} ({})",
-                self.fps(),
-                self.gpu.info.name,
-                self.gpu.info.device_type
-            ),
-            format!(
-                "{} | {} | {}x{} | light {:.0}/{:.0} deg",
-                self.material(),
-                mode,
-                self.scene.width,
-                self.scene.height,
-                self.view.light_yaw,
-                self.view.light_pitch
-            ),
-            format!(
-                "texel {:.3} mm  kernel {k}x{k}  {} nodes  prune {:.2} %",
-                s.texel_mm,
-                self.pre.nodes.positions.len(),
-                100.0 * s.prune_tolerance,
-                k = s.kernel_size
-            ),
-        ];
-        if let Some(r) = self.report() {
-            lines.push(format!(
-                "frame GPU {:.2} ms  wall {:.2} ms  (medians of {})",
-                r.frame.gpu_median_ms, r.frame.wall_median_ms, r.frames
-            ));
-            let mut line = String::new();
-            for p in &r.passes {
-                let ms = if p.stats.median_ms.is_nan() {
-                    "skip".to_string()
-                } else {
-                    format!("{:.2}", p.stats.median_ms)
-                };
-                let item = format!("{} {ms}  ", p.name);
-                if line.len() + item.len() > 60 {
-                    lines.push(std::mem::take(&mut line));
-                }
-                line.push_str(&item);
-            }
-            lines.push(line);
-        }
-        if let Some(j) = &self.job {
+        let wanted = self.wanted();
+        let progress = self.job.as_ref().map(|j| {
             let (stage, done, total) = j.progress.lock().map(|g| g.clone()).unwrap_or_default();
-            lines.push(format!(
-                "preprocessing {}: {stage} {:.0} %  {:.1} s",
-                j.material,
-                100.0 * done as f64 / total.max(1) as f64,
-                j.started.elapsed().as_secs_f64()
-            ));
-        } else if !self.status.is_empty() {
-            lines.push(self.status.clone());
+            (
+                j.wanted.label(),
+                stage,
+                done as f32 / total.max(1) as f32,
+                j.started.elapsed().as_secs_f64(),
+            )
+        });
+        let names = self
+            .renderer
+            .as_ref()
+            .map(|r| r.pass_names())
+            .unwrap_or_default();
+        let passes = names
+            .iter()
+            .enumerate()
+            .map(|(k, n)| {
+                let v = self
+                    .timings
+                    .iter()
+                    .map(|t| t.pass_ms.get(k).copied().unwrap_or(f64::NAN))
+                    .collect();
+                (n.clone(), v)
+            })
+            .collect();
+        let c = self.rig.camera(&self.view);
+        let back = (c.position - c.target).normalize_or(Vec3::Z);
+        let right = c.up.cross(back).normalize_or(Vec3::X);
+        let up = back.cross(right);
+        let report = self.report();
+        panel::Snapshot {
+            device: format!("{} ({})", self.gpu.info.name, self.gpu.info.device_type),
+            fps: self.fps(),
+            frame_ms: report
+                .as_ref()
+                .map(|r| (r.frame.gpu_median_ms, r.frame.wall_median_ms)),
+            status: self.status.clone(),
+            progress,
+            shown: (wanted != self.current).then(|| self.current.label()),
+            preset: wanted.preset.clone(),
+            material: wanted.material,
+            mode: self.mode,
+            texel_mm: s.texel_mm,
+            kernel_size: s.kernel_size,
+            nodes: self.pre.nodes.positions.len(),
+            prune_tolerance: s.prune_tolerance,
+            overrides: wanted.overrides,
+            lights: self.rig.lights(&self.view),
+            camera_axes: [right, up, back],
+            passes,
+            frames: self.timings.iter().map(|t| t.gpu_ms).collect(),
         }
-        if let Some(env) = &self.scene.environment {
-            lines.push(format!(
-                "environment {} turned {:.0} deg | shift+right drag, [ ] turn | e/E map",
-                env.source, self.view.environment_yaw
-            ));
+    }
+
+    /// Lays the panel out for this frame (hands its triangles to the `ui` pass) and returns
+    /// what the user did in it.
+    fn layout_ui(&mut self) -> Result<Vec<script::Action>> {
+        let raw = self.egui_input.take_egui_input(&self.window);
+        let snapshot = self.ui_visible.then(|| self.snapshot());
+        let mut actions = Vec::new();
+        let panel = &mut self.panel;
+        let mut out = self.egui.run_ui(raw, |ui| {
+            if let Some(s) = &snapshot {
+                panel::show(ui.ctx(), s, panel, &mut actions);
+            }
+        });
+        self.egui_input
+            .handle_platform_output(&self.window, out.platform_output);
+        let primitives = self.egui.tessellate(out.shapes, out.pixels_per_point);
+        let mut layer = self.ui_layer.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(e) = layer.take_error() {
+            bail!("{e}");
         }
-        lines.push("drag orbit | right drag/arrows light | wheel zoom | mid drag pan".into());
-        lines.push("m/M material | 1 local 2 global 3 both | b blend | p shot | h | q".into());
-        lines
+        layer.set_frame(
+            std::mem::take(&mut out.textures_delta.set)
+                .into_iter()
+                .flat_map(|(id, deltas)| deltas.into_iter().map(move |d| (id, d))),
+            std::mem::take(&mut out.textures_delta.free)
+                .into_iter()
+                .collect(),
+            primitives,
+            out.pixels_per_point,
+        )?;
+        Ok(actions)
     }
 
     /// Renders and presents one frame; saves a screenshot if one was asked for.
-    fn frame(&mut self, out: &std::path::Path) -> Result<()> {
+    fn frame(&mut self, app: &AppSettings) -> Result<()> {
+        let out = app.out.as_path();
         if self.size_changed {
             let size = self.window.inner_size();
             if size.width == 0 || size.height == 0 {
@@ -610,13 +969,23 @@ impl Running {
             self.rebuild()?;
             self.size_changed = false;
         }
-        let lines = self.overlay_lines();
+        for a in self.layout_ui()? {
+            tracing::info!(?a, "panel");
+            match self.apply(a, app) {
+                Ok(true) => {}
+                Ok(false) => self.quit = true,
+                // A bad request from the panel is shown, not fatal.
+                Err(e) => {
+                    tracing::error!("{e:#}");
+                    self.status = format!("{e:#}");
+                }
+            }
+        }
         let camera = self.rig.camera(&self.view);
         let lights = self.rig.lights(&self.view);
         let shot = self.shot.take();
         let renderer = self.renderer.as_mut().context("no renderer")?;
         renderer.set_camera(camera);
-        renderer.set_overlay(&lines)?;
         if shot.is_some() {
             renderer.request_readback();
         }
@@ -685,6 +1054,11 @@ impl Running {
         }
         let state = serde_json::json!({
             "material": self.material(),
+            "sigma_s_prime": self.scene.material.sigma_s_prime,
+            "sigma_a": self.scene.material.sigma_a,
+            "eta": self.scene.material.eta,
+            "model": self.scene.material.model.name(),
+            "lights": self.scene.lights.len(),
             "mode": self.mode.name(),
             "width": o.width,
             "height": o.height,
@@ -731,7 +1105,8 @@ impl Running {
                 "3" => Action::Mode(self.both_blend),
                 "b" if !event.repeat => Action::CycleBlend,
                 "p" if !event.repeat => Action::Screenshot(None),
-                "h" if !event.repeat => Action::ToggleOverlay,
+                "h" if !event.repeat => Action::ToggleUi,
+                "s" if !event.repeat => Action::SaveScene(None),
                 "r" => Action::Reset,
                 "e" if !event.repeat => Action::NextEnvironment(1),
                 "E" if !event.repeat => Action::NextEnvironment(-1),
@@ -760,11 +1135,45 @@ impl Running {
     }
 }
 
-/// What a material change needs to know.
+/// What a material change and the saved files need to know.
 struct AppSettings {
-    overrides: SettingsOverrides,
     target_error: f64,
     cache: Option<PathBuf>,
+    /// Folder for screenshots and saved scenes.
+    out: PathBuf,
+}
+
+/// `l` made a light of `kind`: a point or spot light where the directional light came from,
+/// at 4 radii from the object's centre; a directional light along the way it shone. The
+/// irradiance at the centre stays (a point light's `radiance` is its intensity at 1 mm).
+fn light_of_kind(l: &Light, kind: LightKind, center: Vec3, radius: f32) -> Light {
+    let travel = match l.kind {
+        LightKind::Point => (center - l.position).normalize_or(Vec3::NEG_Y),
+        _ => l.direction.normalize_or(Vec3::NEG_Y),
+    };
+    let position = match l.kind {
+        LightKind::Point | LightKind::Spot => l.position,
+        _ => center - travel * 4.0 * radius,
+    };
+    let local = |k: LightKind| matches!(k, LightKind::Point | LightKind::Spot);
+    let d2 = position.distance_squared(center).max(1e-12);
+    let radiance = match (local(l.kind), local(kind)) {
+        (false, true) => l.radiance * d2,
+        (true, false) => l.radiance / d2,
+        _ => l.radiance,
+    };
+    Light {
+        kind,
+        position,
+        direction: travel,
+        radiance,
+        cos_cone: if kind == LightKind::Spot {
+            30f32.to_radians().cos()
+        } else {
+            -1.0
+        },
+        rotation: Quat::IDENTITY,
+    }
 }
 
 impl App {
@@ -801,7 +1210,22 @@ impl App {
         self.validation = Some(gpu.validation.clone());
         let size = window.inner_size();
         let swapchain = Swapchain::new(&gpu, size.width.max(1), size.height.max(1), config.vsync)?;
-        let options = renderer_options(config.mode, swapchain::is_srgb(swapchain.format));
+        let linear = swapchain::is_srgb(swapchain.format);
+        let ui_layer: SharedUi = Arc::new(Mutex::new(UiLayer::new(
+            &gpu,
+            crate::passes::window::format(linear),
+            linear,
+        )?));
+        let egui_ctx = egui::Context::default();
+        let egui_input = egui_winit::State::new(
+            egui_ctx.clone(),
+            egui::ViewportId::ROOT,
+            &window,
+            Some(window.scale_factor() as f32),
+            None,
+            Some(gpu.info.max_image_dimension_2d as usize),
+        );
+        let options = renderer_options(config.mode, linear, &ui_layer);
         let transfer = crate::renderer::environment_transfer(
             &config.scene,
             &config.pre,
@@ -826,6 +1250,11 @@ impl App {
             Blend::Simple => Blend::Simple,
             _ => Blend::Optimized,
         };
+        let current = Wanted {
+            preset: config.scene.resolved.material.preset.clone(),
+            material: config.scene.material,
+            overrides: config.overrides,
+        };
         let mut running = Running {
             renderer: None,
             swapchain,
@@ -839,11 +1268,18 @@ impl App {
             mode: config.mode,
             both_blend,
             job: None,
-            queued_material: None,
+            current,
+            queued: None,
             status: String::new(),
             timings: VecDeque::with_capacity(TIMING_WINDOW + 1),
             frame_instants: VecDeque::with_capacity(TIMING_WINDOW + 1),
-            overlay: true,
+            ui_layer,
+            egui: egui_ctx,
+            egui_input,
+            panel: panel::PanelState::default(),
+            ui_visible: true,
+            scene_saves: 0,
+            quit: false,
             size_changed: false,
             shot: None,
             shots: 0,
@@ -921,9 +1357,11 @@ impl App {
             el.exit();
             return Ok(());
         }
-        let out = self.out.clone();
         if let Some(r) = self.running.as_mut() {
-            r.frame(&out)?;
+            r.frame(&self.settings)?;
+            if r.quit {
+                el.exit();
+            }
         }
         Ok(())
     }
@@ -942,6 +1380,33 @@ impl ApplicationHandler for App {
         let Some(running) = self.running.as_mut() else {
             return;
         };
+        // The panel sees every event first. What it takes does not reach the view: a press or
+        // the wheel with the pointer over it (decided from where its areas lie, which does
+        // not wait for the next layout to see the pointer's new place), or keys while a field
+        // is typed in.
+        let _ = running.egui_input.on_window_event(&running.window, &event);
+        let over_panel = || {
+            let ppp = running.egui.pixels_per_point();
+            let at = egui::pos2(running.cursor.x as f32 / ppp, running.cursor.y as f32 / ppp);
+            // The background layer (the whole screen, under `run_ui`) is the view's.
+            let on_area = running
+                .egui
+                .layer_id_at(at)
+                .is_some_and(|l| l.order != egui::Order::Background);
+            running.ui_visible && (on_area || running.egui.egui_is_using_pointer())
+        };
+        let taken = match event {
+            WindowEvent::KeyboardInput { .. } => running.egui.egui_wants_keyboard_input(),
+            WindowEvent::MouseInput {
+                state: ElementState::Pressed,
+                ..
+            }
+            | WindowEvent::MouseWheel { .. } => over_panel(),
+            _ => false,
+        };
+        if taken {
+            return;
+        }
         let action = match event {
             WindowEvent::CloseRequested => Some(Action::Quit),
             WindowEvent::Resized(_) => {
@@ -1026,11 +1491,10 @@ pub fn connect() -> Result<EventLoop<()>> {
 pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
     let mut app = App {
         settings: AppSettings {
-            overrides: config.overrides,
             target_error: config.target_error,
             cache: config.cache.clone(),
+            out: config.out.clone(),
         },
-        out: config.out.clone(),
         script: config.script.iter().cloned().collect(),
         frames_left: 0,
         waiting: false,
@@ -1046,7 +1510,7 @@ pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
     // Drop the renderer, swapchain, surface and device before checking the log.
     if let Some(r) = app.running.take() {
         if let Some(job) = r.job.as_ref() {
-            tracing::info!("abandoning the preprocessing of {}", job.material);
+            tracing::info!("abandoning the preprocessing of {}", job.wanted.label());
         }
         drop(r);
     }

@@ -5,11 +5,19 @@
 //! frames 3; light 40 10; frames 2; screenshot lit; material ketchup; wait; mode simple;
 //! orbit 30 0; zoom 1.2; pan 20 0; resize 640 480; frames 2; screenshot; quit
 //! environment 90; envmap; frames 2; screenshot turned
+//! sigma-a 0.002 0.004 0.02; eta 1.0; model halfspace; wait; settings texel=0.8; wait
+//! light-colour 0 1 0.8 0.6; light-intensity 0 2; light-direction 0 1 -1 0
+//! add-light point; light-kind 1 spot; remove-light 0; save-scene edited
 //! ```
 //!
-//! Commands are separated by `;` or new lines; `#` starts a comment.
+//! Commands are separated by `;` or new lines; `#` starts a comment. The interface's controls
+//! produce the same actions as these commands (material, settings, lights, screenshot, save
+//! scene), so a script exercises what a click does.
 
+use crate::physics::Model;
 use crate::preprocess::operators::Blend;
+use crate::preprocess::settings::SettingsOverrides;
+use crate::scene::desc::LightKind;
 use anyhow::{bail, Context, Result};
 
 /// One thing the viewer can be asked to do, from a key, the mouse or a script.
@@ -38,8 +46,32 @@ pub enum Action {
     CycleBlend,
     /// Save the image (PNG + EXR), the window as shown and the timings; optional base name.
     Screenshot(Option<String>),
-    /// Show or hide the text overlay.
-    ToggleOverlay,
+    /// Show or hide the interface.
+    ToggleUi,
+    /// The reduced scattering coefficients, 1/mm (preprocessing runs in the background).
+    SigmaS([f64; 3]),
+    /// The absorption coefficients, 1/mm.
+    SigmaA([f64; 3]),
+    /// The relative index of refraction.
+    Eta(f64),
+    /// The model (the half-space models need eta = 1).
+    Model(Model),
+    /// The settings given instead of derived (None: derived); a new atlas where they change it.
+    Settings(SettingsOverrides),
+    /// Light `i`'s direction of travel (world; directional and spot lights).
+    LightDirection(usize, [f32; 3]),
+    /// Light `i`'s colour (its intensity kept).
+    LightColour(usize, [f32; 3]),
+    /// Light `i`'s intensity (its colour kept).
+    LightIntensity(usize, f32),
+    /// Light `i` becomes a light of this kind (directional, point or spot).
+    LightKind(usize, LightKind),
+    /// Add a light of this kind (directional, point or spot), up to the limit.
+    AddLight(LightKind),
+    /// Remove light `i` (one light always stays).
+    RemoveLight(usize),
+    /// Write the scene file that reproduces the view; optional base name.
+    SaveScene(Option<String>),
     /// Camera and lights back to the scene's.
     Reset,
     /// Ask the window system for this inner size.
@@ -72,90 +104,220 @@ fn finite(v: f32, what: &str) -> Result<f32> {
     Ok(v)
 }
 
+/// The light kinds a light can be made into here (environment lights come from scene files).
+fn light_kind(word: Option<&str>) -> Result<LightKind> {
+    match word.context("missing light kind")? {
+        "directional" => Ok(LightKind::Directional),
+        "point" => Ok(LightKind::Point),
+        "spot" => Ok(LightKind::Spot),
+        other => bail!("unknown light kind '{other}' (directional, point, spot)"),
+    }
+}
+
+/// `key=value` settings; `auto` leaves a setting derived.
+fn settings(words: &[&str]) -> Result<SettingsOverrides> {
+    let mut o = SettingsOverrides::default();
+    if words.is_empty() {
+        bail!("missing settings (texel=MM kernel=N nodes=MM prune=FRACTION, or auto)");
+    }
+    for w in words {
+        if *w == "auto" {
+            continue;
+        }
+        let (key, value) = w
+            .split_once('=')
+            .with_context(|| format!("'{w}' is not key=value"))?;
+        let auto = value == "auto";
+        let real = |what: &str| -> Result<Option<f64>> {
+            if auto {
+                return Ok(None);
+            }
+            let v: f64 = number(Some(value), what)?;
+            if !(v.is_finite() && v > 0.0) {
+                bail!("{what} {v} must be positive");
+            }
+            Ok(Some(v))
+        };
+        match key {
+            "texel" => o.texel_mm = real("texel size in mm")?,
+            "nodes" => o.node_spacing_mm = real("node spacing in mm")?,
+            "prune" => o.prune_tolerance = real("pruning tolerance")?,
+            "kernel" => {
+                o.kernel_size = if auto {
+                    None
+                } else {
+                    Some(number(Some(value), "kernel size")?)
+                }
+            }
+            other => bail!("unknown setting '{other}' (texel, kernel, nodes, prune)"),
+        }
+    }
+    crate::preprocess::settings::validate(&o)?;
+    Ok(o)
+}
+
 fn parse_step(words: &[&str]) -> Result<Step> {
-    let mut it = words[1..].iter().copied();
-    let mut two = |what: &str| -> Result<(f32, f32)> {
-        let a = finite(number(it.next(), what)?, what)?;
-        let b = finite(number(it.next(), what)?, what)?;
-        Ok((a, b))
+    let args = &words[1..];
+    let want = |n: usize| -> Result<()> {
+        match args.len().cmp(&n) {
+            std::cmp::Ordering::Greater => bail!("too many arguments"),
+            _ => Ok(()),
+        }
     };
-    let step = match words[0] {
+    let real =
+        |k: usize, what: &str| -> Result<f32> { finite(number(args.get(k).copied(), what)?, what) };
+    let index = |k: usize| -> Result<usize> { number(args.get(k).copied(), "light index") };
+    let triple = |from: usize, what: &str| -> Result<[f64; 3]> {
+        let mut v = [0.0f64; 3];
+        for (c, x) in v.iter_mut().enumerate() {
+            *x = number(args.get(from + c).copied(), what)?;
+            if !x.is_finite() {
+                bail!("{what} must be finite");
+            }
+        }
+        Ok(v)
+    };
+    let (step, n) = match words[0] {
         "frames" => {
-            let n: u32 = number(words.get(1).copied(), "frame count")?;
+            let n: u32 = number(args.first().copied(), "frame count")?;
             if n == 0 {
                 bail!("frames needs a count of at least 1");
             }
-            Step::Frames(n)
+            (Step::Frames(n), 1)
         }
-        "wait" => Step::Wait,
-        "orbit" => {
-            let (a, b) = two("angle in degrees")?;
-            Step::Act(Action::Orbit(a, b))
-        }
-        "light" => {
-            let (a, b) = two("angle in degrees")?;
-            Step::Act(Action::Light(a, b))
-        }
-        "environment" => {
-            let a = finite(number(words.get(1).copied(), "angle in degrees")?, "angle")?;
-            Step::Act(Action::Environment(a))
-        }
-        "envmap" => Step::Act(Action::NextEnvironment(1)),
-        "pan" => {
-            let (a, b) = two("pixel offset")?;
-            Step::Act(Action::Pan(a, b))
-        }
+        "wait" => (Step::Wait, 0),
+        "orbit" => (
+            Step::Act(Action::Orbit(
+                real(0, "angle in degrees")?,
+                real(1, "angle in degrees")?,
+            )),
+            2,
+        ),
+        "light" => (
+            Step::Act(Action::Light(
+                real(0, "angle in degrees")?,
+                real(1, "angle in degrees")?,
+            )),
+            2,
+        ),
+        "environment" => (
+            Step::Act(Action::Environment(real(0, "angle in degrees")?)),
+            1,
+        ),
+        "envmap" => (Step::Act(Action::NextEnvironment(1)), 0),
+        "pan" => (
+            Step::Act(Action::Pan(
+                real(0, "pixel offset")?,
+                real(1, "pixel offset")?,
+            )),
+            2,
+        ),
         "zoom" => {
-            let f: f32 = number(words.get(1).copied(), "zoom factor")?;
-            if !(f.is_finite() && f > 0.0) {
+            let f = real(0, "zoom factor")?;
+            if f <= 0.0 {
                 bail!("zoom factor {f} must be positive");
             }
-            Step::Act(Action::Zoom(f))
+            (Step::Act(Action::Zoom(f)), 1)
         }
-        "material" => Step::Act(Action::Material(
-            words.get(1).context("missing material name")?.to_string(),
-        )),
+        "material" => (
+            Step::Act(Action::Material(
+                args.first().context("missing material name")?.to_string(),
+            )),
+            1,
+        ),
         "mode" => {
-            let name = *words.get(1).context("missing mode")?;
+            let name = *args.first().context("missing mode")?;
             let mode = Blend::ALL
                 .into_iter()
                 .find(|b| b.name() == name)
                 .with_context(|| {
                     format!("unknown mode '{name}' (local, global, simple, optimized)")
                 })?;
-            Step::Act(Action::Mode(mode))
+            (Step::Act(Action::Mode(mode)), 1)
         }
-        "screenshot" => Step::Act(Action::Screenshot(words.get(1).map(|s| s.to_string()))),
-        "overlay" => Step::Act(Action::ToggleOverlay),
-        "reset" => Step::Act(Action::Reset),
+        "sigma-s" => (
+            Step::Act(Action::SigmaS(triple(0, "coefficient in 1/mm")?)),
+            3,
+        ),
+        "sigma-a" => (
+            Step::Act(Action::SigmaA(triple(0, "coefficient in 1/mm")?)),
+            3,
+        ),
+        "eta" => {
+            let eta: f64 = number(args.first().copied(), "index")?;
+            (Step::Act(Action::Eta(eta)), 1)
+        }
+        "model" => {
+            let name = *args.first().context("missing model")?;
+            let model = Model::ALL
+                .into_iter()
+                .find(|m| m.name() == name)
+                .with_context(|| {
+                    format!(
+                        "unknown model '{name}' ({})",
+                        Model::ALL.map(Model::name).join(", ")
+                    )
+                })?;
+            (Step::Act(Action::Model(model)), 1)
+        }
+        "settings" => (Step::Act(Action::Settings(settings(args)?)), args.len()),
+        "light-direction" => {
+            let d = triple(1, "direction component")?;
+            (
+                Step::Act(Action::LightDirection(index(0)?, d.map(|x| x as f32))),
+                4,
+            )
+        }
+        "light-colour" | "light-color" => {
+            let c = triple(1, "colour component")?;
+            (
+                Step::Act(Action::LightColour(index(0)?, c.map(|x| x as f32))),
+                4,
+            )
+        }
+        "light-intensity" => (
+            Step::Act(Action::LightIntensity(index(0)?, real(1, "intensity")?)),
+            2,
+        ),
+        "light-kind" => (
+            Step::Act(Action::LightKind(
+                index(0)?,
+                light_kind(args.get(1).copied())?,
+            )),
+            2,
+        ),
+        "add-light" => (
+            Step::Act(Action::AddLight(light_kind(args.first().copied())?)),
+            1,
+        ),
+        "remove-light" => (Step::Act(Action::RemoveLight(index(0)?)), 1),
+        "screenshot" => (
+            Step::Act(Action::Screenshot(args.first().map(|s| s.to_string()))),
+            1,
+        ),
+        "save-scene" => (
+            Step::Act(Action::SaveScene(args.first().map(|s| s.to_string()))),
+            1,
+        ),
+        "ui" => (Step::Act(Action::ToggleUi), 0),
+        "reset" => (Step::Act(Action::Reset), 0),
         "resize" => {
-            let w: u32 = number(words.get(1).copied(), "width")?;
-            let h: u32 = number(words.get(2).copied(), "height")?;
+            let w: u32 = number(args.first().copied(), "width")?;
+            let h: u32 = number(args.get(1).copied(), "height")?;
             if w == 0 || h == 0 {
                 bail!("resize needs a positive size");
             }
-            Step::Act(Action::Resize(w, h))
+            (Step::Act(Action::Resize(w, h)), 2)
         }
-        "quit" => Step::Act(Action::Quit),
+        "quit" => (Step::Act(Action::Quit), 0),
         other => bail!(
             "unknown command '{other}' (frames, wait, orbit, light, environment, envmap, pan, \
-             zoom, material, mode, screenshot, overlay, reset, resize, quit)"
+             zoom, material, mode, sigma-s, sigma-a, eta, model, settings, light-direction, \
+             light-colour, light-intensity, light-kind, add-light, remove-light, screenshot, \
+             save-scene, ui, reset, resize, quit)"
         ),
     };
-    let expected = match &step {
-        Step::Frames(_)
-        | Step::Act(
-            Action::Zoom(_) | Action::Material(_) | Action::Mode(_) | Action::Environment(_),
-        ) => 2,
-        Step::Act(Action::Screenshot(_)) => words.len().min(2),
-        Step::Act(Action::Orbit(..) | Action::Light(..) | Action::Pan(..) | Action::Resize(..)) => {
-            3
-        }
-        _ => 1,
-    };
-    if words.len() > expected {
-        bail!("too many arguments");
-    }
+    want(n)?;
     Ok(step)
 }
 
@@ -185,8 +347,11 @@ mod tests {
     fn parses_every_command() {
         let s = parse(
             "frames 3; light 40 -10 # a comment\norbit 30 0; zoom 1.5; pan 10 -4\n\
-             material ketchup; wait; mode simple; screenshot lit; screenshot; overlay; reset;\n\
-             resize 640 480; quit",
+             material ketchup; wait; mode simple; screenshot lit; screenshot; ui; reset;\n\
+             resize 640 480; sigma-s 1 2 3; sigma-a 0.1 0.2 0.3; eta 1.0; model dipole\n\
+             settings texel=0.5 kernel=auto; light-direction 1 0 -1 0; light-colour 0 1 0.5 0.25\n\
+             light-intensity 0 2; light-kind 0 spot; add-light point; remove-light 1;\n\
+             save-scene s; quit",
         )
         .unwrap();
         assert_eq!(
@@ -202,9 +367,24 @@ mod tests {
                 Step::Act(Action::Mode(Blend::Simple)),
                 Step::Act(Action::Screenshot(Some("lit".into()))),
                 Step::Act(Action::Screenshot(None)),
-                Step::Act(Action::ToggleOverlay),
+                Step::Act(Action::ToggleUi),
                 Step::Act(Action::Reset),
                 Step::Act(Action::Resize(640, 480)),
+                Step::Act(Action::SigmaS([1.0, 2.0, 3.0])),
+                Step::Act(Action::SigmaA([0.1, 0.2, 0.3])),
+                Step::Act(Action::Eta(1.0)),
+                Step::Act(Action::Model(Model::Dipole)),
+                Step::Act(Action::Settings(SettingsOverrides {
+                    texel_mm: Some(0.5),
+                    ..Default::default()
+                })),
+                Step::Act(Action::LightDirection(1, [0.0, -1.0, 0.0])),
+                Step::Act(Action::LightColour(0, [1.0, 0.5, 0.25])),
+                Step::Act(Action::LightIntensity(0, 2.0)),
+                Step::Act(Action::LightKind(0, LightKind::Spot)),
+                Step::Act(Action::AddLight(LightKind::Point)),
+                Step::Act(Action::RemoveLight(1)),
+                Step::Act(Action::SaveScene(Some("s".into()))),
                 Step::Act(Action::Quit),
             ]
         );
@@ -223,6 +403,12 @@ mod tests {
             ("jump 3", "unknown command 'jump'"),
             ("quit now", "too many arguments"),
             ("resize 0 10", "positive size"),
+            ("model photon", "unknown model 'photon'"),
+            ("settings texel=-1", "must be positive"),
+            ("settings blur=2", "unknown setting 'blur'"),
+            ("add-light environment", "unknown light kind"),
+            ("light-colour 0 1 1", "missing colour component"),
+            ("sigma-a 1 2 3 4", "too many arguments"),
         ] {
             let e = format!("{:#}", parse(text).unwrap_err());
             assert!(e.contains(needle), "{text}: {e}");

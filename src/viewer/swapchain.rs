@@ -301,10 +301,17 @@ impl Swapchain {
                     .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
                     .image(target)
                     .subresource_range(range),
-                // The window image: the overlay's storage writes visible to the blit.
+                // The window image: the `window` pass's storage writes and the `ui` pass's
+                // attachment writes visible to the blit.
                 vk::ImageMemoryBarrier2::default()
-                    .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
-                    .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
+                    .src_stage_mask(
+                        vk::PipelineStageFlags2::COMPUTE_SHADER
+                            | vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+                    )
+                    .src_access_mask(
+                        vk::AccessFlags2::SHADER_STORAGE_WRITE
+                            | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+                    )
                     .dst_stage_mask(vk::PipelineStageFlags2::BLIT)
                     .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
                     .old_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)

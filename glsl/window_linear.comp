@@ -2,4 +2,4 @@
 #extension GL_GOOGLE_include_directive : require
 #define WINDOW_FORMAT rgba16f
 #define LINEAR_OUT
-#include "overlay.glsl"
+#include "window.glsl"

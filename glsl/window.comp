@@ -1,4 +1,4 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #define WINDOW_FORMAT rgba8
-#include "overlay.glsl"
+#include "window.glsl"
