@@ -587,15 +587,85 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
         dist(&moved)
     );
 
-    // The panel's "Save scene" button (its place in the default 512x512 window), clicked: the
-    // scene file appears. Clicked again every 10 s if not (a click can be lost while the
-    // X server hands the pointer over on a loaded machine).
+    // The panel, by real input at its controls' places in the default 512x512 window. A
+    // press-drag-release in three steps, each given time to reach a frame.
+    let drag_at = |(x0, y0): (i32, i32), (x1, y1): (i32, i32)| {
+        let (xm, ym) = ((x0 + x1) / 2, (y0 + y1) / 2);
+        let s = |v: i32| v.to_string();
+        let (x0, y0, xm, ym, x1, y1) = (s(x0), s(y0), s(xm), s(ym), s(x1), s(y1));
+        xdotool(
+            d,
+            &[
+                "mousemove",
+                "--window",
+                &window,
+                &x0,
+                &y0,
+                "mousedown",
+                "1",
+                "sleep",
+                "0.3",
+                "mousemove",
+                "--window",
+                &window,
+                &xm,
+                &ym,
+                "sleep",
+                "0.3",
+                "mousemove",
+                "--window",
+                &window,
+                &x1,
+                &y1,
+                "sleep",
+                "0.3",
+                "mouseup",
+                "1",
+            ],
+        );
+    };
+    // The light's sphere: dragged from its centre up and left, the light comes from there.
+    let before = screenshot(d, &["p"], &dir, &mut viewer);
+    drag_at((75, 390), (55, 365));
+    let turned = screenshot(d, &["p"], &dir, &mut viewer);
+    assert_ne!(
+        before["light_directions"], turned["light_directions"],
+        "dragging on the light's sphere did not move the light"
+    );
+    assert_eq!(
+        before["camera"], turned["camera"],
+        "the drag reached the view"
+    );
+    // The index slider, dragged right: a new material, prepared in the background, then
+    // shown (screenshots until it is, at most a minute).
+    drag_at((65, 219), (115, 219));
+    let start = Instant::now();
+    let eta = loop {
+        let v = screenshot(d, &["p"], &dir, &mut viewer);
+        if v["eta"] != before["eta"] {
+            break v["eta"].as_f64().unwrap();
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "dragging the eta slider changed nothing in a minute"
+        );
+        std::thread::sleep(Duration::from_secs(2));
+    };
+    assert!(
+        eta > 1.5 && eta <= 2.0,
+        "eta {eta} after dragging the slider right"
+    );
+    assert_eq!(turned["material"], "skimmilk");
+
+    // The "Save scene" button, clicked: the scene file appears. Clicked again every 10 s if
+    // not (a click can be lost while the X server hands the pointer over on a loaded
+    // machine).
     let saved = dir.join("scene-000.toml");
     let start = Instant::now();
     while !saved.exists() {
         xdotool(
             d,
-            &["mousemove", "--window", &window, "130", "86", "click", "1"],
+            &["mousemove", "--window", &window, "130", "94", "click", "1"],
         );
         let clicked = Instant::now();
         while !saved.exists() && clicked.elapsed() < Duration::from_secs(10) {
@@ -611,6 +681,7 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
         text.contains("[camera]") && text.contains("[[lights]]"),
         "{text}"
     );
+    assert!(text.contains(&format!("eta = {eta}")), "{text}");
 
     // Escape closes it cleanly (validation on: any message would fail the exit code).
     let deadline = Instant::now() + Duration::from_secs(90);

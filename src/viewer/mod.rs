@@ -687,6 +687,7 @@ impl Running {
                 self.transfer = transfer;
                 self.reupload()?;
                 self.status = format!("{label} ready in {seconds:.1} s");
+                println!("view: {label} shown {seconds:.2} s after it was asked for");
             }
             Ok(Err(e)) => {
                 tracing::error!("preprocessing {label} failed: {e:#}");
@@ -1059,6 +1060,12 @@ impl Running {
             "eta": self.scene.material.eta,
             "model": self.scene.material.model.name(),
             "lights": self.scene.lights.len(),
+            "light_directions": self
+                .rig
+                .lights(&self.view)
+                .iter()
+                .map(|l| l.direction.to_array())
+                .collect::<Vec<_>>(),
             "mode": self.mode.name(),
             "width": o.width,
             "height": o.height,

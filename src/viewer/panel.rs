@@ -99,8 +99,8 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
                 Some((gpu, wall)) => format!("frame: GPU {gpu:.2} ms, wall {wall:.2} ms (medians)"),
                 None => "frame: timing...".into(),
             });
-            // The buttons keep their place: nothing above them comes and goes once the
-            // first frames are timed (the input test clicks them).
+            // The controls keep their places: nothing above them comes and goes (the input
+            // test clicks and drags them where they lie in the default window).
             ui.horizontal(|ui| {
                 if ui.button("Screenshot").clicked() {
                     actions.push(Action::Screenshot(None));
@@ -109,30 +109,34 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
                     actions.push(Action::SaveScene(None));
                 }
             });
-            if let Some((what, stage, done, seconds)) = &s.progress {
-                ui.add(
-                    egui::ProgressBar::new(*done)
-                        .text(format!("preparing {what}: {stage} ({seconds:.1} s)")),
-                );
-            }
-            if let Some(shown) = &s.shown {
-                ui.label(format!("shown meanwhile: {shown}"));
-            }
-            if !s.status.is_empty() {
-                ui.label(&s.status);
-            }
-            egui::CollapsingHeader::new("Material")
-                .default_open(true)
-                .show(ui, |ui| material(ui, s, actions));
-            egui::CollapsingHeader::new("Settings")
-                .default_open(false)
-                .show(ui, |ui| settings(ui, s, st, actions));
-            egui::CollapsingHeader::new("Lights")
-                .default_open(true)
-                .show(ui, |ui| lights(ui, s, st, actions));
-            egui::CollapsingHeader::new("GPU time per pass")
-                .default_open(true)
-                .show(ui, |ui| plot(ui, s));
+            // Taller than a small window: the rest scrolls.
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                egui::CollapsingHeader::new("Material")
+                    .default_open(true)
+                    .show(ui, |ui| material(ui, s, actions));
+                egui::CollapsingHeader::new("Settings")
+                    .default_open(false)
+                    .show(ui, |ui| settings(ui, s, st, actions));
+                egui::CollapsingHeader::new("Lights")
+                    .default_open(true)
+                    .show(ui, |ui| lights(ui, s, st, actions));
+                egui::CollapsingHeader::new("GPU time per pass")
+                    .default_open(true)
+                    .show(ui, |ui| plot(ui, s));
+                // What comes and goes stays last: the controls above keep their places.
+                if let Some((what, stage, done, seconds)) = &s.progress {
+                    ui.add(
+                        egui::ProgressBar::new(*done)
+                            .text(format!("preparing {what}: {stage} ({seconds:.1} s)")),
+                    );
+                }
+                if let Some(shown) = &s.shown {
+                    ui.label(format!("shown meanwhile: {shown}"));
+                }
+                if !s.status.is_empty() {
+                    ui.label(&s.status);
+                }
+            });
         });
 }
 
