@@ -72,7 +72,7 @@ void main() {
     // The optimized fit and the direct term are bounded so that light on any texel gives every
     // texel a non-negative response (tests/preprocess.rs light_is_never_negative); where the
     // bound is met with equality the f32 sums of the passes round it to a few ulp either side.
-    vec3 b = max(local_response(in_atlas) + in_global, vec3(0.0));
+    vec3 b = max(local_response(in_atlas) + in_global, vec3(0.0)) * frame.material.yzw;
     if (TEXTURED) {
         b *= texture(albedo_texture, in_uv).rgb;
     }

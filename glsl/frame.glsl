@@ -28,7 +28,9 @@ layout(std140, set = 0, binding = 0) uniform Frame {
     mat4 view_proj;        // world (mm) -> camera clip space
     mat4 inverse_view_proj; // camera clip space -> world (mm)
     vec4 camera_pos;       // xyz
-    vec4 material;         // x: relative index of refraction eta
+    vec4 material;         // x: relative index of refraction eta; yzw: a scale on the multiple-
+                           //    scattering response (1; the viewer's preview of a material
+                           //    still being prepared)
     vec4 sigma_s;          // rgb: reduced scattering coefficient, 1/mm
     vec4 sigma_t;          // rgb: sigma_s' + sigma_a, 1/mm
     uvec4 counts;          // x: number of lights, y: number of shadow-map layers,

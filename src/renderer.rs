@@ -701,6 +701,13 @@ impl Renderer {
         })
     }
 
+    /// Scales the multiple-scattering response per channel in the composite from the next
+    /// frame on (1: none). The viewer's preview of a material still being prepared: the
+    /// shown operators scaled to the new material's total reflectance.
+    pub fn set_response_scale(&mut self, scale: [f32; 3]) {
+        self.material_uniforms = self.material_uniforms.with_response_scale(scale);
+    }
+
     /// Moves the camera; the next frame renders from there (nothing else changes).
     pub fn set_camera(&mut self, camera: crate::scene::Camera) {
         self.scene.camera = camera;

@@ -273,7 +273,8 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     let dir = common::temp_dir("viewer-panel");
     let cache = dir.join("cache");
     let script = "frames 2; screenshot start\n\
-                  sigma-a 0.004 0.01 0.05; eta 1.0; model halfspace; wait; frames 2\n\
+                  sigma-a 0.004 0.01 0.05; frames 1; screenshot preview; wait; frames 2\n\
+                  screenshot exact; eta 1.0; model halfspace; wait; frames 2\n\
                   light-colour 0 1 0.6 0.4; light-intensity 0 1.5; light-direction 0 1 -1 -0.5\n\
                   add-light point; frames 2; screenshot edited; save-scene edited\n\
                   settings texel=0.9; wait; frames 2; screenshot coarse\n\
@@ -305,6 +306,47 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
         "the settings keep the material"
     );
     assert_eq!(json(&dir.join("spot.json"))["lights"], 1);
+
+    // While the new absorption was prepared, the next frame showed the old operators scaled to
+    // its total reflectance: nearer the real image than the old material in every channel.
+    let preview = json(&dir.join("preview.json"));
+    assert_eq!(
+        preview["material"], "skimmilk",
+        "the preview came after the run"
+    );
+    assert!(preview["preview"].is_array(), "{preview}");
+    assert!(json(&dir.join("exact.json"))["preview"].is_null());
+    let exr = |name: &str| {
+        translucent::output::read_exr(&dir.join(format!("{name}.exr")))
+            .unwrap()
+            .2
+    };
+    let channel_means = |v: &[f32]| {
+        let mut m = [0.0f64; 3];
+        for p in v.chunks(4) {
+            for c in 0..3 {
+                m[c] += p[c] as f64;
+            }
+        }
+        m
+    };
+    let (m_start, m_preview, m_exact) = (
+        channel_means(&exr("start")),
+        channel_means(&exr("preview")),
+        channel_means(&exr("exact")),
+    );
+    for c in 0..3 {
+        let (before, during) = (
+            (m_start[c] / m_exact[c] - 1.0).abs(),
+            (m_preview[c] / m_exact[c] - 1.0).abs(),
+        );
+        assert!(
+            during < 0.5 * before && during < 0.1,
+            "channel {c}: the old material is {:.1} % off the new one, the preview {:.1} %",
+            100.0 * before,
+            100.0 * during
+        );
+    }
 
     // The new absorption and the warm light changed the image: bluer light is absorbed
     // more, the light is redder.

@@ -60,6 +60,13 @@ pub struct MaterialUniforms {
 }
 
 impl MaterialUniforms {
+    /// The same uniforms with the multiple-scattering response scaled by `scale` per channel
+    /// in the composite (1: none; the viewer's preview of a material still being prepared).
+    pub fn with_response_scale(mut self, scale: [f32; 3]) -> MaterialUniforms {
+        self.material[1..4].copy_from_slice(&scale);
+        self
+    }
+
     /// The uniforms of `m` under its model.
     pub fn of(m: &Material) -> MaterialUniforms {
         let profiles = m.profiles();
@@ -85,7 +92,7 @@ impl MaterialUniforms {
         let t = [0, 1, 2].map(|c| (s[c] + a[c]) as f32);
         MaterialUniforms {
             incidence,
-            material: [m.eta as f32, 0.0, 0.0, 0.0],
+            material: [m.eta as f32, 1.0, 1.0, 1.0],
             sigma_s: [s[0] as f32, s[1] as f32, s[2] as f32, 0.0],
             sigma_t: [t[0], t[1], t[2], 0.0],
             exit_lobe,

@@ -271,6 +271,13 @@ struct Running {
     frames: u64,
     /// The panel asked to quit.
     quit: bool,
+    /// While a material of the same model is being prepared: the shown response's scale per
+    /// channel to its total reflectance (the preview; None when the image shows what was asked
+    /// for, or the model changes).
+    preview: Option<[f32; 3]>,
+    /// The global pass's variant measured for the uploaded data (None: measure at the next
+    /// build).
+    global: Option<crate::passes::compute::GlobalVariant>,
     /// The environment maps to switch between (empty without an environment light).
     environments: Vec<Arc<crate::environment::Environment>>,
     /// The one shown.
@@ -291,15 +298,22 @@ struct App {
     validation: Option<Arc<crate::gpu::ValidationLog>>,
 }
 
-fn renderer_options(mode: Blend, linear: bool, ui: &SharedUi) -> Options {
+/// The renderer's options: the global pass's variant as measured for the uploaded data, or
+/// measured now (`tune_global`) when `global` is None.
+fn renderer_options(
+    mode: Blend,
+    linear: bool,
+    ui: &SharedUi,
+    global: Option<crate::passes::compute::GlobalVariant>,
+) -> Options {
     Options {
         mode,
         window: Some(WindowOutput {
             linear,
             ui: Some(ui.clone()),
         }),
-        // The global pass's variant measured on this device (tune_global).
-        global_layout: crate::passes::compute::GlobalLayout::Auto,
+        global_layout: global.map_or(crate::passes::compute::GlobalLayout::Auto, |v| v.layout),
+        global_lanes: global.map(|v| v.lanes),
         ..Default::default()
     }
 }
@@ -332,18 +346,19 @@ impl Running {
         self.scene.height = extent.height.clamp(1, max);
         // The old graph's memory goes before the new one is allocated.
         self.renderer = None;
-        self.renderer = Some(Renderer::with_data(
-            &self.gpu,
-            self.scene.clone(),
-            &self.data,
-            renderer_options(self.mode, self.linear(), &self.ui_layer),
-        )?);
+        let options = renderer_options(self.mode, self.linear(), &self.ui_layer, self.global);
+        let renderer = Renderer::with_data(&self.gpu, self.scene.clone(), &self.data, options)?;
+        // Measured once per uploaded data: a resize or a new light keeps the variant (and
+        // does not stall for the measurement again).
+        self.global = Some(renderer.global_variant());
+        self.renderer = Some(renderer);
         Ok(())
     }
 
     fn reupload(&mut self) -> Result<()> {
         self.renderer = None;
-        let options = renderer_options(self.mode, self.linear(), &self.ui_layer);
+        self.global = None;
+        let options = renderer_options(self.mode, self.linear(), &self.ui_layer, None);
         self.data = Renderer::upload_with(
             &self.gpu,
             &self.scene,
@@ -629,6 +644,26 @@ impl Running {
         } else if w != self.current {
             self.start_job(w, app);
         }
+        self.update_preview();
+    }
+
+    /// The preview of the material asked for while it is prepared: the shown operators'
+    /// response scaled per channel by the ratio of the two materials' total reflectance under
+    /// their (common) model. Right in the mean over a large flat part; the shape of the
+    /// profile, the single scattering and a new index's Fresnel terms follow with the real
+    /// preprocessing.
+    fn update_preview(&mut self) {
+        let (w, shown) = (self.wanted().material, self.current.material);
+        self.preview = (w != shown && w.model == shown.model).then(|| {
+            let (new, old) = (w.total_reflectance(), shown.total_reflectance());
+            [0, 1, 2].map(|c| {
+                if old[c] > 0.0 {
+                    (new[c] / old[c]) as f32
+                } else {
+                    1.0
+                }
+            })
+        });
     }
 
     fn start_job(&mut self, wanted: Wanted, app: &AppSettings) {
@@ -700,6 +735,7 @@ impl Running {
                 self.start_job(next, app);
             }
         }
+        self.update_preview();
         Ok(())
     }
 
@@ -910,13 +946,23 @@ impl Running {
                 .map(|r| (r.frame.gpu_median_ms, r.frame.wall_median_ms)),
             status: self.status.clone(),
             progress,
-            shown: (wanted != self.current).then(|| self.current.label()),
+            shown: (wanted != self.current).then(|| match self.preview {
+                Some(p) => format!(
+                    "{} as a preview, its response x {:.2} / {:.2} / {:.2} (the new total reflectance)",
+                    self.current.label(),
+                    p[0],
+                    p[1],
+                    p[2]
+                ),
+                None => self.current.label(),
+            }),
             preset: wanted.preset.clone(),
             material: wanted.material,
             mode: self.mode,
             texel_mm: s.texel_mm,
             kernel_size: s.kernel_size,
             nodes: self.pre.nodes.positions.len(),
+            node_spacing_mm: s.node_spacing_mm,
             prune_tolerance: s.prune_tolerance,
             overrides: wanted.overrides,
             lights: self.rig.lights(&self.view),
@@ -987,6 +1033,7 @@ impl Running {
         let shot = self.shot.take();
         let renderer = self.renderer.as_mut().context("no renderer")?;
         renderer.set_camera(camera);
+        renderer.set_response_scale(self.preview.unwrap_or([1.0; 3]));
         if shot.is_some() {
             renderer.request_readback();
         }
@@ -1059,6 +1106,7 @@ impl Running {
             "sigma_a": self.scene.material.sigma_a,
             "eta": self.scene.material.eta,
             "model": self.scene.material.model.name(),
+            "preview": self.preview,
             "lights": self.scene.lights.len(),
             "light_directions": self
                 .rig
@@ -1232,7 +1280,7 @@ impl App {
             None,
             Some(gpu.info.max_image_dimension_2d as usize),
         );
-        let options = renderer_options(config.mode, linear, &ui_layer);
+        let options = renderer_options(config.mode, linear, &ui_layer, None);
         let transfer = crate::renderer::environment_transfer(
             &config.scene,
             &config.pre,
@@ -1287,6 +1335,8 @@ impl App {
             ui_visible: true,
             scene_saves: 0,
             quit: false,
+            preview: None,
+            global: None,
             size_changed: false,
             shot: None,
             shots: 0,

@@ -43,6 +43,8 @@ pub struct Snapshot {
     pub kernel_size: u32,
     /// The global response's node count.
     pub nodes: usize,
+    /// The nodes' spacing in use, mm.
+    pub node_spacing_mm: f64,
     /// The pruning tolerance in use (fraction).
     pub prune_tolerance: f64,
     /// The settings given instead of derived.
@@ -223,9 +225,10 @@ fn material(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
 
 fn settings(ui: &mut egui::Ui, s: &Snapshot, st: &mut PanelState, actions: &mut Vec<Action>) {
     ui.label(format!(
-        "in use: texel {:.3} mm, kernel {k}x{k}, {} nodes, pruning {:.2} %",
+        "in use: texel {:.3} mm, kernel {k}x{k}, {} nodes {:.2} mm apart, pruning {:.2} %",
         s.texel_mm,
         s.nodes,
+        s.node_spacing_mm,
         100.0 * s.prune_tolerance,
         k = s.kernel_size
     ));
@@ -248,6 +251,12 @@ fn settings(ui: &mut egui::Ui, s: &Snapshot, st: &mut PanelState, actions: &mut 
         });
     };
     row(ui, "texel, mm", &mut edit.texel_mm, s.texel_mm);
+    row(
+        ui,
+        "node spacing, mm",
+        &mut edit.node_spacing_mm,
+        s.node_spacing_mm,
+    );
     row(
         ui,
         "pruning tolerance",
