@@ -1272,6 +1272,12 @@ impl App {
             linear,
         )?));
         let egui_ctx = egui::Context::default();
+        // No soft shadows under the panel and its pop-ups: a wide band of blended triangles
+        // that a software rasteriser pays for on every frame.
+        egui_ctx.all_styles_mut(|style| {
+            style.visuals.window_shadow = egui::epaint::Shadow::NONE;
+            style.visuals.popup_shadow = egui::epaint::Shadow::NONE;
+        });
         let egui_input = egui_winit::State::new(
             egui_ctx.clone(),
             egui::ViewportId::ROOT,
