@@ -117,6 +117,35 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// `translucent --validate view --script SCRIPT --cache CACHE --out OUT` on the X server `x`;
+/// more arguments (a scene, `--environment`) can follow.
+fn scripted_view(x: &Xvfb, script: &str, cache: &Path, out: &Path) -> Command {
+    let mut view = common::bin();
+    view.env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["--validate", "view", "--script", script, "--cache"])
+        .arg(cache)
+        .arg("--out")
+        .arg(out);
+    view
+}
+
+/// `translucent --validate render --frames 2 --cache CACHE --out OUT [SCENE]`, which must
+/// succeed.
+fn render_into(cache: &Path, out: &Path, scene: Option<&Path>) {
+    let mut render = common::bin();
+    render
+        .args(["--validate", "render", "--frames", "2", "--cache"])
+        .arg(cache)
+        .arg("--out")
+        .arg(out);
+    if let Some(scene) = scene {
+        render.arg(scene);
+    }
+    let o = render.output().unwrap();
+    assert!(o.status.success(), "{}", common::stderr(&o));
+}
+
 #[test]
 fn scripted_session_in_a_window_shows_the_lit_object() {
     let x = Xvfb::start();
@@ -124,14 +153,7 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
     let cache = dir.join("cache");
 
     // The reference image: the same scene through `render` (no window).
-    let mut render = common::bin();
-    render
-        .args(["--validate", "render", "--frames", "2", "--cache"])
-        .arg(&cache)
-        .arg("--out")
-        .arg(dir.join("render"));
-    let o = render.output().unwrap();
-    assert!(o.status.success(), "{}", common::stderr(&o));
+    render_into(&cache, &dir.join("render"), None);
 
     let script = "frames 3; screenshot start\n\
                   light 90 0; frames 2; screenshot light\n\
@@ -140,13 +162,7 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
                   mode local; frames 2; screenshot local\n\
                   reset; material ketchup; wait; frames 2; screenshot ketchup\n\
                   quit";
-    let mut view = common::bin();
-    view.env("DISPLAY", &x.display)
-        .env_remove("WAYLAND_DISPLAY")
-        .args(["--validate", "view", "--script", script, "--cache"])
-        .arg(&cache)
-        .arg("--out")
-        .arg(&dir);
+    let view = scripted_view(&x, script, &cache, &dir);
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
     for name in ["start", "light", "zoom", "resized", "local", "ketchup"] {
@@ -279,13 +295,7 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
                   add-light point; frames 2; screenshot edited; save-scene edited\n\
                   settings texel=0.9; wait; frames 2; screenshot coarse\n\
                   remove-light 1; light-kind 0 spot; frames 2; screenshot spot; quit";
-    let mut view = common::bin();
-    view.env("DISPLAY", &x.display)
-        .env_remove("WAYLAND_DISPLAY")
-        .args(["--validate", "view", "--script", script, "--cache"])
-        .arg(&cache)
-        .arg("--out")
-        .arg(&dir);
+    let view = scripted_view(&x, script, &cache, &dir);
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(400));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
     assert!(stdout.contains("save scene: wrote"), "{stdout}");
@@ -362,15 +372,7 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     );
 
     // The saved scene renders the edited view: the same image to 0.1 %.
-    let mut render = common::bin();
-    render
-        .args(["--validate", "render", "--frames", "2", "--cache"])
-        .arg(&cache)
-        .arg("--out")
-        .arg(dir.join("render"))
-        .arg(dir.join("edited.toml"));
-    let o = render.output().unwrap();
-    assert!(o.status.success(), "{}", common::stderr(&o));
+    render_into(&cache, &dir.join("render"), Some(&dir.join("edited.toml")));
     let (_, _, shot) = translucent::output::read_exr(&dir.join("edited.exr")).unwrap();
     let (_, _, reference) = translucent::output::read_exr(&dir.join("render/render.exr")).unwrap();
     let (err, _) = translucent::reference::metrics::compare(&shot, &reference, None);
@@ -402,15 +404,9 @@ fn the_environment_turns_and_switches_maps_in_the_viewer() {
                   envmap; frames 2; screenshot overcast\n\
                   envmap; frames 2; screenshot back\n\
                   quit";
-    let mut view = common::bin();
-    view.env("DISPLAY", &x.display)
-        .env_remove("WAYLAND_DISPLAY")
-        .args(["--validate", "view", "--script", script, "--cache"])
-        .arg(dir.join("cache"))
-        .arg("--environment")
+    let mut view = scripted_view(&x, script, &dir.join("cache"), &dir);
+    view.arg("--environment")
         .arg(dir.join("overcast.exr"))
-        .arg("--out")
-        .arg(&dir)
         .arg(dir.join("scene.toml"));
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");

@@ -28,23 +28,37 @@ fn alloc_error(what: &str, e: impl std::fmt::Display) -> RendererError {
 }
 
 impl DeviceAllocator {
-    fn allocate(
+    /// Memory for a new buffer or image: allocated, then bound with `bind`; on either failure
+    /// what was made is undone (`destroy` the handle, free the memory).
+    fn back(
         &self,
         name: &str,
         requirements: vk::MemoryRequirements,
         location: MemoryLocation,
         linear: bool,
+        bind: impl FnOnce(&Allocation) -> ash::prelude::VkResult<()>,
+        destroy: impl FnOnce(),
     ) -> RendererResult<Allocation> {
-        self.gpu
-            .allocator()
-            .allocate(&AllocationCreateDesc {
-                name,
-                requirements,
-                location,
-                linear,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            })
-            .map_err(|e| alloc_error(name, e))
+        let allocation = self.gpu.allocator().allocate(&AllocationCreateDesc {
+            name,
+            requirements,
+            location,
+            linear,
+            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+        });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(e) => {
+                destroy();
+                return Err(alloc_error(name, e));
+            }
+        };
+        if let Err(e) = bind(&allocation) {
+            let _ = self.gpu.allocator().free(allocation);
+            destroy();
+            return Err(e.into());
+        }
+        Ok(allocation)
     }
 }
 
@@ -63,15 +77,14 @@ impl Allocator for DeviceAllocator {
             .sharing_mode(vk::SharingMode::EXCLUSIVE);
         let buffer = unsafe { device.create_buffer(&info, None)? };
         let requirements = unsafe { device.get_buffer_memory_requirements(buffer) };
-        let allocation =
-            match self.allocate("ui buffer", requirements, MemoryLocation::CpuToGpu, true) {
-                Ok(a) => a,
-                Err(e) => {
-                    unsafe { device.destroy_buffer(buffer, None) };
-                    return Err(e);
-                }
-            };
-        unsafe { device.bind_buffer_memory(buffer, allocation.memory(), allocation.offset())? };
+        let allocation = self.back(
+            "ui buffer",
+            requirements,
+            MemoryLocation::CpuToGpu,
+            true,
+            |a| unsafe { device.bind_buffer_memory(buffer, a.memory(), a.offset()) },
+            || unsafe { device.destroy_buffer(buffer, None) },
+        )?;
         Ok((buffer, allocation))
     }
 
@@ -100,15 +113,14 @@ impl Allocator for DeviceAllocator {
             .samples(vk::SampleCountFlags::TYPE_1);
         let image = unsafe { device.create_image(&info, None)? };
         let requirements = unsafe { device.get_image_memory_requirements(image) };
-        let allocation =
-            match self.allocate("ui texture", requirements, MemoryLocation::GpuOnly, false) {
-                Ok(a) => a,
-                Err(e) => {
-                    unsafe { device.destroy_image(image, None) };
-                    return Err(e);
-                }
-            };
-        unsafe { device.bind_image_memory(image, allocation.memory(), allocation.offset())? };
+        let allocation = self.back(
+            "ui texture",
+            requirements,
+            MemoryLocation::GpuOnly,
+            false,
+            |a| unsafe { device.bind_image_memory(image, a.memory(), a.offset()) },
+            || unsafe { device.destroy_image(image, None) },
+        )?;
         Ok((image, allocation))
     }
 
@@ -164,7 +176,6 @@ pub struct UiLayer {
     renderer: egui_ash_renderer::Renderer<DeviceAllocator>,
     gpu: Arc<Gpu>,
     pool: vk::CommandPool,
-    format: vk::Format,
     primitives: Vec<ClippedPrimitive>,
     pixels_per_point: f32,
     /// Textures egui freed in the last frame: released before the next one is laid out (the
@@ -216,17 +227,11 @@ impl UiLayer {
             renderer,
             gpu: gpu.clone(),
             pool,
-            format,
             primitives: Vec::new(),
             pixels_per_point: 1.0,
             to_free: Vec::new(),
             error: None,
         })
-    }
-
-    /// The format of the images this layer draws into.
-    pub fn format(&self) -> vk::Format {
-        self.format
     }
 
     /// Takes the next frame's interface: texture changes (uploaded now, with a one-shot

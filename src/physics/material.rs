@@ -29,14 +29,6 @@ pub enum Model {
 }
 
 impl Model {
-    /// Every model.
-    pub const ALL: [Model; 4] = [
-        Model::Dipole,
-        Model::Halfspace,
-        Model::HalfspaceSingle,
-        Model::Volume,
-    ];
-
     /// The most accurate model for a medium of relative index `eta`: the tabulated profile
     /// where it applies (eta = 1), the dipole elsewhere.
     pub fn for_eta(eta: f64) -> Model {

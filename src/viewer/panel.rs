@@ -14,6 +14,7 @@ use crate::preprocess::operators::Blend;
 use crate::preprocess::settings::SettingsOverrides;
 use crate::scene::desc::LightKind;
 use crate::scene::{Light, MAX_LIGHTS};
+use clap::ValueEnum;
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use glam::Vec3;
 
@@ -202,7 +203,7 @@ fn material(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
     egui::ComboBox::from_label("model")
         .selected_text(m.model.name())
         .show_ui(ui, |ui| {
-            for model in Model::ALL {
+            for &model in Model::value_variants() {
                 let allowed = model == Model::Dipole || m.eta == 1.0;
                 let item = ui.add_enabled(
                     allowed,

@@ -19,6 +19,7 @@ use crate::preprocess::operators::Blend;
 use crate::preprocess::settings::SettingsOverrides;
 use crate::scene::desc::LightKind;
 use anyhow::{bail, Context, Result};
+use clap::ValueEnum;
 
 /// One thing the viewer can be asked to do, from a key, the mouse or a script.
 #[derive(Debug, Clone, PartialEq)]
@@ -186,20 +187,15 @@ fn parse_step(words: &[&str]) -> Result<Step> {
             (Step::Frames(n), 1)
         }
         "wait" => (Step::Wait, 0),
-        "orbit" => (
-            Step::Act(Action::Orbit(
-                real(0, "angle in degrees")?,
-                real(1, "angle in degrees")?,
-            )),
-            2,
-        ),
-        "light" => (
-            Step::Act(Action::Light(
-                real(0, "angle in degrees")?,
-                real(1, "angle in degrees")?,
-            )),
-            2,
-        ),
+        "orbit" | "light" => {
+            let (a, b) = (real(0, "angle in degrees")?, real(1, "angle in degrees")?);
+            let act = if words[0] == "orbit" {
+                Action::Orbit(a, b)
+            } else {
+                Action::Light(a, b)
+            };
+            (Step::Act(act), 2)
+        }
         "environment" => (
             Step::Act(Action::Environment(real(0, "angle in degrees")?)),
             1,
@@ -249,15 +245,11 @@ fn parse_step(words: &[&str]) -> Result<Step> {
         }
         "model" => {
             let name = *args.first().context("missing model")?;
-            let model = Model::ALL
-                .into_iter()
-                .find(|m| m.name() == name)
-                .with_context(|| {
-                    format!(
-                        "unknown model '{name}' ({})",
-                        Model::ALL.map(Model::name).join(", ")
-                    )
-                })?;
+            // The names of scene files and `--model` (clap's, as the command line parses them).
+            let model = <Model as clap::ValueEnum>::from_str(name, false).map_err(|_| {
+                let names: Vec<&str> = Model::value_variants().iter().map(|m| m.name()).collect();
+                anyhow::anyhow!("unknown model '{name}' ({})", names.join(", "))
+            })?;
             (Step::Act(Action::Model(model)), 1)
         }
         "settings" => (Step::Act(Action::Settings(settings(args)?)), args.len()),
