@@ -8,6 +8,7 @@ pub mod data;
 pub mod frame;
 pub mod illum;
 pub mod readback;
+pub mod reweigh;
 pub mod shadow;
 pub mod single;
 pub mod ui;

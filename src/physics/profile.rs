@@ -337,6 +337,15 @@ impl Tabulated {
         (a * (x / c[j - 1]).powf(slope), slope)
     }
 
+    /// sigma_t, then the optical radii, cumulative fractions, annulus centres and mean values
+    /// the profile interpolates (for the device's copy of it, glsl/profile.glsl).
+    pub fn parts(&self) -> (f64, [&[f64]; 4]) {
+        (
+            self.sigma_t,
+            [&self.radii, &self.cumulative, &self.centres, &self.values],
+        )
+    }
+
     /// R(r), 1/mm^2.
     pub fn rd(&self, r: f64) -> f64 {
         self.optical(r * self.sigma_t).0 * self.sigma_t * self.sigma_t

@@ -240,60 +240,154 @@ pub struct Operators {
     pub exit_slopes: Vec<[f32; 3]>,
 }
 
-/// Mean of R_d over texel `s` as seen from `x`, per channel: the exact disc mean when `x`
-/// lies within the texel, a 6x6 (within 1.5 texels) or 3x3 (within 2.5 texels) sub-sampling
-/// where R_d is too curved for one sample, the profile at the texel's position beyond. Each
-/// sample stands for a square cell of edge c and carries the second-order term of the cell's
-/// mean, R_d + (c^2 / 24) Laplacian(R_d): R_d is convex away from its peak, so the bare
-/// midpoint rule underestimates every tap (by about 1 % of R_total in all, which showed as a
-/// uniform darkening of the slab and the bunny).
+/// The material's weights of the operators' entries before pruning and blending.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Weights {
+    /// Per texel, k*k RGB window weights K_t(s) A_s, as [`Operators::kernels`].
+    pub kernels: Vec<[f32; 3]>,
+    /// Seam taps, as [`Operators::seams`].
+    pub seams: Csr,
+    /// The rows of F, receivers, unpruned.
+    pub rows: Vec<Vec<(u32, Rgb)>>,
+    /// What the random walks did, where they filled F.
+    pub walks: Option<super::walk::WalkReport>,
+    /// Per node, the exit lobe's slopes the walks measured (empty otherwise).
+    pub exit_slopes: Vec<[f32; 3]>,
+    /// Seconds spent on the kernels and seam taps, and on F.
+    pub seconds: [f64; 2],
+}
+
+impl Weights {
+    /// The weights of `material` on the CPU: the kernels and seam taps, and F (random walks
+    /// in `mesh` where the model says so, the profile's integral over `basis` elsewhere).
+    pub fn evaluate(
+        mesh: &crate::scene::mesh::Mesh,
+        atlas: &Atlas,
+        nodes: &Nodes,
+        basis: &Basis,
+        material: &Material,
+        settings: &super::settings::Settings,
+        progress: Progress<'_>,
+    ) -> Weights {
+        let kernel_size = settings.kernel_size;
+        let profiles = material.profiles();
+        let clock = std::time::Instant::now();
+        let kernels = local_kernels(atlas, kernel_size, &profiles, progress);
+        let seams = seam_taps(atlas, kernel_size, &profiles);
+        let kernels_s = clock.elapsed().as_secs_f64();
+
+        let clock = std::time::Instant::now();
+        let (rows, walks, exit_slopes) = if material.model.walks() {
+            // Single scattering is its own pass wherever the walks fill F.
+            let min_order = 2;
+            let (walked, report) = super::walk::walk_response(
+                mesh,
+                nodes,
+                material,
+                settings.walk_paths,
+                min_order,
+                progress,
+            );
+            (walked.rows, Some(report), walked.slopes)
+        } else {
+            let rows = global_rows(atlas, nodes, basis, &profiles, progress);
+            (rows, None, Vec::new())
+        };
+        Weights {
+            kernels,
+            seams,
+            rows,
+            walks,
+            exit_slopes,
+            seconds: [kernels_s, clock.elapsed().as_secs_f64()],
+        }
+    }
+}
+
+/// How [`texel_mean`] integrates texel `s` as seen from `x`: the exact disc mean when `x` lies
+/// within the texel, a 6x6 (within 1.5 texels) or 3x3 (within 2.5 texels) sub-sampling where
+/// R_d is too curved for one sample, the profile at the texel's position beyond. Part of an
+/// entry's geometry: the device's re-weighting ([`crate::passes::reweigh`]) takes the level
+/// decided here rather than deciding again in single precision.
+pub fn tap_level(atlas: &Atlas, s: usize, x: DVec3) -> TapLevel {
+    let ts = &atlas.texels[s];
+    let r = x.distance(ts.position.as_dvec3());
+    let h = atlas.texel_mm;
+    if r < (ts.area as f64 / std::f64::consts::PI).sqrt() {
+        TapLevel::Disc
+    } else if r < FINE_SUBSAMPLE_REACH_TEXELS * h {
+        TapLevel::Fine
+    } else if r < SUBSAMPLE_REACH_TEXELS * h {
+        TapLevel::Coarse
+    } else {
+        TapLevel::Point
+    }
+}
+
+/// The quadrature of one texel mean (see [`tap_level`]); the values are the device's codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum TapLevel {
+    /// The exact disc mean of R_d over the texel's area.
+    Disc = 0,
+    /// [`FINE_SUBSAMPLES`]^2 samples.
+    Fine = 1,
+    /// [`COARSE_SUBSAMPLES`]^2 samples.
+    Coarse = 2,
+    /// One sample with the cell's second-order term.
+    Point = 3,
+}
+
+/// Mean of R_d over texel `s` as seen from `x`, per channel, by the quadrature [`tap_level`]
+/// chooses. Each sample stands for a square cell of edge c and carries the second-order term
+/// of the cell's mean, R_d + (c^2 / 24) Laplacian(R_d): R_d is convex away from its peak, so
+/// the bare midpoint rule underestimates every tap (by about 1 % of R_total in all, which
+/// showed as a uniform darkening of the slab and the bunny).
 fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, profiles: &[Profile; 3]) -> Rgb {
     let ts = &atlas.texels[s];
-    let area = ts.area as f64;
     let xs = ts.position.as_dvec3();
-    let r = x.distance(xs);
-    let rho = (area / std::f64::consts::PI).sqrt();
     let h = atlas.texel_mm;
-    if r < rho {
-        rgb(profiles, |d| d.disc_mean(rho))
-    } else if r < SUBSAMPLE_REACH_TEXELS * h {
-        let m = if r < FINE_SUBSAMPLE_REACH_TEXELS * h {
-            FINE_SUBSAMPLES
-        } else {
-            COARSE_SUBSAMPLES
-        };
-        let chart = &atlas.charts[ts.chart as usize];
-        let (u, v) = chart.axes;
-        let mut acc = Rgb::ZERO;
-        let step = h / m as f64;
-        let weight = 1.0 / (m * m) as f64;
-        for j in 0..m {
-            for i in 0..m {
-                let (a, b) = (
-                    (i as f64 + 0.5) * step - 0.5 * h,
-                    (j as f64 + 0.5) * step - 0.5 * h,
-                );
-                let ry = x.distance(xs + u * a + v * b);
-                acc += rgb(profiles, |d| {
-                    d.rd_cell_mean(ry, step * step / 24.0) * weight
-                });
-            }
+    let m = match tap_level(atlas, s, x) {
+        TapLevel::Disc => {
+            let rho = (ts.area as f64 / std::f64::consts::PI).sqrt();
+            return rgb(profiles, |d| d.disc_mean(rho));
         }
-        acc
-    } else {
-        rgb(profiles, |d| d.rd_cell_mean(r, h * h / 24.0))
+        TapLevel::Point => {
+            let r = x.distance(xs);
+            return rgb(profiles, |d| d.rd_cell_mean(r, h * h / 24.0));
+        }
+        TapLevel::Fine => FINE_SUBSAMPLES,
+        TapLevel::Coarse => COARSE_SUBSAMPLES,
+    };
+    let chart = &atlas.charts[ts.chart as usize];
+    let (u, v) = chart.axes;
+    let mut acc = Rgb::ZERO;
+    let step = h / m as f64;
+    let weight = 1.0 / (m * m) as f64;
+    for j in 0..m {
+        for i in 0..m {
+            let (a, b) = (
+                (i as f64 + 0.5) * step - 0.5 * h,
+                (j as f64 + 0.5) * step - 0.5 * h,
+            );
+            let ry = x.distance(xs + u * a + v * b);
+            acc += rgb(profiles, |d| {
+                d.rd_cell_mean(ry, step * step / 24.0) * weight
+            });
+        }
     }
+    acc
 }
 
 /// Receivers closer than this many texels to a source texel sample it (the profile is too
 /// curved there for one sample of the cell-mean rule).
-const SUBSAMPLE_REACH_TEXELS: f64 = 2.5;
+pub const SUBSAMPLE_REACH_TEXELS: f64 = 2.5;
 /// Receivers closer than this many texels sample it finely.
-const FINE_SUBSAMPLE_REACH_TEXELS: f64 = 1.5;
+pub const FINE_SUBSAMPLE_REACH_TEXELS: f64 = 1.5;
 /// Sub-samples per texel side close to the receiver.
-const FINE_SUBSAMPLES: usize = 6;
+pub const FINE_SUBSAMPLES: usize = 6;
 /// Sub-samples per texel side further out.
-const COARSE_SUBSAMPLES: usize = 3;
+pub const COARSE_SUBSAMPLES: usize = 3;
 
 fn rgb(profiles: &[Profile; 3], f: impl Fn(&Profile) -> f64) -> Rgb {
     Rgb::from_fn(|c| f(&profiles[c]))
@@ -478,15 +572,20 @@ fn cholesky_substitute(l: &[f64], b: &mut [f64], n: usize) {
 /// The texel <-> node basis (see [`super::nodes`]): phi_p(t) per texel, each node's support
 /// (the texels where phi_p > 0, with phi_p), its area A_p = sum_t phi_p(t) A_t and its gather
 /// weights phi_p(t) A_t / A_p.
-struct Basis {
-    phi_rows: Vec<Vec<(u32, f32)>>,
-    supports: Vec<Vec<(u32, f32)>>,
-    node_area: Vec<f64>,
-    gather: Vec<Vec<(u32, f32)>>,
+pub struct Basis {
+    /// phi_p(t): per texel, (node, weight).
+    pub phi_rows: Vec<Vec<(u32, f32)>>,
+    /// Per node, (texel, phi_p(t)) where phi_p > 0.
+    pub supports: Vec<Vec<(u32, f32)>>,
+    /// A_p, mm^2.
+    pub node_area: Vec<f64>,
+    /// Per node, (texel, phi_p(t) A_t / A_p).
+    pub gather: Vec<Vec<(u32, f32)>>,
 }
 
 impl Basis {
-    fn new(atlas: &Atlas, nodes: &Nodes) -> Basis {
+    /// The basis of `nodes` over `atlas`'s texels.
+    pub fn new(atlas: &Atlas, nodes: &Nodes) -> Basis {
         let phi_rows = texel_nodes(atlas, nodes);
         let mut supports: Vec<Vec<(u32, f32)>> = vec![Vec::new(); nodes.positions.len()];
         for (t, row) in phi_rows.iter().enumerate() {
@@ -526,7 +625,7 @@ impl Basis {
     /// Centroid c_p and second moment per axis m_p of each node's support (each texel adding
     /// its own h^2 / 12), for the far pairs' second-order quadrature; a node without support
     /// sits at its position with no spread.
-    fn moments(&self, atlas: &Atlas, positions: &[DVec3]) -> Vec<(DVec3, f64)> {
+    pub fn moments(&self, atlas: &Atlas, positions: &[DVec3]) -> Vec<(DVec3, f64)> {
         let weighted_area = |t: u32, w: f32| w as f64 * atlas.texels[t as usize].area as f64;
         let at = |t: u32| atlas.texels[t as usize].position.as_dvec3();
         self.supports
@@ -552,6 +651,17 @@ impl Basis {
                 (c, 0.5 * m2 + atlas.texel_mm * atlas.texel_mm / 12.0)
             })
             .collect()
+    }
+}
+
+impl Basis {
+    /// Where node `q` (at `xq`) receives: the centre of its own texel, where phi_q peaks, so
+    /// that the peak of R_d falls on that texel's exact disc mean rather than between
+    /// sub-samples, the same way as in the kernels; `xq` for a node without support.
+    pub fn receiver_point(&self, atlas: &Atlas, q: usize, xq: DVec3) -> DVec3 {
+        receiver_texel(&self.supports[q])
+            .map(|c| atlas.texels[c].position.as_dvec3())
+            .unwrap_or(xq)
     }
 }
 
@@ -595,36 +705,29 @@ fn local_kernels(
     kernels
 }
 
-/// The global F, one receiver row at a time, each pruned under `prune_tolerance`. Pairs
-/// closer than [`NEAR_SPACINGS`] sum over the source's support texels; far pairs use the
-/// second-order quadrature A_p (R_d(|c_p - x|) + m_p/2 Laplacian R_d) with the support's
-/// centroid c_p and second moment m_p.
-fn global_response(
+/// The rows of the global F, one receiver at a time, unpruned. Pairs closer than
+/// [`NEAR_SPACINGS`] node spacings ([`near_pair`]) sum over the source's support texels; far
+/// pairs use the second-order quadrature A_p (R_d(|c_p - x|) + m_p/2 Laplacian R_d) with the
+/// support's centroid c_p and second moment m_p ([`Basis::moments`]).
+fn global_rows(
     atlas: &Atlas,
     nodes: &Nodes,
     basis: &Basis,
     profiles: &[Profile; 3],
-    prune_tolerance: f64,
     progress: Progress<'_>,
-) -> (Csr, PruneReport) {
+) -> Vec<Vec<(u32, Rgb)>> {
     let n_nodes = nodes.positions.len();
     let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
     let moments = basis.moments(atlas, &positions);
-    let near = NEAR_SPACINGS * nodes.spacing_mm;
     let done = std::sync::atomic::AtomicU64::new(0);
     let rows: Vec<Vec<(u32, Rgb)>> = (0..n_nodes)
         .into_par_iter()
         .map(|q| {
             let xq = positions[q];
-            // The near field is integrated as seen from the centre of q's own texel (where
-            // phi_q peaks), so that the peak of R_d falls on that texel's exact disc mean
-            // rather than between sub-samples, the same way as in the kernels.
-            let xc = receiver_texel(&basis.supports[q])
-                .map(|c| atlas.texels[c].position.as_dvec3())
-                .unwrap_or(xq);
+            let xc = basis.receiver_point(atlas, q, xq);
             let row: Vec<(u32, Rgb)> = (0..n_nodes)
                 .map(|p| {
-                    let f = if positions[p].distance(xq) < near {
+                    let f = if near_pair(nodes, positions[p], xq) {
                         basis.supports[p]
                             .iter()
                             .map(|&(t, w)| {
@@ -650,7 +753,13 @@ fn global_response(
         })
         .collect();
     progress("global", n_nodes as u64, n_nodes as u64);
-    pruned(rows, prune_tolerance)
+    rows
+}
+
+/// Whether source node `p` at `xp` and receiver `q` at `xq` are a near pair of F, whose entry
+/// integrates over the source's support texels rather than using the far pairs' quadrature.
+pub fn near_pair(nodes: &Nodes, xp: DVec3, xq: DVec3) -> bool {
+    xp.distance(xq) < NEAR_SPACINGS * nodes.spacing_mm
 }
 
 /// Receiver rows of F pruned under `prune_tolerance` each, with what pruning dropped.
@@ -700,9 +809,8 @@ impl Operators {
     }
 
     /// Builds all operators, one stage after another: the texel <-> node basis, the local
-    /// kernels and seam taps, the global F (pruned so that each row loses at most
-    /// `prune_tolerance` of its sum), the near-field fit of optimized blending and the direct
-    /// terms of both blendings.
+    /// kernels and seam taps, the global F, then [`Operators::from_weights`]'s pruning, fit
+    /// and direct terms.
     pub fn build(
         mesh: &crate::scene::mesh::Mesh,
         atlas: &Atlas,
@@ -711,44 +819,55 @@ impl Operators {
         settings: &super::settings::Settings,
         progress: Progress<'_>,
     ) -> Operators {
-        let (kernel_size, prune_tolerance) = (settings.kernel_size, settings.prune_tolerance);
         let profiles = material.profiles();
         let basis = Basis::new(atlas, nodes);
         progress("basis", 1, 1);
+        let weights = Weights::evaluate(mesh, atlas, nodes, &basis, material, settings, progress);
+        Self::assemble(atlas, nodes, basis, &profiles, settings, weights, progress)
+    }
 
-        let clock = std::time::Instant::now();
-        let kernels = local_kernels(atlas, kernel_size, &profiles, progress);
-        let seams = seam_taps(atlas, kernel_size, &profiles);
-        let kernels_s = clock.elapsed().as_secs_f64();
+    /// The operators from the material's weights of the kernels, seam taps and F however they
+    /// were evaluated ([`Operators::build`] on the CPU, [`crate::passes::reweigh`] on the
+    /// device): F pruned, the optimized blending's near field fitted, the kernels balanced and
+    /// the direct terms of both blendings.
+    pub fn from_weights(
+        atlas: &Atlas,
+        nodes: &Nodes,
+        material: &Material,
+        settings: &super::settings::Settings,
+        weights: Weights,
+        progress: Progress<'_>,
+    ) -> Operators {
+        let basis = Basis::new(atlas, nodes);
+        Self::assemble(
+            atlas,
+            nodes,
+            basis,
+            &material.profiles(),
+            settings,
+            weights,
+            progress,
+        )
+    }
 
+    fn assemble(
+        atlas: &Atlas,
+        nodes: &Nodes,
+        basis: Basis,
+        profiles: &[Profile; 3],
+        settings: &super::settings::Settings,
+        weights: Weights,
+        progress: Progress<'_>,
+    ) -> Operators {
         let clock = std::time::Instant::now();
-        let mut exit_slopes = Vec::new();
-        let (global, prune, walks) = if material.model.walks() {
-            // Single scattering is its own pass wherever the walks fill F.
-            let min_order = 2;
-            let (walked, report) = super::walk::walk_response(
-                mesh,
-                nodes,
-                material,
-                settings.walk_paths,
-                min_order,
-                progress,
-            );
-            exit_slopes = walked.slopes;
-            let (global, prune) = pruned(walked.rows, prune_tolerance);
-            (global, prune, Some(report))
-        } else {
-            let (global, prune) =
-                global_response(atlas, nodes, &basis, &profiles, prune_tolerance, progress);
-            (global, prune, None)
-        };
-        let global_s = clock.elapsed().as_secs_f64();
+        let (global, prune) = pruned(weights.rows, settings.prune_tolerance);
+        let prune_s = clock.elapsed().as_secs_f64();
 
         let clock = std::time::Instant::now();
         let mut ops = Operators {
-            kernel_size,
-            kernels,
-            seams,
+            kernel_size: settings.kernel_size,
+            kernels: weights.kernels,
+            seams: weights.seams,
             texel_nodes: Csr1::from_rows(basis.phi_rows),
             gather: Csr1::from_rows(basis.gather),
             node_area: basis.node_area.iter().map(|a| *a as f32).collect(),
@@ -757,11 +876,11 @@ impl Operators {
             direct_simple: Vec::new(),
             direct_optimized: Vec::new(),
             prune,
-            seconds: [kernels_s, global_s, 0.0],
-            walks,
-            exit_slopes,
+            seconds: [weights.seconds[0], weights.seconds[1] + prune_s, 0.0],
+            walks: weights.walks,
+            exit_slopes: weights.exit_slopes,
         };
-        ops.optimized = ops.fit_near_field(atlas, nodes, &profiles, &basis.supports, progress);
+        ops.optimized = ops.fit_near_field(atlas, nodes, profiles, &basis.supports, progress);
         // What F carries beyond each mode's W depends on F, W and the gather, not on the
         // kernels: computed once, before the kernels are balanced, for both uses.
         let beyond = ops.beyond_kernel(Blend::Optimized);
@@ -1100,9 +1219,33 @@ impl Operators {
 }
 
 /// Seam taps (see the module documentation): per texel, the texels of other charts within the
-/// kernel's inscribed disc, with their kernel weights. Found through a uniform grid of cells
-/// one disc radius wide.
+/// kernel's inscribed disc ([`seam_pattern`]), with their kernel weights.
 fn seam_taps(atlas: &Atlas, kernel_size: u32, profiles: &[Profile; 3]) -> Csr {
+    let pattern = seam_pattern(atlas, kernel_size);
+    let rows: Vec<Vec<(u32, [f32; 3])>> = pattern
+        .par_iter()
+        .enumerate()
+        .map(|(t, sources)| {
+            let x = atlas.texels[t].position.as_dvec3();
+            sources
+                .iter()
+                .map(|&s| {
+                    let area = atlas.texels[s as usize].area as f64;
+                    (
+                        s,
+                        (texel_mean(atlas, s as usize, x, profiles) * area).to_f32(),
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    Csr::from_rows(rows)
+}
+
+/// Per texel, the texels of other charts whose positions lie within the kernel's inscribed
+/// disc, in increasing order: the seam taps' geometry, which does not depend on the material.
+/// Found through a uniform grid of cells one disc radius wide.
+pub fn seam_pattern(atlas: &Atlas, kernel_size: u32) -> Vec<Vec<u32>> {
     use std::collections::HashMap;
     let radius = (kernel_size / 2) as f64 * atlas.texel_mm + 0.5 * atlas.texel_mm;
     let cell = |p: DVec3| {
@@ -1115,7 +1258,7 @@ fn seam_taps(atlas: &Atlas, kernel_size: u32, profiles: &[Profile; 3]) -> Csr {
             .or_default()
             .push(i as u32);
     }
-    let rows: Vec<Vec<(u32, [f32; 3])>> = atlas
+    atlas
         .texels
         .par_iter()
         .map(|t| {
@@ -1130,21 +1273,17 @@ fn seam_taps(atlas: &Atlas, kernel_size: u32, profiles: &[Profile; 3]) -> Csr {
                         };
                         for &s in list {
                             let ts = &atlas.texels[s as usize];
-                            if ts.chart == t.chart || ts.position.as_dvec3().distance(x) > radius {
-                                continue;
+                            if ts.chart != t.chart && ts.position.as_dvec3().distance(x) <= radius {
+                                row.push(s);
                             }
-                            let mean = texel_mean(atlas, s as usize, x, profiles);
-                            let w = (mean * ts.area as f64).to_f32();
-                            row.push((s, w));
                         }
                     }
                 }
             }
-            row.sort_by_key(|e| e.0);
+            row.sort_unstable();
             row
         })
-        .collect();
-    Csr::from_rows(rows)
+        .collect()
 }
 
 /// The texel that represents node `q` as a receiver: where phi_q peaks.

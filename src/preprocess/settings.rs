@@ -42,6 +42,22 @@ pub struct Settings {
     pub walk_paths: u32,
 }
 
+impl Settings {
+    /// Overrides that pin every setting that shapes the atlas, the nodes and the operators'
+    /// patterns to these: what a material edit keeps so that its operators can be re-weighted
+    /// on the same geometry ([`crate::passes::reweigh`]), and what a saved scene names so that
+    /// it renders the same.
+    pub fn pinned(&self) -> SettingsOverrides {
+        SettingsOverrides {
+            texel_mm: Some(self.texel_mm),
+            kernel_size: Some(self.kernel_size),
+            node_spacing_mm: Some(self.node_spacing_mm),
+            prune_tolerance: Some(self.prune_tolerance),
+            walk_paths: (self.walk_paths > 0).then_some(self.walk_paths),
+        }
+    }
+}
+
 /// Values given by the user instead of derived ones.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct SettingsOverrides {
