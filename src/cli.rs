@@ -405,6 +405,10 @@ pub struct PrecomputeArgs {
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
+    /// Also re-weight the operators for the material this many times on the device (the
+    /// viewer's material edit, `passes::reweigh`) and once on the CPU, and print the times.
+    #[arg(long, value_name = "TIMES")]
+    pub reweigh: Option<usize>,
 }
 
 /// Arguments of `render` (no `Default`: the bare command takes clap's defaults, see
@@ -639,8 +643,17 @@ impl Bars {
     }
 }
 
-fn precompute(args: &PrecomputeArgs) -> Result<()> {
+fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
+    if let Some(times) = args.reweigh {
+        frame_count("--reweigh", times, 1)?;
+    }
     let scene = args.input.load()?;
+    if args.reweigh.is_some() && !crate::passes::reweigh::Reweigher::supports(&scene.material) {
+        bail!(
+            "--reweigh: model '{}' fills F by random walks, which cannot be re-weighted",
+            scene.material.model.name()
+        );
+    }
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     println!(
         "mesh: {} vertices, {} triangles, {:.0} mm^2",
@@ -681,6 +694,78 @@ fn precompute(args: &PrecomputeArgs) -> Result<()> {
         "device memory to render (optimized blending): {:.1} MiB",
         need.total as f64 / (1u64 << 20) as f64
     );
+    if let Some(times) = args.reweigh {
+        reweigh_times(cli, &scene, &pre, times)?;
+    }
+    Ok(())
+}
+
+/// `precompute --reweigh`: the material edit's costs, on the device and on the CPU.
+fn reweigh_times(
+    cli: &Cli,
+    scene: &Scene,
+    pre: &preprocess::Preprocessed,
+    times: usize,
+) -> Result<()> {
+    use crate::passes::reweigh::{Geometry, Reweigher};
+    use crate::preprocess::operators::{Basis, Operators, Weights};
+    use std::time::Instant;
+    let material = &scene.material;
+    let gpu = Gpu::new(&GpuOptions {
+        validate: cli.validate,
+        device: cli.device.clone(),
+        ..Default::default()
+    })?;
+    let clock = Instant::now();
+    let geometry = Geometry::of(pre);
+    let geometry_s = clock.elapsed().as_secs_f64();
+    let [taps, pairs, terms] = geometry.entries();
+    let mut reweigher = Reweigher::new(&gpu, geometry)?;
+    let none = |_: &str, _: u64, _: u64| {};
+    let mut device_ms = Vec::new();
+    let mut weights = None;
+    for _ in 0..times {
+        let r = reweigher.weights(material)?;
+        device_ms.push(r.device_ms);
+        weights = Some(r.weights);
+    }
+    let weights = weights.expect("at least one run");
+    let clock = Instant::now();
+    let _ = Operators::from_weights(
+        &pre.atlas,
+        &pre.nodes,
+        material,
+        &pre.settings,
+        weights,
+        &none,
+    );
+    let assemble_s = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let basis = Basis::new(&pre.atlas, &pre.nodes);
+    let _ = Weights::evaluate(
+        &scene.mesh,
+        &pre.atlas,
+        &pre.nodes,
+        &basis,
+        material,
+        &pre.settings,
+        &none,
+    );
+    let cpu_s = clock.elapsed().as_secs_f64();
+    device_ms.sort_by(f64::total_cmp);
+    println!(
+        "reweigh on {}: geometry kept {:.2} s ({taps} taps, {pairs} pairs of F, {terms} near-pair terms)",
+        gpu.info.name, geometry_s
+    );
+    println!(
+        "reweigh: device pass median {:.1} ms, max {:.1} ms of {times}; CPU weights {:.2} s; \
+         pruning, fit and direct terms {:.2} s",
+        device_ms[device_ms.len() / 2],
+        device_ms[device_ms.len() - 1],
+        cpu_s,
+        assemble_s
+    );
+    gpu.validation.check()?;
     Ok(())
 }
 
@@ -1747,7 +1832,7 @@ pub fn main() -> ExitCode {
     let result = match &cli.command {
         None => bare_render_args().and_then(|args| render(&cli, &args)),
         Some(Command::Render(args)) => render(&cli, args),
-        Some(Command::Precompute(args)) => precompute(args),
+        Some(Command::Precompute(args)) => precompute(&cli, args),
         Some(Command::Bench(args)) => bench(&cli, args),
         Some(Command::Reference(args)) => reference(args),
         Some(Command::Truth(args)) => truth(args),

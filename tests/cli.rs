@@ -727,3 +727,37 @@ fn precompute_says_the_incidence_factor() {
     );
     assert!(!run("1.3").contains("oblique incidence"));
 }
+
+/// `precompute --reweigh` re-weights the operators on the (validated) device and reports the
+/// pass's time; a model whose F comes from random walks is refused before anything is built.
+#[test]
+fn precompute_times_the_material_reweighting() {
+    let o = bin()
+        .args([
+            "--validate",
+            "precompute",
+            "--no-cache",
+            "--texel-mm",
+            "1.5",
+            "--reweigh",
+            "2",
+        ])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.contains("reweigh: device pass median"), "{out}");
+    assert!(out.contains("pairs of F"), "{out}");
+    let mut walks = bin();
+    walks.args([
+        "precompute",
+        "--no-cache",
+        "--eta",
+        "1",
+        "--model",
+        "volume",
+        "--reweigh",
+        "1",
+    ]);
+    fails_with(walks, "cannot be re-weighted");
+}
