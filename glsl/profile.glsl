@@ -16,20 +16,40 @@ struct Channel {
     vec4 head;
     // albedo, sigma_tr, z_r, z_v (dipole).
     vec4 dipole;
-    // The table's optical radii, cumulative fractions, annulus centres and mean values, four
-    // to a vec4.
-    vec4 radii[TABLE / 4];
-    vec4 cumulative[TABLE / 4];
-    vec4 centres[TABLE / 4];
-    vec4 values[TABLE / 4];
+    // The table's optical radii, cumulative fractions, annulus centres and mean values
+    // (fields RADII, CUMULATIVE, CENTRES, VALUES), four to a vec4.
+    vec4 table[4][TABLE / 4];
 };
+
+const int RADII = 0;
+const int CUMULATIVE = 1;
+const int CENTRES = 2;
+const int VALUES = 3;
 
 layout(set = 0, binding = PROFILE_BINDING, std140) uniform Profiles {
     Channel channel[3];
 } profiles;
 
 // Entry j of channel c's table `field`.
-#define AT(c, field, j) profiles.channel[c].field[(j) >> 2][(j) & 3]
+float at(int c, int field, int j) {
+    return profiles.channel[c].table[field][j >> 2][j & 3];
+}
+
+// The first entry of channel c's table `field` (increasing) that is not below x; TABLE if
+// none (partition_point).
+int first_not_below(int c, int field, float x) {
+    int lo = 0;
+    int hi = TABLE;
+    while (lo < hi) {
+        int mid = (lo + hi) >> 1;
+        if (at(c, field, mid) < x) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
 
 // Dipole: R_d and its plane Laplacian (Dipole::rd_derivatives, rd_and_laplacian).
 vec2 dipole_rd_laplacian(vec4 d, float r) {
@@ -65,28 +85,17 @@ float dipole_cumulative(vec4 d, float rho) {
 
 // Table: the profile in optical units and its log-log slope (Tabulated::optical).
 vec2 table_optical(int c, float x) {
-    if (x <= AT(c, centres, 0)) {
-        return vec2(AT(c, values, 0), 0.0);
+    if (x <= at(c, CENTRES, 0)) {
+        return vec2(at(c, VALUES, 0), 0.0);
     }
-    // The first centre not below x (partition_point).
-    int lo = 0;
-    int hi = TABLE;
-    while (lo < hi) {
-        int mid = (lo + hi) >> 1;
-        if (AT(c, centres, mid) < x) {
-            lo = mid + 1;
-        } else {
-            hi = mid;
-        }
-    }
-    int j = lo;
+    int j = first_not_below(c, CENTRES, x);
     if (j >= TABLE) {
         return vec2(0.0);
     }
-    float ca = AT(c, centres, j - 1);
-    float cb = AT(c, centres, j);
-    float a = AT(c, values, j - 1);
-    float b = AT(c, values, j);
+    float ca = at(c, CENTRES, j - 1);
+    float cb = at(c, CENTRES, j);
+    float a = at(c, VALUES, j - 1);
+    float b = at(c, VALUES, j);
     if (a <= 0.0 || b <= 0.0) {
         float t = (x - ca) / (cb - ca);
         return vec2((1.0 - t) * a + t * b, 0.0);
@@ -97,29 +106,19 @@ vec2 table_optical(int c, float x) {
 
 float table_cumulative(int c, float rho) {
     float x = rho * profiles.channel[c].head.y;
-    float r0 = AT(c, radii, 0);
+    float r0 = at(c, RADII, 0);
     if (x <= r0) {
-        return AT(c, cumulative, 0) * (x / r0) * (x / r0);
+        return at(c, CUMULATIVE, 0) * (x / r0) * (x / r0);
     }
-    int lo = 0;
-    int hi = TABLE;
-    while (lo < hi) {
-        int mid = (lo + hi) >> 1;
-        if (AT(c, radii, mid) < x) {
-            lo = mid + 1;
-        } else {
-            hi = mid;
-        }
-    }
-    int j = lo;
+    int j = first_not_below(c, RADII, x);
     if (j >= TABLE) {
-        return AT(c, cumulative, TABLE - 1);
+        return at(c, CUMULATIVE, TABLE - 1);
     }
-    float ra = AT(c, radii, j - 1);
-    float rb = AT(c, radii, j);
+    float ra = at(c, RADII, j - 1);
+    float rb = at(c, RADII, j);
     float t = (x * x - ra * ra) / (rb * rb - ra * ra);
-    float ca = AT(c, cumulative, j - 1);
-    return ca + t * (AT(c, cumulative, j) - ca);
+    float ca = at(c, CUMULATIVE, j - 1);
+    return ca + t * (at(c, CUMULATIVE, j) - ca);
 }
 
 // R and its plane Laplacian of channel c at r (mm).

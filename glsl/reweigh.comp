@@ -48,6 +48,11 @@ layout(set = 0, binding = 9, std430) writeonly buffer DenseOut {
     float dense_out[];
 };
 
+// Sub-samples per texel side of the fine and coarse quadratures: operators.rs's
+// FINE_SUBSAMPLES and COARSE_SUBSAMPLES, set by src/passes/reweigh.rs.
+layout(constant_id = 0) const int FINE_SUBSAMPLES = 1;
+layout(constant_id = 1) const int COARSE_SUBSAMPLES = 1;
+
 const uint DISC = 0u;
 const uint FINE = 1u;
 const uint COARSE = 2u;
@@ -63,7 +68,7 @@ vec3 texel_mean(uint s, uint level, vec3 x) {
     if (level == POINT) {
         return rd_cell_mean(distance(x, pa.xyz), h * h / 24.0);
     }
-    int m = level == FINE ? 6 : 3;
+    int m = level == FINE ? FINE_SUBSAMPLES : COARSE_SUBSAMPLES;
     vec3 u = texelFetch(axes_u, int(s)).xyz;
     vec3 v = texelFetch(axes_v, int(s)).xyz;
     float step_ = h / float(m);

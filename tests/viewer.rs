@@ -146,6 +146,26 @@ fn render_into(cache: &Path, out: &Path, scene: Option<&Path>) {
     assert!(o.status.success(), "{}", common::stderr(&o));
 }
 
+/// Asserts that two EXR images have the same size and cover more than 1000 pixels, and that
+/// they differ by under 0.1 % relative RMS (worst channel); returns the size.
+fn assert_same_image(
+    shot: &std::path::Path,
+    reference: &std::path::Path,
+    what: &str,
+) -> (u32, u32) {
+    let (w, h, shot) = translucent::output::read_exr(shot).unwrap();
+    let (rw, rh, reference) = translucent::output::read_exr(reference).unwrap();
+    assert_eq!((w, h), (rw, rh), "{what}: image sizes");
+    let (err, _) = translucent::reference::metrics::compare(&shot, &reference, None);
+    assert!(err.pixels > 1000, "{what}: {} covered pixels", err.pixels);
+    assert!(
+        err.rel_rms < 1e-3,
+        "{what} differ: {:.4} % RMS",
+        100.0 * err.rel_rms
+    );
+    (w, h)
+}
+
 #[test]
 fn scripted_session_in_a_window_shows_the_lit_object() {
     let x = Xvfb::start();
@@ -174,16 +194,10 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
     assert!(stdout.contains("view: closed after"), "{stdout}");
 
     // The first screenshot is the default view: the same image as `render`.
-    let (w, h, shot) = translucent::output::read_exr(&dir.join("start.exr")).unwrap();
-    let (rw, rh, reference) =
-        translucent::output::read_exr(&dir.join("render/render.exr")).unwrap();
-    assert_eq!((w, h), (rw, rh));
-    let (err, _) = translucent::reference::metrics::compare(&shot, &reference, None);
-    assert!(err.pixels > 1000, "{} covered pixels", err.pixels);
-    assert!(
-        err.rel_rms < 1e-3,
-        "viewer and render differ: {:.4} % RMS",
-        100.0 * err.rel_rms
+    let (w, h) = assert_same_image(
+        &dir.join("start.exr"),
+        &dir.join("render/render.exr"),
+        "viewer and render",
     );
 
     // What the window showed: the lit object, with the panel (the `ui` pass) over its top-left
@@ -373,14 +387,10 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
 
     // The saved scene renders the edited view: the same image to 0.1 %.
     render_into(&cache, &dir.join("render"), Some(&dir.join("edited.toml")));
-    let (_, _, shot) = translucent::output::read_exr(&dir.join("edited.exr")).unwrap();
-    let (_, _, reference) = translucent::output::read_exr(&dir.join("render/render.exr")).unwrap();
-    let (err, _) = translucent::reference::metrics::compare(&shot, &reference, None);
-    assert!(err.pixels > 1000, "{} covered pixels", err.pixels);
-    assert!(
-        err.rel_rms < 1e-3,
-        "the saved scene renders differently: {:.4} % RMS",
-        100.0 * err.rel_rms
+    assert_same_image(
+        &dir.join("edited.exr"),
+        &dir.join("render/render.exr"),
+        "the saved scene and the viewer",
     );
 }
 

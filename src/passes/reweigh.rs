@@ -144,19 +144,14 @@ impl Geometry {
             let level = operators::tap_level(atlas, s, atlas.texels[t].position.as_dvec3());
             [t as u32, s as u32 | (level as u32) << 30, 0, 0]
         };
-        let half = (kernel_size / 2) as i64;
-        let mut taps =
-            Vec::with_capacity(atlas.texels.len() * (kernel_size * kernel_size) as usize);
-        for (t, tt) in atlas.texels.iter().enumerate() {
-            for dy in -half..=half {
-                for dx in -half..=half {
-                    match atlas.texel_at(tt.x as i64 + dx, tt.y as i64 + dy) {
-                        Some(s) if atlas.texels[s].chart == tt.chart => taps.push(tap(t, s)),
-                        _ => taps.push([t as u32, NO_SOURCE, 0, 0]),
-                    }
-                }
-            }
-        }
+        let mut taps: Vec<[u32; 4]> = (0..atlas.texels.len())
+            .flat_map(|t| {
+                operators::window_sources(atlas, t, kernel_size).map(move |source| match source {
+                    Some(s) => tap(t, s),
+                    None => [t as u32, NO_SOURCE, 0, 0],
+                })
+            })
+            .collect();
         let window_slots = taps.len();
         let pattern = operators::seam_pattern(atlas, kernel_size);
         let mut seam_pattern = vec![0u32];
@@ -324,7 +319,16 @@ impl Reweigher {
         }
         set.add(8, Binding::Storage(tap_out.raw));
         set.add(9, Binding::Storage(dense_out.raw));
-        let pipeline = Pipeline::compute::<Push>(gpu, "reweigh", shaders::REWEIGH_COMP, set)?;
+        let pipeline = Pipeline::compute_specialized::<Push>(
+            gpu,
+            "reweigh",
+            shaders::REWEIGH_COMP,
+            set,
+            &[
+                operators::FINE_SUBSAMPLES as u32,
+                operators::COARSE_SUBSAMPLES as u32,
+            ],
+        )?;
         Ok(Reweigher {
             gpu: gpu.clone(),
             pipeline,
@@ -333,11 +337,6 @@ impl Reweigher {
             dense_out,
             geometry,
         })
-    }
-
-    /// The geometry this re-weighs.
-    pub fn geometry(&self) -> &Geometry {
-        &self.geometry
     }
 
     /// Evaluates `material`'s weights of every entry on the device.
@@ -405,6 +404,7 @@ impl Reweigher {
                 rows,
                 walks: None,
                 exit_slopes: Vec::new(),
+                // One submit times the taps and F together: all of it is counted with F.
                 seconds: [0.0, device_ms * 1e-3],
             },
             device_ms,

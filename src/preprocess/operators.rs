@@ -381,9 +381,9 @@ fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, profiles: &[Profile; 3]) -> Rgb
 
 /// Receivers closer than this many texels to a source texel sample it (the profile is too
 /// curved there for one sample of the cell-mean rule).
-pub const SUBSAMPLE_REACH_TEXELS: f64 = 2.5;
+const SUBSAMPLE_REACH_TEXELS: f64 = 2.5;
 /// Receivers closer than this many texels sample it finely.
-pub const FINE_SUBSAMPLE_REACH_TEXELS: f64 = 1.5;
+const FINE_SUBSAMPLE_REACH_TEXELS: f64 = 1.5;
 /// Sub-samples per texel side close to the receiver.
 pub const FINE_SUBSAMPLES: usize = 6;
 /// Sub-samples per texel side further out.
@@ -652,9 +652,7 @@ impl Basis {
             })
             .collect()
     }
-}
 
-impl Basis {
     /// Where node `q` (at `xq`) receives: the centre of its own texel, where phi_q peaks, so
     /// that the peak of R_d falls on that texel's exact disc mean rather than between
     /// sub-samples, the same way as in the kernels; `xq` for a node without support.
@@ -663,6 +661,25 @@ impl Basis {
             .map(|c| atlas.texels[c].position.as_dvec3())
             .unwrap_or(xq)
     }
+}
+
+/// The sources of texel `t`'s k x k kernel window, row-major from (-k/2, -k/2): the texel at
+/// each offset where it is covered and of `t`'s chart, None elsewhere (what the window holds
+/// for every material; the kernels' layout).
+pub fn window_sources(
+    atlas: &Atlas,
+    t: usize,
+    kernel_size: u32,
+) -> impl Iterator<Item = Option<usize>> + '_ {
+    let tt = &atlas.texels[t];
+    let half = (kernel_size / 2) as i64;
+    (-half..=half).flat_map(move |dy| {
+        (-half..=half).map(move |dx| {
+            atlas
+                .texel_at(tt.x as i64 + dx, tt.y as i64 + dy)
+                .filter(|&s| atlas.texels[s].chart == tt.chart)
+        })
+    })
 }
 
 /// The local kernels: per covered texel its k x k window of K_t(s) A_s over texels of the same
@@ -674,26 +691,21 @@ fn local_kernels(
     progress: Progress<'_>,
 ) -> Vec<[f32; 3]> {
     let n_texels = atlas.texels.len() as u64;
-    let k = kernel_size as i64;
-    let half = k / 2;
     let done = std::sync::atomic::AtomicU64::new(0);
     let kernels = atlas
         .texels
         .par_iter()
-        .flat_map_iter(|t| {
-            let xt = t.position.as_dvec3();
-            let mut out = Vec::with_capacity((k * k) as usize);
-            for dy in -half..=half {
-                for dx in -half..=half {
-                    let w = match atlas.texel_at(t.x as i64 + dx, t.y as i64 + dy) {
-                        Some(s) if atlas.texels[s].chart == t.chart => {
-                            texel_mean(atlas, s, xt, profiles) * atlas.texels[s].area as f64
-                        }
-                        _ => Rgb::ZERO,
-                    };
-                    out.push(w.to_f32());
-                }
-            }
+        .enumerate()
+        .flat_map_iter(|(t, tt)| {
+            let xt = tt.position.as_dvec3();
+            let out: Vec<[f32; 3]> = window_sources(atlas, t, kernel_size)
+                .map(|source| match source {
+                    Some(s) => {
+                        (texel_mean(atlas, s, xt, profiles) * atlas.texels[s].area as f64).to_f32()
+                    }
+                    None => [0.0; 3],
+                })
+                .collect();
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             if n.is_multiple_of(4096) {
                 progress("kernels", n, n_texels);
