@@ -237,8 +237,9 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
         // bunny, long-triangle meshes included). The mesh term (welding, adjacency and
         // chart growth, simplification) is partly serial. The fit term lies between the
         // bunny's constrained fit (the whole estimate 1.1-1.4x of the measured time) and a
-        // ketchup sphere's, whose dual sweeps run longer (0.58-0.66x; at the earlier 2/3 of
-        // this coefficient that scene came to 0.23x, outside the 4x bound, on a busy run).
+        // ketchup sphere's, whose constrained solves run longer (0.58-0.66x with the earlier
+        // iterative solver; at the earlier 2/3 of this coefficient that scene came to 0.23x,
+        // outside the 4x bound, on a busy run).
         seconds: (2.5e-7 * (texels * kk) as f64
             + 3.0e-7 * (nodes * nodes) as f64
             + 4.5e-8 * fit_work)
