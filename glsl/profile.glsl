@@ -72,13 +72,20 @@ vec2 dipole_rd_laplacian(vec4 d, float r) {
     return vec2(sum.x, lap);
 }
 
+// 1 - e^(-x) for x >= 0, without cancellation near 0 (expm1).
+float one_minus_exp(float x) {
+    return x < 1e-2 ? x * (1.0 - 0.5 * x * (1.0 - x / 3.0 * (1.0 - 0.25 * x))) : 1.0 - exp(-x);
+}
+
+// Dipole::cumulative, in its cancellation-free form.
 float dipole_cumulative(vec4 d, float rho) {
     float s = d.y;
     float acc = 0.0;
     for (int i = 0; i < 2; i++) {
         float z = i == 0 ? d.z : d.w;
         float dd = sqrt(rho * rho + z * z);
-        acc += z * (exp(-s * z) / z - exp(-s * dd) / dd);
+        float delta = rho * rho / (dd + z);
+        acc += exp(-s * z) * (one_minus_exp(s * delta) + exp(-s * delta) * delta / dd);
     }
     return 0.5 * d.x * acc;
 }
