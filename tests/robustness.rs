@@ -190,11 +190,13 @@ fn output_faults_leave_no_partial_files() {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1500));
+    // SIGTERM, not SIGINT: a test run started in the background by a non-interactive shell
+    // has SIGINT ignored, the child inherits that and would finish.
     let killed = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args(["-TERM", &child.id().to_string()])
         .status()
         .expect("kill(1) runs (Debian: procps, installed by .ci/run)");
-    assert!(killed.success(), "kill -INT failed: {killed}");
+    assert!(killed.success(), "kill -TERM failed: {killed}");
     let status = child.wait().unwrap();
     assert!(
         !status.success(),
