@@ -1329,6 +1329,11 @@ impl Operators {
         let reach = footprint + nodes.spacing_mm;
         let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
         let done = std::sync::atomic::AtomicU64::new(0);
+        let non_negative = self
+            .kernels
+            .iter()
+            .chain(&self.seams.vals)
+            .all(|w| w.iter().all(|&v| v >= 0.0));
         let rows: Vec<Vec<(u32, [f32; 3])>> = (0..n_nodes)
             .into_par_iter()
             .map(|q| {
@@ -1387,11 +1392,16 @@ impl Operators {
                         // The row is interpolated (phi_q) over q's whole support: the fixed
                         // part the constraint may lean on is the smallest kernel weight of s
                         // among those receivers, so that every texel's response stays >= 0.
-                        let kw_min = supports[q].iter().fold(Rgb::from_f32(kw), |m, &(t, _)| {
-                            let w =
-                                Rgb::from_f32(self.kernel_weight(atlas, t as usize, s as usize));
-                            Rgb(std::array::from_fn(|ch| m.0[ch].min(w.0[ch])))
-                        });
+                        // With no negative weight, the first zero ends the search (most
+                        // texels of the fit lie outside some receiver's kernel).
+                        let mut kw_min = Rgb::from_f32(kw);
+                        for &(t, _) in &supports[q] {
+                            let w = self.kernel_weight(atlas, t as usize, s as usize);
+                            kw_min = Rgb(std::array::from_fn(|ch| kw_min.0[ch].min(w[ch] as f64)));
+                            if non_negative && kw_min.0 == [0.0; 3] {
+                                break;
+                            }
+                        }
                         let area = ts.area as f64;
                         let fixed = mean - target - Rgb::from_f32(kw) / area + kw_min / area;
                         constraints.push((phi.clone(), fixed));
