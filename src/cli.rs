@@ -752,7 +752,7 @@ fn reweigh_times(
         &none,
     );
     let cpu_s = clock.elapsed().as_secs_f64();
-    device_ms.sort_by(f64::total_cmp);
+    let device = crate::graph::timing::Stats::of(&device_ms);
     println!(
         "reweigh on {}: geometry kept {:.2} s ({taps} taps, {pairs} pairs of F, {terms} near-pair terms)",
         gpu.info.name, geometry_s
@@ -760,10 +760,7 @@ fn reweigh_times(
     println!(
         "reweigh: device pass median {:.1} ms, max {:.1} ms of {times}; CPU weights {:.2} s; \
          pruning, fit and direct terms {:.2} s",
-        device_ms[device_ms.len() / 2],
-        device_ms[device_ms.len() - 1],
-        cpu_s,
-        assemble_s
+        device.median_ms, device.max_ms, cpu_s, assemble_s
     );
     gpu.validation.check()?;
     Ok(())
