@@ -162,6 +162,11 @@ pub struct ViewArgs {
     /// scene with an environment light.
     #[arg(long, value_delimiter = ',')]
     pub environment: Vec<PathBuf>,
+    /// Where an edit of the material's coefficients, index or model re-weights the operators
+    /// (the settings, and so the atlas and the nodes, stay): `auto` is the device on a GPU and
+    /// the CPU on a CPU device; `off` runs the whole preprocessing for every edit.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub reweigh: crate::viewer::Reweigh,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -1503,12 +1508,14 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     let mode = args
         .mode
         .unwrap_or_else(|| Blend::for_model(scene.material.model));
+    let overrides = args.pre.overrides().or(scene.settings);
     crate::viewer::run(
         event_loop,
         crate::viewer::ViewConfig {
             scene,
             pre,
-            overrides: args.pre.overrides(),
+            overrides,
+            reweigh: args.reweigh,
             target_error: args.pre.target_error,
             cache: args.pre.cache_dir(),
             mode,

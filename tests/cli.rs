@@ -303,6 +303,53 @@ fn precompute_prints_its_choices_and_uses_the_cache() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A scene file's `[settings]` are used; the command line's flags win over them; a bad or
+/// unknown one is refused with its section named.
+#[test]
+fn a_scene_files_settings_are_used_and_flags_win() {
+    let dir = temp_dir("scene-settings");
+    let scene = |settings: &str| {
+        let path = dir.join("scene.toml");
+        std::fs::write(
+            &path,
+            format!("[material]\npreset = \"ketchup\"\n\n[settings]\n{settings}"),
+        )
+        .unwrap();
+        path
+    };
+    let run = |path: &std::path::Path, flags: &[&str]| {
+        let o = bin()
+            .arg("precompute")
+            .arg(path)
+            .args(flags)
+            .arg("--no-cache")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let path = scene("texel_mm = 1.0\nkernel = 5\n");
+    let out = run(&path, &[]);
+    for needle in ["texel 1.000 mm: given", "kernel 5x5: given"] {
+        assert!(out.contains(needle), "{needle} missing from\n{out}");
+    }
+    let out = run(&path, &["--texel-mm", "1.25"]);
+    for needle in ["texel 1.250 mm: given", "kernel 5x5: given"] {
+        assert!(out.contains(needle), "{needle} missing from\n{out}");
+    }
+    let mut c = bin();
+    c.arg("precompute")
+        .arg(scene("kernel = 4\n"))
+        .arg("--no-cache");
+    fails_with(c, "[settings]: kernel size 4 must be odd");
+    let mut c = bin();
+    c.arg("precompute")
+        .arg(scene("texel = 1.0\n"))
+        .arg("--no-cache");
+    fails_with(c, "unknown field `texel`");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn bench_writes_per_pass_bounds() {
     let dir = temp_dir("bench");

@@ -309,10 +309,21 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
                   add-light point; frames 2; screenshot edited; save-scene edited\n\
                   settings texel=0.9; wait; frames 2; screenshot coarse\n\
                   remove-light 1; light-kind 0 spot; frames 2; screenshot spot; quit";
-    let view = scripted_view(&x, script, &cache, &dir);
+    let mut view = scripted_view(&x, script, &cache, &dir);
+    // The material edits re-weight the operators with the device's pass (on lavapipe too,
+    // where `auto` would take the CPU): the saved scene's fresh preprocessing checks them.
+    view.args(["--reweigh", "device"]);
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(400));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
     assert!(stdout.contains("save scene: wrote"), "{stdout}");
+    assert!(
+        stdout.contains("(re-weighted on the device"),
+        "a material edit did not re-weight on the device:\n{stdout}"
+    );
+    assert!(
+        stdout.contains("edit shown") && stdout.contains("(as a preview)"),
+        "{stdout}"
+    );
 
     let start = json(&dir.join("start.json"));
     let edited = json(&dir.join("edited.json"));
@@ -760,4 +771,7 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(lines.contains("view: closed after"), "{lines}");
+    // The index's edit kept the settings and re-weighted the operators where a CPU device
+    // has them evaluated: on the CPU.
+    assert!(lines.contains("re-weighted on the CPU"), "{lines}");
 }

@@ -154,8 +154,10 @@ pub struct Gpu {
     pub device: ash::Device,
     /// The physical device behind it.
     pub physical: vk::PhysicalDevice,
-    /// Graphics + compute queue.
-    pub queue: vk::Queue,
+    /// Graphics + compute queue, behind a lock: Vulkan wants submissions to one queue (and
+    /// waits for the whole device) externally synchronized, and a material edit's
+    /// re-weighting pass submits from the viewer's background thread.
+    queue: Mutex<vk::Queue>,
     /// Family of [`Gpu::queue`].
     pub queue_family: u32,
     /// Description of the device.
@@ -169,6 +171,13 @@ pub struct Gpu {
     pub surface: Option<Surface>,
     allocator: ManuallyDrop<Mutex<Allocator>>,
     upload_pool: Mutex<vk::CommandPool>,
+}
+
+impl DeviceInfo {
+    /// Whether the device is a CPU (lavapipe): its work shares the host's cores.
+    pub fn is_cpu(&self) -> bool {
+        self.device_type == device_type_name(vk::PhysicalDeviceType::CPU)
+    }
 }
 
 fn device_type_name(t: vk::PhysicalDeviceType) -> &'static str {
@@ -688,7 +697,7 @@ impl Gpu {
             instance: instance.clone(),
             device,
             physical,
-            queue,
+            queue: Mutex::new(queue),
             queue_family,
             info,
             validation,
@@ -705,6 +714,13 @@ impl Gpu {
         // A poisoned lock only means another thread panicked while allocating; the
         // allocator's own state stays consistent.
         self.allocator.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The queue, held for one submission or presentation (not while waiting on a fence).
+    pub fn queue(&self) -> std::sync::MutexGuard<'_, vk::Queue> {
+        // A poisoned lock only means another thread panicked while holding it; the handle
+        // itself stays valid.
+        self.queue.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Records `record` into a fresh command buffer, submits it and waits for completion.
@@ -785,12 +801,14 @@ impl Gpu {
         .vk("vkCreateFence")?;
         let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
         let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cmds)];
-        let result = unsafe { self.device.queue_submit2(self.queue, &submit, fence) }
-            .vk("vkQueueSubmit2")
-            .and_then(|_| {
-                unsafe { self.device.wait_for_fences(&[fence], true, u64::MAX) }
-                    .vk("vkWaitForFences")
-            });
+        // The queue is held for the submission only, not while waiting.
+        let submitted = {
+            let queue = self.queue();
+            unsafe { self.device.queue_submit2(*queue, &submit, fence) }
+        };
+        let result = submitted.vk("vkQueueSubmit2").and_then(|_| {
+            unsafe { self.device.wait_for_fences(&[fence], true, u64::MAX) }.vk("vkWaitForFences")
+        });
         unsafe { self.device.destroy_fence(fence, None) };
         result
     }
@@ -810,6 +828,8 @@ impl Gpu {
 
     /// Waits until the device is idle (before destroying resources in use).
     pub fn wait_idle(&self) {
+        // vkDeviceWaitIdle synchronizes with every queue of the device.
+        let _queue = self.queue();
         // Nothing useful can be done if this fails (device lost): destruction goes on.
         let _ = unsafe { self.device.device_wait_idle() };
     }

@@ -45,7 +45,7 @@ impl Binding {
 #[derive(Default)]
 pub struct BindingSet {
     entries: Vec<(u32, Binding)>,
-    owned: Vec<Box<dyn std::any::Any>>,
+    owned: Vec<Box<dyn std::any::Any + Send + Sync>>,
 }
 
 impl BindingSet {
@@ -60,7 +60,7 @@ impl BindingSet {
     }
 
     /// Hands the set something its descriptors refer to; it lives as long as the pipeline.
-    pub fn keep(&mut self, owned: impl std::any::Any) {
+    pub fn keep(&mut self, owned: impl std::any::Any + Send + Sync) {
         self.owned.push(Box::new(owned));
     }
 
@@ -155,7 +155,7 @@ pub struct Pipeline {
     push_size: usize,
     /// What the descriptor set refers to and the pipeline keeps alive (texel views,
     /// samplers); dropped after the set.
-    owned: Vec<Box<dyn std::any::Any>>,
+    owned: Vec<Box<dyn std::any::Any + Send + Sync>>,
 }
 
 impl Pipeline {

@@ -551,7 +551,7 @@ impl FrameGraph {
             d.reset_fences(&[self.fence]).vk("vkResetFences")?;
             let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
             let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cmds)];
-            d.queue_submit2(gpu.queue, &submit, self.fence)
+            d.queue_submit2(*gpu.queue(), &submit, self.fence)
                 .vk("vkQueueSubmit2")?;
             d.wait_for_fences(&[self.fence], true, u64::MAX)
                 .vk("vkWaitForFences")?;

@@ -250,7 +250,7 @@ impl UiLayer {
         }
         for (id, delta) in textures {
             self.renderer
-                .set_texture(self.gpu.queue, self.pool, id, &delta)
+                .set_texture(*self.gpu.queue(), self.pool, id, &delta)
                 .context("uploading the interface's textures")?;
         }
         self.primitives = primitives;

@@ -74,7 +74,8 @@ pub fn object_scale(scene: &Scene, target_error: f64, max_texels: f64) -> Object
     }
 }
 
-/// Chooses the settings for a scene.
+/// Chooses the settings for a scene: `overrides` (the command line's), then the scene file's
+/// `[settings]`, the rest derived.
 pub fn choose(
     scene: &Scene,
     overrides: &SettingsOverrides,
@@ -86,6 +87,7 @@ pub fn choose(
         );
     }
     settings::validate(overrides)?;
+    let overrides = &overrides.or(scene.settings);
     if scene.material.model.walks() && !scene.mesh.is_closed() {
         anyhow::bail!(
             "model {} walks inside the object, and this mesh is not closed (an open surface has no inside: a walk leaving through a hole would never return); use a closed mesh or another model",

@@ -73,6 +73,20 @@ pub struct SettingsOverrides {
     pub walk_paths: Option<u32>,
 }
 
+impl SettingsOverrides {
+    /// These, and `below`'s where these leave a setting out (the command line's over the
+    /// scene file's).
+    pub fn or(self, below: SettingsOverrides) -> SettingsOverrides {
+        SettingsOverrides {
+            texel_mm: self.texel_mm.or(below.texel_mm),
+            kernel_size: self.kernel_size.or(below.kernel_size),
+            node_spacing_mm: self.node_spacing_mm.or(below.node_spacing_mm),
+            prune_tolerance: self.prune_tolerance.or(below.prune_tolerance),
+            walk_paths: self.walk_paths.or(below.walk_paths),
+        }
+    }
+}
+
 /// What the derivation needs to know about the object and the image.
 #[derive(Debug, Clone, Copy)]
 pub struct ObjectScale {

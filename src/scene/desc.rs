@@ -37,6 +37,13 @@
 //! [output]
 //! width = 512
 //! height = 512
+//!
+//! [settings]                 # preprocessing settings; each one left out is derived
+//! texel_mm = 0.5             # (the command line's --texel-mm, --kernel, ... win over these)
+//! kernel = 7
+//! node_spacing_mm = 3.5
+//! prune = 0.005
+//! walk_paths = 4096          # model "volume" only
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -210,6 +217,59 @@ pub struct OutputDesc {
     pub shadow_map: Option<u32>,
 }
 
+/// `[settings]`: the preprocessing settings a scene gives (a saved viewer scene names those
+/// its operators were made with); each one left out is derived.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SettingsDesc {
+    /// Atlas texel edge, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub texel_mm: Option<f64>,
+    /// Local kernel edge, texels (odd).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<u32>,
+    /// Spacing of the global response's nodes, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub node_spacing_mm: Option<f64>,
+    /// Largest fraction of each row of F that pruning may drop.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prune: Option<f64>,
+    /// Random walks per node and channel (model "volume").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub walk_paths: Option<u32>,
+}
+
+impl SettingsDesc {
+    /// Whether no setting is given (the section is then not written).
+    pub fn is_empty(&self) -> bool {
+        *self == SettingsDesc::default()
+    }
+}
+
+impl From<SettingsDesc> for crate::preprocess::settings::SettingsOverrides {
+    fn from(d: SettingsDesc) -> Self {
+        Self {
+            texel_mm: d.texel_mm,
+            kernel_size: d.kernel,
+            node_spacing_mm: d.node_spacing_mm,
+            prune_tolerance: d.prune,
+            walk_paths: d.walk_paths,
+        }
+    }
+}
+
+impl From<crate::preprocess::settings::SettingsOverrides> for SettingsDesc {
+    fn from(o: crate::preprocess::settings::SettingsOverrides) -> Self {
+        Self {
+            texel_mm: o.texel_mm,
+            kernel: o.kernel_size,
+            node_spacing_mm: o.node_spacing_mm,
+            prune: o.prune_tolerance,
+            walk_paths: o.walk_paths,
+        }
+    }
+}
+
 /// A whole scene file.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
 #[serde(deny_unknown_fields)]
@@ -231,6 +291,9 @@ pub struct SceneDesc {
     /// The image.
     #[serde(default)]
     pub output: OutputDesc,
+    /// The preprocessing settings given.
+    #[serde(default, skip_serializing_if = "SettingsDesc::is_empty")]
+    pub settings: SettingsDesc,
 }
 
 impl SceneDesc {
@@ -252,6 +315,26 @@ mod tests {
     #[test]
     fn empty_file_is_the_default_scene() {
         assert_eq!(SceneDesc::parse("").unwrap(), SceneDesc::default());
+    }
+
+    #[test]
+    fn settings_are_written_only_when_given_and_read_back() {
+        let mut d = SceneDesc::default();
+        assert!(!d.to_toml().contains("[settings]"), "{}", d.to_toml());
+        d.settings.texel_mm = Some(0.52);
+        d.settings.kernel = Some(7);
+        let text = d.to_toml();
+        assert!(
+            text.contains("[settings]") && !text.contains("prune"),
+            "{text}"
+        );
+        assert_eq!(SceneDesc::parse(&text).unwrap(), d);
+        let o = crate::preprocess::settings::SettingsOverrides::from(d.settings);
+        assert_eq!(
+            (o.texel_mm, o.kernel_size, o.prune_tolerance),
+            (Some(0.52), Some(7), None)
+        );
+        assert_eq!(SettingsDesc::from(o), d.settings);
     }
 
     #[test]

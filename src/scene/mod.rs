@@ -151,6 +151,9 @@ pub struct Scene {
     /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
     /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
+    /// The preprocessing settings the scene file gives (`[settings]`); the command line's
+    /// win over them ([`crate::preprocess::choose`]).
+    pub settings: crate::preprocess::settings::SettingsOverrides,
     /// The description with every default made explicit (what `render` prints).
     pub resolved: SceneDesc,
     /// Why the image may be black or nearly so, for a reason the user can fix (printed and
@@ -671,6 +674,8 @@ impl Scene {
         }
         // The default shadow map follows the atlas texel, known after the settings are chosen
         // (`shadow::shadow_map_size`).
+        let settings = crate::preprocess::settings::SettingsOverrides::from(desc.settings);
+        crate::preprocess::settings::validate(&settings).context("[settings]")?;
         let shadow_map = od.shadow_map;
         if let Some(s) = shadow_map {
             if !(16..=16384).contains(&s) {
@@ -776,6 +781,7 @@ impl Scene {
             height,
             exposure: exposure as f32,
             shadow_map,
+            settings,
             resolved: desc,
             warnings,
             notes,

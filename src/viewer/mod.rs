@@ -40,6 +40,7 @@ use crate::gpu::{Gpu, GpuOptions, WindowTarget};
 use crate::graph::timing::{FrameTiming, TimingReport};
 use crate::output;
 use crate::passes::data::SubsurfaceData;
+use crate::passes::reweigh::{Geometry, Reweigher};
 use crate::passes::ui::{SharedUi, UiLayer};
 use crate::physics::material::{Material, PRESETS};
 use crate::preprocess::{self, operators::Blend, settings::SettingsOverrides, Preprocessed};
@@ -69,8 +70,11 @@ pub struct ViewConfig {
     pub scene: Scene,
     /// The scene's preprocessing.
     pub pre: Preprocessed,
-    /// Settings given on the command line (kept when the material changes).
+    /// Settings given on the command line and in the scene file (a material preset's
+    /// settings start from these; an edit of the coefficients keeps the settings in use).
     pub overrides: SettingsOverrides,
+    /// Where a material edit's weights are evaluated.
+    pub reweigh: Reweigh,
     /// Target error for the settings chosen after a material change.
     pub target_error: f64,
     /// Preprocessing cache, if any.
@@ -201,9 +205,129 @@ impl Rig {
     }
 }
 
-/// What a material's background run produces: its preprocessing and, with an environment
-/// light, the transfer over its atlas.
-type JobResult = (Preprocessed, Option<crate::environment::prt::Transfer>);
+/// Where a material edit's weights are evaluated when the settings, and so the atlas and the
+/// nodes, stay (`view --reweigh`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Reweigh {
+    /// On the device when it is a GPU, on the CPU when the device is itself a CPU (lavapipe,
+    /// where the pass is no faster than the CPU and would share its cores with the frames).
+    #[default]
+    Auto,
+    /// The device's compute pass (`passes::reweigh`).
+    Device,
+    /// The CPU, as a fresh preprocessing evaluates them.
+    Cpu,
+    /// Not at all: every edit runs the whole preprocessing (atlas and nodes too).
+    Off,
+}
+
+/// The device's re-weighting, kept between edits with the settings its geometry was made
+/// for.
+type KeptReweigher = (crate::preprocess::settings::Settings, Reweigher);
+
+/// What a material's background run produces.
+struct JobOutput {
+    /// The preprocessing.
+    pre: Preprocessed,
+    /// With an environment light, the transfer over its atlas.
+    transfer: Option<crate::environment::prt::Transfer>,
+    /// How the operators were made, for the status line.
+    how: String,
+}
+
+/// A material's preprocessing on the viewer's background thread: from the cache when it
+/// holds it; else, where the settings are the shown ones and the model's F integrates its
+/// profile, the shown atlas and nodes with every entry re-weighted for the new material (on
+/// the device with `device`'s `(true, ..)`, keeping its pass in `kept`; on the CPU with
+/// `(false, ..)`): the same operators as a fresh preprocessing, without its atlas and nodes;
+/// else (or without `device`) the whole preprocessing.
+fn prepare_in_background(
+    scene: &Scene,
+    overrides: &SettingsOverrides,
+    target_error: f64,
+    cache: Option<&std::path::Path>,
+    shown: &Preprocessed,
+    device: Option<(bool, &Arc<Gpu>, &mut Option<KeptReweigher>)>,
+    report: crate::preprocess::operators::Progress<'_>,
+) -> Result<JobOutput> {
+    use crate::preprocess::{cache as store, operators::Operators, CacheOutcome, StageTimes};
+    let choice = preprocess::choose(scene, overrides, target_error)?;
+    let material = &scene.material;
+    let same = choice.settings == shown.settings && Reweigher::supports(material);
+    let cached = |settings| {
+        let dir = cache?;
+        store::load::<Preprocessed>(dir, store::key(&scene.mesh, material, settings))
+            .ok()
+            .flatten()
+    };
+    let reweigh = device.filter(|_| same);
+    let hit = reweigh.as_ref().and_then(|_| cached(&choice.settings));
+    let (pre, how) = match (hit, reweigh) {
+        (Some(pre), _) => (pre, "from the cache".to_string()),
+        (None, None) => {
+            let (pre, outcome) = preprocess::prepare(scene, &choice, cache, report)?;
+            let how = match outcome {
+                CacheOutcome::Hit(_) => "from the cache",
+                _ => "preprocessed",
+            };
+            (pre, how.to_string())
+        }
+        (None, Some((on_device, gpu, kept))) => {
+            let clock = Instant::now();
+            let s = &shown.settings;
+            let (ops, how) = if on_device {
+                let mut r = match kept.take() {
+                    Some((k, r)) if k == *s => r,
+                    _ => {
+                        report("re-weighting: the geometry to the device", 0, 1);
+                        Reweigher::new(gpu, Geometry::of(shown))?
+                    }
+                };
+                report("re-weighting on the device", 0, 1);
+                let weighed = r.weights(material);
+                *kept = Some((*s, r));
+                let w = weighed?;
+                let ops = Operators::from_weights(
+                    &shown.atlas,
+                    &shown.nodes,
+                    material,
+                    s,
+                    w.weights,
+                    report,
+                );
+                let how = format!(
+                    "re-weighted on the device: pass {:.1} ms, operators {:.2} s",
+                    w.device_ms,
+                    clock.elapsed().as_secs_f64()
+                );
+                (ops, how)
+            } else {
+                let ops =
+                    Operators::build(&scene.mesh, &shown.atlas, &shown.nodes, material, s, report);
+                let how = format!(
+                    "re-weighted on the CPU: operators {:.2} s",
+                    clock.elapsed().as_secs_f64()
+                );
+                (ops, how)
+            };
+            let pre = Preprocessed {
+                settings: choice.settings,
+                reasons: choice.reasons,
+                atlas: shown.atlas.clone(),
+                nodes: shown.nodes.clone(),
+                ops,
+                times: StageTimes {
+                    operators_s: clock.elapsed().as_secs_f64(),
+                    ..Default::default()
+                },
+            };
+            (pre, how)
+        }
+    };
+    report("environment transfer", 0, 1);
+    let transfer = crate::renderer::environment_transfer(scene, &pre, cache);
+    Ok(JobOutput { pre, transfer, how })
+}
 
 /// A material with the settings given for it: what a preprocessing run is for.
 #[derive(Debug, Clone, PartialEq)]
@@ -228,7 +352,7 @@ struct Job {
     wanted: Wanted,
     started: Instant,
     progress: Arc<Mutex<(String, u64, u64)>>,
-    handle: JoinHandle<Result<JobResult>>,
+    handle: JoinHandle<(Result<JobOutput>, Option<KeptReweigher>)>,
 }
 
 /// The window and everything that draws into it.
@@ -237,7 +361,8 @@ struct Running {
     renderer: Option<Renderer>,
     swapchain: Swapchain,
     data: SubsurfaceData,
-    pre: Preprocessed,
+    /// The shown preprocessing (shared with a background run that re-weights its operators).
+    pre: Arc<Preprocessed>,
     scene: Scene,
     gpu: Arc<Gpu>,
     window: Window,
@@ -246,6 +371,10 @@ struct Running {
     mode: Blend,
     both_blend: Blend,
     job: Option<Job>,
+    /// The device's re-weighting of the shown geometry, between runs (a run borrows it).
+    reweigher: Option<KeptReweigher>,
+    /// When the latest edit was asked for, until a frame shows it (preview or prepared).
+    edit_asked: Option<Instant>,
     /// What the image shows: the material and the settings it was prepared with.
     current: Wanted,
     /// The latest material or settings asked for while a run was going (replaced by newer
@@ -426,6 +555,7 @@ impl Running {
             }
             Action::Model(model) => {
                 let mut w = self.wanted();
+                w.overrides = self.pinned(&w, app)?;
                 w.material = w.material.with_model(model).context("model")?;
                 self.request(w, app);
             }
@@ -610,11 +740,30 @@ impl Running {
             true => material.with_model(crate::physics::Model::Halfspace)?,
             false => material,
         };
-        let mut w = self.wanted();
-        w.preset = Some(name);
-        w.material = material;
+        // A preset gets the settings derived for it (and so its own atlas), as a scene
+        // file naming it would; a cached one loads at once.
+        let w = Wanted {
+            preset: Some(name),
+            material,
+            overrides: app.given,
+        };
         self.request(w, app);
         Ok(())
+    }
+
+    /// The settings `w` is (or will be) prepared with, pinned: what a change of its material's
+    /// coefficients or model keeps, so that the new operators are the same entries of the same
+    /// atlas and nodes, re-weighted for the new material.
+    fn pinned(&self, w: &Wanted, app: &AppSettings) -> Result<SettingsOverrides> {
+        if *w == self.current {
+            return Ok(self.pre.settings.pinned());
+        }
+        let mut scene = self.scene.clone();
+        scene.material = w.material;
+        scene.settings = SettingsOverrides::default();
+        Ok(preprocess::choose(&scene, &w.overrides, app.target_error)?
+            .settings
+            .pinned())
     }
 
     /// Asks for coefficients of one's own; `model` where it applies, else the index's own.
@@ -631,6 +780,7 @@ impl Running {
             material = material.with_model(model).context("the material")?;
         }
         let mut w = self.wanted();
+        w.overrides = self.pinned(&w, app)?;
         w.preset = None;
         w.material = material;
         self.request(w, app);
@@ -639,6 +789,9 @@ impl Running {
 
     /// Prepares `w` now, or after the run going on (the latest request wins).
     fn request(&mut self, w: Wanted, app: &AppSettings) {
+        if w != self.wanted() {
+            self.edit_asked = Some(Instant::now());
+        }
         if self.job.is_some() {
             self.queued = Some(w);
         } else if w != self.current {
@@ -669,21 +822,37 @@ impl Running {
     fn start_job(&mut self, wanted: Wanted, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
         let mut scene = self.scene.clone();
+        scene.material = wanted.material;
+        // The wanted settings hold the scene file's already (and may have dropped some).
+        scene.settings = SettingsOverrides::default();
         let (target, cache) = (app.target_error, app.cache.clone());
+        let overrides = wanted.overrides;
+        let shown = self.pre.clone();
+        let gpu = self.gpu.clone();
+        let device = match app.reweigh {
+            Reweigh::Auto => (!self.gpu.info.is_cpu()).then_some(true),
+            Reweigh::Device => Some(true),
+            Reweigh::Cpu => Some(false),
+            Reweigh::Off => None,
+        };
+        let mut kept = self.reweigher.take();
         let p = progress.clone();
-        let (material, overrides) = (wanted.material, wanted.overrides);
-        let handle = std::thread::spawn(move || -> Result<JobResult> {
-            scene.material = material;
-            let choice = preprocess::choose(&scene, &overrides, target)?;
+        let handle = std::thread::spawn(move || {
             let report = |stage: &str, done: u64, total: u64| {
                 if let Ok(mut g) = p.lock() {
                     *g = (stage.to_string(), done, total);
                 }
             };
-            let (pre, _) = preprocess::prepare(&scene, &choice, cache.as_deref(), &report)?;
-            report("environment transfer", 0, 1);
-            let transfer = crate::renderer::environment_transfer(&scene, &pre, cache.as_deref());
-            Ok((pre, transfer))
+            let out = prepare_in_background(
+                &scene,
+                &overrides,
+                target,
+                cache.as_deref(),
+                &shown,
+                device.map(|d| (d, &gpu, &mut kept)),
+                &report,
+            );
+            (out, kept)
         });
         self.status = format!("preprocessing {}...", wanted.label());
         self.job = Some(Job {
@@ -702,8 +871,12 @@ impl Running {
         let job = self.job.take().expect("checked above");
         let seconds = job.started.elapsed().as_secs_f64();
         let label = job.wanted.label();
-        match job.handle.join() {
-            Ok(Ok((pre, transfer))) => {
+        let Ok((out, kept)) = job.handle.join() else {
+            bail!("the preprocessing thread for {label} panicked");
+        };
+        self.reweigher = kept;
+        match out {
+            Ok(out) => {
                 let w = job.wanted;
                 self.scene.material = w.material;
                 let md = &mut self.scene.resolved.material;
@@ -718,17 +891,19 @@ impl Running {
                 };
                 md.model = Some(w.material.model);
                 self.current = w;
-                self.pre = pre;
-                self.transfer = transfer;
+                self.pre = Arc::new(out.pre);
+                self.transfer = out.transfer;
                 self.reupload()?;
-                self.status = format!("{label} ready in {seconds:.1} s");
-                println!("view: {label} shown {seconds:.2} s after it was asked for");
+                self.status = format!("{label} ready in {seconds:.1} s ({})", out.how);
+                println!(
+                    "view: {label} shown {seconds:.2} s after it was asked for ({})",
+                    out.how
+                );
             }
-            Ok(Err(e)) => {
+            Err(e) => {
                 tracing::error!("preprocessing {label} failed: {e:#}");
                 self.status = format!("{label} failed: {e:#}");
             }
-            Err(_) => bail!("the preprocessing thread for {label} panicked"),
         }
         if let Some(next) = self.queued.take() {
             if next != self.current {
@@ -858,18 +1033,11 @@ impl Running {
         desc.lights = Some(out_lights);
         desc.output.width = Some(self.scene.width);
         desc.output.height = Some(self.scene.height);
-        let o = &self.current.overrides;
+        // The settings given in the viewer (a coefficient edit pins those in use): the
+        // operators `render` makes from this file are the shown ones.
+        desc.settings = self.current.overrides.into();
         let text = format!(
-            "# Saved by `translucent view`: `translucent render` of this file reproduces the view.\n\
-             # Settings given in the viewer (pass them to render as flags): texel {}, kernel {}, \
-             node spacing {}, pruning {}\n{}",
-            o.texel_mm.map_or("derived".into(), |v| format!("--texel-mm {v}")),
-            o.kernel_size
-                .map_or("derived".into(), |v| format!("--kernel {v}")),
-            o.node_spacing_mm
-                .map_or("derived".into(), |v| format!("--node-spacing-mm {v}")),
-            o.prune_tolerance
-                .map_or("derived".into(), |v| format!("--prune {v}")),
+            "# Saved by `translucent view`: `translucent render` of this file reproduces the view.\n{}",
             desc.to_toml()
         );
         output::create_dir(out)?;
@@ -1043,6 +1211,20 @@ impl Running {
         if presented == Presented::OutOfDate {
             self.size_changed = true;
         }
+        // An edit is shown once its preview is, or once nothing is being prepared (a new
+        // model has no preview: it shows when prepared).
+        if self.preview.is_some() || !self.busy() {
+            if let Some(asked) = self.edit_asked.take() {
+                println!(
+                    "view: edit shown {:.1} ms after it was asked for ({})",
+                    asked.elapsed().as_secs_f64() * 1e3,
+                    match self.preview {
+                        Some(_) => "as a preview",
+                        None => "prepared",
+                    }
+                );
+            }
+        }
         self.frames += 1;
         self.timings.push_back(timing);
         self.frame_instants.push_back(Instant::now());
@@ -1194,6 +1376,11 @@ impl Running {
 struct AppSettings {
     target_error: f64,
     cache: Option<PathBuf>,
+    /// The settings given on the command line and in the scene file: what a preset's
+    /// settings start from.
+    given: SettingsOverrides,
+    /// Where a material edit's weights are evaluated.
+    reweigh: Reweigh,
     /// Folder for screenshots and saved scenes.
     out: PathBuf,
 }
@@ -1321,7 +1508,7 @@ impl App {
             swapchain,
             data,
             rig: Rig::new(&config.scene),
-            pre: config.pre,
+            pre: Arc::new(config.pre),
             scene: config.scene,
             gpu,
             window,
@@ -1329,6 +1516,8 @@ impl App {
             mode: config.mode,
             both_blend,
             job: None,
+            reweigher: None,
+            edit_asked: None,
             current,
             queued: None,
             status: String::new(),
@@ -1556,6 +1745,8 @@ pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
         settings: AppSettings {
             target_error: config.target_error,
             cache: config.cache.clone(),
+            given: config.overrides,
+            reweigh: config.reweigh,
             out: config.out.clone(),
         },
         script: config.script.iter().cloned().collect(),

@@ -426,7 +426,7 @@ impl Swapchain {
                 .command_buffer_infos(&cmds)
                 .signal_semaphore_infos(&signals)];
             d.reset_fences(&[self.fence]).vk("vkResetFences")?;
-            d.queue_submit2(gpu.queue, &submit, self.fence)
+            d.queue_submit2(*gpu.queue(), &submit, self.fence)
                 .vk("vkQueueSubmit2")?;
         }
         let wait = [self.presentable[index as usize]];
@@ -436,7 +436,9 @@ impl Swapchain {
             .wait_semaphores(&wait)
             .swapchains(&chains)
             .image_indices(&indices);
-        let presented = match unsafe { s.swapchain.queue_present(gpu.queue, &info) } {
+        // The queue is held for the call only (a match would keep the guard to its end).
+        let result = unsafe { s.swapchain.queue_present(*gpu.queue(), &info) };
+        let presented = match result {
             Ok(false) => Presented::Shown,
             // Suboptimal or out of date: shown or not, the swapchain must be re-created.
             Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Presented::OutOfDate,
