@@ -163,9 +163,9 @@ pub struct ViewArgs {
     #[arg(long, value_delimiter = ',')]
     pub environment: Vec<PathBuf>,
     /// Where an edit of the material's coefficients, index or model re-weights the operators
-    /// (the settings, and so the atlas and the nodes, stay): `auto` is the device on a GPU and
-    /// the CPU on a CPU device; `off` runs the whole preprocessing for every edit.
-    #[arg(long, value_enum, default_value = "auto")]
+    /// (the settings, and so the atlas and the nodes, stay): on the device (its compute
+    /// pass), on the CPU, or `off`: the whole preprocessing for every edit.
+    #[arg(long, value_enum, default_value = "device")]
     pub reweigh: crate::viewer::Reweigh,
     /// Preprocessing controls.
     #[command(flatten)]

@@ -173,13 +173,6 @@ pub struct Gpu {
     upload_pool: Mutex<vk::CommandPool>,
 }
 
-impl DeviceInfo {
-    /// Whether the device is a CPU (lavapipe): its work shares the host's cores.
-    pub fn is_cpu(&self) -> bool {
-        self.device_type == device_type_name(vk::PhysicalDeviceType::CPU)
-    }
-}
-
 fn device_type_name(t: vk::PhysicalDeviceType) -> &'static str {
     match t {
         vk::PhysicalDeviceType::DISCRETE_GPU => "discrete GPU",
