@@ -257,7 +257,14 @@ fn prepare_in_background(
     use crate::preprocess::{cache as store, operators::Operators, CacheOutcome, StageTimes};
     let choice = preprocess::choose(scene, overrides, target_error)?;
     let material = &scene.material;
-    let same = choice.settings == shown.settings && Reweigher::supports(material);
+    // The walks' count is the only setting that shapes no geometry (it is 0 but for `volume`).
+    let geometry =
+        |s: &crate::preprocess::settings::Settings| crate::preprocess::settings::Settings {
+            walk_paths: 0,
+            ..*s
+        };
+    let same =
+        geometry(&choice.settings) == geometry(&shown.settings) && Reweigher::supports(material);
     let cached = |settings| {
         let dir = cache?;
         store::load::<Preprocessed>(dir, store::key(&scene.mesh, material, settings))

@@ -65,6 +65,9 @@ pub struct Snapshot {
 pub struct PanelState {
     /// The override fields as edited, applied with the button.
     pub overrides: Option<SettingsOverrides>,
+    /// The settings given when the fields were last filled: given ones that change
+    /// elsewhere (a coefficient edit pins those in use) fill them again.
+    pub overrides_seen: Option<SettingsOverrides>,
     /// Lights whose direction is on the far side of the sphere (behind the object).
     pub behind: Vec<bool>,
 }
@@ -233,6 +236,10 @@ fn settings(ui: &mut egui::Ui, s: &Snapshot, st: &mut PanelState, actions: &mut 
         100.0 * s.prune_tolerance,
         k = s.kernel_size
     ));
+    if st.overrides_seen != Some(s.overrides) {
+        st.overrides_seen = Some(s.overrides);
+        st.overrides = Some(s.overrides);
+    }
     let edit = st.overrides.get_or_insert(s.overrides);
     let row = |ui: &mut egui::Ui, label: &str, value: &mut Option<f64>, derived: f64| {
         ui.horizontal(|ui| {
@@ -280,6 +287,11 @@ fn settings(ui: &mut egui::Ui, s: &Snapshot, st: &mut PanelState, actions: &mut 
             actions.push(Action::Settings(*edit));
         }
     });
+    ui.small(
+        "An edit of the coefficients, index or model keeps these (given), so that the \
+         operators are re-weighted on the same atlas; All derived derives them for the \
+         material (a new preprocessing).",
+    );
 }
 
 fn lights(ui: &mut egui::Ui, s: &Snapshot, st: &mut PanelState, actions: &mut Vec<Action>) {
