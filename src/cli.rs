@@ -167,6 +167,11 @@ pub struct ViewArgs {
     /// pass), on the CPU, or `off`: the whole preprocessing for every edit.
     #[arg(long, value_enum, default_value = "device")]
     pub reweigh: crate::viewer::Reweigh,
+    /// Milliseconds a material or settings request must stay unchanged before it is
+    /// prepared (the preview shows every edit at once): a slider drag is prepared where it
+    /// stops, not at every value it passes.
+    #[arg(long, default_value_t = 200)]
+    pub settle_ms: u64,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -1516,6 +1521,7 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
             pre,
             overrides,
             reweigh: args.reweigh,
+            settle: std::time::Duration::from_millis(args.settle_ms),
             target_error: args.pre.target_error,
             cache: args.pre.cache_dir(),
             mode,

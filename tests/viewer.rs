@@ -303,6 +303,7 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     let dir = common::temp_dir("viewer-panel");
     let cache = dir.join("cache");
     let script = "frames 2; screenshot start\n\
+                  sigma-a 0.003 0.006 0.03; frames 1; sigma-a 0.0035 0.008 0.04; frames 1\n\
                   sigma-a 0.004 0.01 0.05; frames 1; screenshot preview; wait; frames 2\n\
                   screenshot exact; eta 1.0; model halfspace; wait; frames 2\n\
                   light-colour 0 1 0.6 0.4; light-intensity 0 1.5; light-direction 0 1 -1 -0.5\n\
@@ -312,8 +313,9 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     let mut view = scripted_view(&x, script, &cache, &dir);
     // The material edits re-weight the operators with the device's pass (the default, said
     // here so that a new default cannot drop the check): the saved scene's fresh
-    // preprocessing checks them.
-    view.args(["--reweigh", "device"]);
+    // preprocessing checks them. A request is prepared once it has stayed for 3 s, far
+    // longer than the frames between the drag's steps on a loaded machine.
+    view.args(["--reweigh", "device", "--settle-ms", "3000"]);
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(400));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
     assert!(stdout.contains("save scene: wrote"), "{stdout}");
@@ -323,6 +325,13 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     );
     assert!(
         stdout.contains("edit shown") && stdout.contains("(as a preview)"),
+        "{stdout}"
+    );
+    // The three-step drag of the absorption was prepared once, where it stopped (its last
+    // value is the edited view's, below).
+    assert_eq!(
+        stdout.matches("custom material (dipole) shown").count(),
+        1,
         "{stdout}"
     );
 

@@ -33,9 +33,10 @@
 //! model whose F is simulated runs the whole preprocessing (from the cache when it holds
 //! it). The next frame already shows a preview (the shown response scaled to the new total
 //! reflectance) where the model stays; the panel shows the stage, its progress and which
-//! material is shown, and the upload of the new data happens between two frames; edits made
-//! while one runs are queued, the latest winning. Relighting, camera moves and blending
-//! changes need no preprocessing.
+//! material is shown, and the upload of the new data happens between two frames. A request
+//! is prepared once it has stayed for `--settle-ms` and no run goes on, the latest winning:
+//! a slider drag is prepared where it stops. Relighting, camera moves and blending changes
+//! need no preprocessing.
 
 pub mod panel;
 pub mod script;
@@ -80,6 +81,11 @@ pub struct ViewConfig {
     pub overrides: SettingsOverrides,
     /// Where a material edit's weights are evaluated.
     pub reweigh: Reweigh,
+    /// How long a material or settings request must stay unchanged before it is prepared:
+    /// a slider drag (an edit a frame) is prepared where it stops rather than at each value
+    /// it passed, and its frames keep the cores meanwhile (the preview shows every edit at
+    /// once).
+    pub settle: std::time::Duration,
     /// Target error for the settings chosen after a material change.
     pub target_error: f64,
     /// Preprocessing cache, if any.
@@ -388,9 +394,11 @@ struct Running {
     edit_asked: Option<Instant>,
     /// What the image shows: the material and the settings it was prepared with.
     current: Wanted,
-    /// The latest material or settings asked for while a run was going (replaced by newer
-    /// edits; started when the run ends).
+    /// The latest material or settings asked for and not yet being prepared (replaced by
+    /// newer edits; started once it has settled and no run goes on).
     queued: Option<Wanted>,
+    /// When `queued` was asked for.
+    queued_at: Instant,
     status: String,
     timings: VecDeque<FrameTiming>,
     frame_instants: VecDeque<Instant>,
@@ -799,16 +807,28 @@ impl Running {
     }
 
     /// Prepares `w` now, or after the run going on (the latest request wins).
+    /// Asks for `w`: prepared once it has stayed for `view --settle-ms` and no run goes on
+    /// (the latest request wins); the preview shows it at once.
     fn request(&mut self, w: Wanted, app: &AppSettings) {
         if w != self.wanted() {
             self.edit_asked = Some(Instant::now());
         }
-        if self.job.is_some() {
-            self.queued = Some(w);
-        } else if w != self.current {
-            self.start_job(w, app);
-        }
+        self.queued = (self.job.is_some() || w != self.current).then_some(w);
+        self.queued_at = Instant::now();
+        self.start_settled(app);
         self.update_preview();
+    }
+
+    /// Starts the queued request once it has settled, unless a run goes on.
+    fn start_settled(&mut self, app: &AppSettings) {
+        if self.job.is_some() || self.queued_at.elapsed() < app.settle {
+            return;
+        }
+        if let Some(next) = self.queued.take() {
+            if next != self.current {
+                self.start_job(next, self.queued_at, app);
+            }
+        }
     }
 
     /// The preview of the material asked for while it is prepared: the shown operators'
@@ -830,7 +850,8 @@ impl Running {
         });
     }
 
-    fn start_job(&mut self, wanted: Wanted, app: &AppSettings) {
+    /// Prepares `wanted`, asked for at `asked`, on a background thread.
+    fn start_job(&mut self, wanted: Wanted, asked: Instant, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
         let mut scene = self.scene.clone();
         scene.material = wanted.material;
@@ -867,18 +888,25 @@ impl Running {
         self.status = format!("preprocessing {}...", wanted.label());
         self.job = Some(Job {
             wanted,
-            started: Instant::now(),
+            started: asked,
             progress,
             handle,
         });
     }
 
-    /// Takes a finished preprocessing run, if any, and starts a queued one.
+    /// Takes a finished preprocessing run, if any, and starts a settled request.
     fn poll_job(&mut self, app: &AppSettings) -> Result<()> {
-        if !self.job.as_ref().is_some_and(|j| j.handle.is_finished()) {
-            return Ok(());
+        if self.job.as_ref().is_some_and(|j| j.handle.is_finished()) {
+            self.take_job()?;
+            self.update_preview();
         }
-        let job = self.job.take().expect("checked above");
+        self.start_settled(app);
+        Ok(())
+    }
+
+    /// Shows a finished run's preprocessing (or says why it failed).
+    fn take_job(&mut self) -> Result<()> {
+        let job = self.job.take().expect("a finished run");
         let seconds = job.started.elapsed().as_secs_f64();
         let label = job.wanted.label();
         let Ok((out, kept)) = job.handle.join() else {
@@ -915,12 +943,6 @@ impl Running {
                 self.status = format!("{label} failed: {e:#}");
             }
         }
-        if let Some(next) = self.queued.take() {
-            if next != self.current {
-                self.start_job(next, app);
-            }
-        }
-        self.update_preview();
         Ok(())
     }
 
@@ -1391,6 +1413,8 @@ struct AppSettings {
     given: SettingsOverrides,
     /// Where a material edit's weights are evaluated.
     reweigh: Reweigh,
+    /// How long a material or settings request must stay unchanged before it is prepared.
+    settle: std::time::Duration,
     /// Folder for screenshots and saved scenes.
     out: PathBuf,
 }
@@ -1530,6 +1554,7 @@ impl App {
             edit_asked: None,
             current,
             queued: None,
+            queued_at: Instant::now(),
             status: String::new(),
             timings: VecDeque::with_capacity(TIMING_WINDOW + 1),
             frame_instants: VecDeque::with_capacity(TIMING_WINDOW + 1),
@@ -1724,7 +1749,7 @@ impl ApplicationHandler for App {
             let size = r.window.inner_size();
             if size.width == 0 || size.height == 0 {
                 // Minimised: sleep until an event arrives, but keep polling a running job.
-                el.set_control_flow(if r.job.is_some() {
+                el.set_control_flow(if r.busy() {
                     ControlFlow::WaitUntil(Instant::now() + std::time::Duration::from_millis(100))
                 } else {
                     ControlFlow::Wait
@@ -1757,6 +1782,7 @@ pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
             cache: config.cache.clone(),
             given: config.overrides,
             reweigh: config.reweigh,
+            settle: config.settle,
             out: config.out.clone(),
         },
         script: config.script.iter().cloned().collect(),
