@@ -245,6 +245,21 @@ struct JobOutput {
     how: String,
 }
 
+/// Whether preprocessings with settings `a` and `b` have the same atlas, nodes and operator
+/// entries: all settings but the walks' count, which shapes no geometry (it is 0 but for
+/// `volume`).
+fn same_geometry(
+    a: &crate::preprocess::settings::Settings,
+    b: &crate::preprocess::settings::Settings,
+) -> bool {
+    let geometry =
+        |s: &crate::preprocess::settings::Settings| crate::preprocess::settings::Settings {
+            walk_paths: 0,
+            ..*s
+        };
+    geometry(a) == geometry(b)
+}
+
 /// A material's preprocessing on the viewer's background thread: from the cache when it
 /// holds it; else, where the settings are the shown ones and the model's F integrates its
 /// profile, the shown atlas and nodes with every entry re-weighted for the new material (on
@@ -263,14 +278,7 @@ fn prepare_in_background(
     use crate::preprocess::{cache as store, operators::Operators, CacheOutcome, StageTimes};
     let choice = preprocess::choose(scene, overrides, target_error)?;
     let material = &scene.material;
-    // The walks' count is the only setting that shapes no geometry (it is 0 but for `volume`).
-    let geometry =
-        |s: &crate::preprocess::settings::Settings| crate::preprocess::settings::Settings {
-            walk_paths: 0,
-            ..*s
-        };
-    let same =
-        geometry(&choice.settings) == geometry(&shown.settings) && Reweigher::supports(material);
+    let same = same_geometry(&choice.settings, &shown.settings) && Reweigher::supports(material);
     let cached = |settings| {
         let dir = cache?;
         store::load::<Preprocessed>(dir, store::key(&scene.mesh, material, settings))
@@ -294,7 +302,7 @@ fn prepare_in_background(
             let s = &shown.settings;
             let (ops, how) = if on_device {
                 let mut r = match kept.take() {
-                    Some((k, r)) if k == *s => r,
+                    Some((k, r)) if same_geometry(&k, s) => r,
                     _ => {
                         report("re-weighting: the geometry to the device", 0, 1);
                         Reweigher::new(gpu, Geometry::of(shown))?
@@ -931,6 +939,14 @@ impl Running {
                 self.current = w;
                 self.pre = Arc::new(out.pre);
                 self.transfer = out.transfer;
+                // The device's copy of an atlas no longer shown is let go (its run has ended).
+                if self
+                    .reweigher
+                    .as_ref()
+                    .is_some_and(|(s, _)| !same_geometry(s, &self.pre.settings))
+                {
+                    self.reweigher = None;
+                }
                 self.reupload()?;
                 self.status = format!("{label} ready in {seconds:.1} s ({})", out.how);
                 println!(
