@@ -1829,3 +1829,49 @@ pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
     println!("view: closed after {frames} frames");
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::same_geometry;
+    use crate::preprocess::settings::Settings;
+
+    #[test]
+    fn only_the_walk_count_leaves_the_geometry() {
+        let a = Settings {
+            texel_mm: 0.5,
+            kernel_size: 7,
+            node_spacing_mm: 1.8,
+            prune_tolerance: 0.01,
+            chart_angle_deg: 60.0,
+            walk_paths: 0,
+        };
+        assert!(same_geometry(
+            &a,
+            &Settings {
+                walk_paths: 4096,
+                ..a
+            }
+        ));
+        for b in [
+            Settings { texel_mm: 0.6, ..a },
+            Settings {
+                kernel_size: 9,
+                ..a
+            },
+            Settings {
+                node_spacing_mm: 2.0,
+                ..a
+            },
+            Settings {
+                prune_tolerance: 0.02,
+                ..a
+            },
+            Settings {
+                chart_angle_deg: 45.0,
+                ..a
+            },
+        ] {
+            assert!(!same_geometry(&a, &b), "{b:?}");
+        }
+    }
+}
