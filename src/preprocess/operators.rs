@@ -630,15 +630,23 @@ impl FitFactor {
 
     /// H^-1 b = J (J^T b).
     fn solve(&self, b: &[f64]) -> Vec<f64> {
-        let (n, j) = (self.n, &self.j);
-        debug_assert_eq!(b.len(), n);
-        let jt_b: Vec<f64> = (0..n)
-            .map(|c| (0..n).map(|k| j[k * n + c] * b[k]).sum())
-            .collect();
-        (0..n)
-            .map(|k| (0..n).map(|c| j[k * n + c] * jt_b[c]).sum())
-            .collect()
+        debug_assert_eq!(b.len(), self.n);
+        columns_times(&self.j, self.n, 0, &transpose_times(&self.j, self.n, b))
     }
+}
+
+/// J^T v for an n x n row-major J.
+fn transpose_times(j: &[f64], n: usize, v: &[f64]) -> Vec<f64> {
+    (0..n)
+        .map(|c| (0..n).map(|k| j[k * n + c] * v[k]).sum())
+        .collect()
+}
+
+/// The product of J's columns `from..n` (n x n, row-major) with entries `from..n` of `d`.
+fn columns_times(j: &[f64], n: usize, from: usize, d: &[f64]) -> Vec<f64> {
+    (0..n)
+        .map(|k| (from..n).map(|c| j[k * n + c] * d[c]).sum())
+        .collect()
 }
 
 /// Goldfarb-Idnani's factors of an active set: J (n x n, row-major), whose first q columns
@@ -669,18 +677,12 @@ impl ActiveSet {
 
     /// d = J^T np.
     fn project(&self, np: &[f64]) -> Vec<f64> {
-        let n = self.n;
-        (0..n)
-            .map(|c| (0..n).map(|k| self.j[k * n + c] * np[k]).sum())
-            .collect()
+        transpose_times(&self.j, self.n, np)
     }
 
     /// z = J2 d2 over the columns past the active set.
     fn primal_direction(&self, d: &[f64]) -> Vec<f64> {
-        let (n, q) = (self.n, self.active.len());
-        (0..n)
-            .map(|k| (q..n).map(|c| self.j[k * n + c] * d[c]).sum())
-            .collect()
+        columns_times(&self.j, self.n, self.active.len(), d)
     }
 
     /// r = R^-1 d1 by back substitution.

@@ -672,10 +672,10 @@ impl Scene {
         if width > 16384 || height > 16384 {
             bail!("[output] size {width}x{height} exceeds 16384 pixels per side");
         }
-        // The default shadow map follows the atlas texel, known after the settings are chosen
-        // (`shadow::shadow_map_size`).
         let settings = crate::preprocess::settings::SettingsOverrides::from(desc.settings);
         crate::preprocess::settings::validate(&settings).context("[settings]")?;
+        // The default shadow map follows the atlas texel, known after the settings are chosen
+        // (`shadow::shadow_map_size`).
         let shadow_map = od.shadow_map;
         if let Some(s) = shadow_map {
             if !(16..=16384).contains(&s) {

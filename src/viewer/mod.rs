@@ -221,8 +221,8 @@ impl Rig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Reweigh {
     /// The device's compute pass (`passes::reweigh`). On lavapipe too: with the window
-    /// rendering on the same two cores, an edit on the default scene was shown 3.4-4.4 s
-    /// after it was asked for against 4.2-5.4 s with the CPU's weights (README).
+    /// rendering on the same two cores, a drag on the default scene reached its exact
+    /// image 3.6-4.3 s after it stopped, against 5.0-5.2 s with the CPU's weights (README).
     #[default]
     Device,
     /// The CPU, as a fresh preprocessing evaluates them.
@@ -279,14 +279,18 @@ fn prepare_in_background(
     let choice = preprocess::choose(scene, overrides, target_error)?;
     let material = &scene.material;
     let same = same_geometry(&choice.settings, &shown.settings) && Reweigher::supports(material);
-    let cached = |settings| {
-        let dir = cache?;
-        store::load::<Preprocessed>(dir, store::key(&scene.mesh, material, settings))
-            .ok()
-            .flatten()
-    };
     let reweigh = device.filter(|_| same);
-    let hit = reweigh.as_ref().and_then(|_| cached(&choice.settings));
+    // The cache first, as `preprocess::prepare` looks (which the other way calls).
+    let hit = match (&reweigh, cache) {
+        (Some(_), Some(dir)) => {
+            let key = store::key(&scene.mesh, material, &choice.settings);
+            store::load::<Preprocessed>(dir, key).unwrap_or_else(|e| {
+                tracing::warn!("{e:#}; re-weighting");
+                None
+            })
+        }
+        _ => None,
+    };
     let (pre, how) = match (hit, reweigh) {
         (Some(pre), _) => (pre, "from the cache".to_string()),
         (None, None) => {
@@ -785,12 +789,32 @@ impl Running {
         if *w == self.current {
             return Ok(self.pre.settings.pinned());
         }
+        // Pinned by an earlier edit (every step of a drag after its first): `choose` would
+        // give them back unchanged, so no scene is copied and nothing derived per frame.
+        let o = &w.overrides;
+        if !w.material.model.walks()
+            && o.walk_paths.is_none()
+            && o.texel_mm.is_some()
+            && o.kernel_size.is_some()
+            && o.node_spacing_mm.is_some()
+            && o.prune_tolerance.is_some()
+        {
+            return Ok(*o);
+        }
+        Ok(
+            preprocess::choose(&self.scene_for(w.material), o, app.target_error)?
+                .settings
+                .pinned(),
+        )
+    }
+
+    /// The scene with `material`, as a run for it sees it: without the scene file's settings,
+    /// which the wanted overrides hold already (and may have dropped).
+    fn scene_for(&self, material: Material) -> Scene {
         let mut scene = self.scene.clone();
-        scene.material = w.material;
+        scene.material = material;
         scene.settings = SettingsOverrides::default();
-        Ok(preprocess::choose(&scene, &w.overrides, app.target_error)?
-            .settings
-            .pinned())
+        scene
     }
 
     /// Asks for coefficients of one's own; `model` where it applies, else the index's own.
@@ -814,7 +838,6 @@ impl Running {
         Ok(())
     }
 
-    /// Prepares `w` now, or after the run going on (the latest request wins).
     /// Asks for `w`: prepared once it has stayed for `view --settle-ms` and no run goes on
     /// (the latest request wins); the preview shows it at once.
     fn request(&mut self, w: Wanted, app: &AppSettings) {
@@ -861,10 +884,7 @@ impl Running {
     /// Prepares `wanted`, asked for at `asked`, on a background thread.
     fn start_job(&mut self, wanted: Wanted, asked: Instant, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
-        let mut scene = self.scene.clone();
-        scene.material = wanted.material;
-        // The wanted settings hold the scene file's already (and may have dropped some).
-        scene.settings = SettingsOverrides::default();
+        let scene = self.scene_for(wanted.material);
         let (target, cache) = (app.target_error, app.cache.clone());
         let overrides = wanted.overrides;
         let shown = self.pre.clone();
