@@ -382,6 +382,11 @@ pub struct PreprocessArgs {
     /// Target relative error of the render.
     #[arg(long, default_value_t = 0.02)]
     pub target_error: f64,
+    /// Frame budget in ms of the default model's single-scattering pass (`render`, `view`):
+    /// where `halfspace-single`'s frame is over it, `halfspace` is used (default: 1.3x the
+    /// frame without the pass, measured; `preprocess::model`). A given model is kept.
+    #[arg(long)]
+    pub frame_budget_ms: Option<f64>,
     /// Cache folder (default: $XDG_CACHE_HOME/translucent or ~/.cache/translucent).
     #[arg(long)]
     pub cache: Option<PathBuf>,
@@ -516,26 +521,37 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     .flatten()
     .collect();
     let mut set = output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)?;
-    let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
+    let mut scene = scene;
+    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
+    let options = |mode| Options {
+        mode,
+        // The deterministic variant (texel buffers, derived lanes), not the measured one:
+        // the lanes change the order of the global sums, and the same command must write
+        // the same image every time.
+        readback_on_request: true,
+        ..Default::default()
+    };
+    let (scene, pre, probe) =
+        fit_frame_budget(&gpu, scene, pre, &args.pre, args.mode, options, true)?;
+    // The scene as rendered: a rule of the default model may have chosen another model, which
+    // the saved scene names.
     let resolved = scene.resolved.to_toml();
     let scene_warnings = scene.warnings.clone();
-    let mode = args
-        .mode
-        .unwrap_or_else(|| Blend::for_model(scene.material.model));
-    let mut renderer = Renderer::cached(
-        &gpu,
-        scene,
-        &pre,
-        Options {
-            mode,
-            // The deterministic variant (texel buffers, derived lanes), not the measured one:
-            // the lanes change the order of the global sums, and the same command must write
-            // the same image every time.
-            readback_on_request: true,
-            ..Default::default()
-        },
-        args.pre.cache_dir().as_deref(),
-    )?;
+    let mut renderer = match probe {
+        Some(r) => r,
+        None => {
+            let mode = args
+                .mode
+                .unwrap_or_else(|| Blend::for_model(scene.material.model));
+            Renderer::cached(
+                &gpu,
+                scene,
+                &pre,
+                options(mode),
+                args.pre.cache_dir().as_deref(),
+            )?
+        }
+    };
     let mut timings = Vec::with_capacity(args.frames);
     for f in 0..args.frames {
         let angle = if args.orbit_light {
@@ -657,7 +673,8 @@ fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
     if let Some(times) = args.reweigh {
         frame_count("--reweigh", times, 1)?;
     }
-    let scene = args.input.load()?;
+    let mut scene = args.input.load()?;
+    preprocess::model::apply_target_error(&mut scene, args.pre.target_error)?;
     if args.reweigh.is_some() && !crate::passes::reweigh::Reweigher::supports(&scene.material) {
         bail!(
             "--reweigh: model '{}' fills F by random walks, which cannot be re-weighted",
@@ -781,7 +798,8 @@ fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     frame_count("--warmup", args.warmup, 0)?;
     let scene = args.input.load()?;
     output::create_dir(&args.out)?;
-    let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, false)?;
+    let mut scene = scene;
+    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, false)?;
     let mode = args
         .mode
         .unwrap_or_else(|| Blend::for_model(scene.material.model));
@@ -1442,7 +1460,7 @@ fn chart_truth(
 /// work, and loads or builds the preprocessing (printing the reasons when `verbose`).
 fn open_and_prepare(
     cli: &Cli,
-    scene: &Scene,
+    scene: &mut Scene,
     pre: &PreprocessArgs,
     verbose: bool,
 ) -> Result<(std::sync::Arc<Gpu>, preprocess::Preprocessed)> {
@@ -1451,6 +1469,26 @@ fn open_and_prepare(
         device: cli.device.clone(),
         ..Default::default()
     })?;
+    let p = prepare_verbose(&gpu, scene, pre, verbose)?;
+    Ok((gpu, p))
+}
+
+/// The default model's rule of the target error applied to `scene`
+/// (`preprocess::model::apply_target_error`), then its settings chosen and printed (when
+/// `verbose`), and its preprocessing made or loaded.
+fn prepare_verbose(
+    gpu: &Gpu,
+    scene: &mut Scene,
+    pre: &PreprocessArgs,
+    verbose: bool,
+) -> Result<preprocess::Preprocessed> {
+    if let Some(b) = pre.frame_budget_ms {
+        if !(b.is_finite() && b > 0.0) {
+            bail!("--frame-budget-ms {b} must be a finite positive time");
+        }
+    }
+    preprocess::model::apply_target_error(scene, pre.target_error)?;
+    let scene = &*scene;
     let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
     let estimate = preprocess::estimate(&scene.mesh, &scene.material, &choice.settings);
     if verbose {
@@ -1474,7 +1512,49 @@ fn open_and_prepare(
     if let (true, CacheOutcome::Hit(path)) = (verbose, &outcome) {
         println!("# preprocessing loaded from {}", path.display());
     }
-    Ok((gpu, p))
+    Ok(p)
+}
+
+/// The frame budget's rule of the default model (`preprocess::model::FrameBudget`): where the
+/// default chose `halfspace-single`, a few frames of it are timed (renderer options from
+/// `options` for the blending mode, `mode` or the model's own); over the budget, `halfspace`
+/// is prepared instead. Returns the scene and preprocessing to render, and the probe's
+/// renderer when they are its own (it fitted).
+fn fit_frame_budget(
+    gpu: &std::sync::Arc<Gpu>,
+    mut scene: Scene,
+    pre: preprocess::Preprocessed,
+    args: &PreprocessArgs,
+    mode: Option<Blend>,
+    options: impl Fn(Blend) -> Options,
+    verbose: bool,
+) -> Result<(Scene, preprocess::Preprocessed, Option<Renderer>)> {
+    use preprocess::model;
+    if !model::needs_frame_probe(&scene) {
+        return Ok((scene, pre, None));
+    }
+    let mode = mode.unwrap_or_else(|| Blend::for_model(scene.material.model));
+    let cache = args.cache_dir();
+    let mut renderer = Renderer::cached(gpu, scene.clone(), &pre, options(mode), cache.as_deref())?;
+    let lights = renderer.orbit_lights(0.0);
+    let mut frames = Vec::with_capacity(model::PROBE_FRAMES);
+    for f in 0..model::PROBE_WARMUP + model::PROBE_FRAMES {
+        let t = renderer.frame(&lights)?;
+        if f >= model::PROBE_WARMUP {
+            frames.push(t);
+        }
+    }
+    let budget = model::FrameBudget::measure(&renderer.pass_names(), &frames, args.frame_budget_ms);
+    if verbose {
+        println!("# {}", budget.describe());
+    }
+    if budget.fits() {
+        return Ok((scene, pre, Some(renderer)));
+    }
+    drop(renderer);
+    model::use_halfspace(&mut scene, budget.reason())?;
+    let pre = prepare_verbose(gpu, &mut scene, args, verbose)?;
+    Ok((scene, pre, None))
 }
 
 fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
@@ -1502,14 +1582,26 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
         .map(|p| crate::environment::Environment::load(p).map(std::sync::Arc::new))
         .collect::<Result<Vec<_>>>()?;
     let event_loop = crate::viewer::connect()?;
-    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
-    for r in &choice.reasons {
-        println!("# {r}");
-    }
-    let bars = Bars::new();
-    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
-    let (pre, _) =
-        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
+    let mut scene = scene;
+    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
+    // The frame budget is measured off screen, on a device of the same choice as the
+    // window's, released before the window opens.
+    let (scene, pre, probe) = fit_frame_budget(
+        &gpu,
+        scene,
+        pre,
+        &args.pre,
+        args.mode,
+        |mode| Options {
+            mode,
+            readback_on_request: true,
+            ..Default::default()
+        },
+        true,
+    )?;
+    drop(probe);
+    check_validation(&gpu)?;
+    drop(gpu);
     let mode = args
         .mode
         .unwrap_or_else(|| Blend::for_model(scene.material.model));
@@ -1599,7 +1691,8 @@ fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
         anyhow::bail!("--reference-rays must be at least 2 and --stride at least 1");
     }
     frame_count("--frames", args.frames, 1)?;
-    let (gpu, pre) = open_and_prepare(cli, &scene, &args.pre, true)?;
+    let mut scene = scene;
+    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
     output::create_dir(&args.out)?;
     let reference = TexelReference::compute(&scene, &pre.atlas, args.stride, args.reference_rays);
     println!(

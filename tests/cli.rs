@@ -808,3 +808,105 @@ fn precompute_times_the_material_reweighting() {
     ]);
     fails_with(walks, "cannot be re-weighted");
 }
+
+/// The default model at eta = 1 keeps its single-scattering pass only within the frame budget
+/// and above the target error (`preprocess::model`); a given model is kept; the model rendered
+/// is the one the written scene names, so that it renders the same again.
+#[test]
+fn the_default_model_keeps_single_scattering_only_within_budget_and_target() {
+    let dir = temp_dir("frame-budget");
+    let scene = dir.join("sphere.toml");
+    std::fs::write(&scene, "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"skimmilk\"\neta = 1.0\n[output]\nwidth = 32\nheight = 32\n").unwrap();
+    let cache = dir.join("cache");
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.join(name);
+        let o = bin()
+            .arg("--validate")
+            .arg("render")
+            .arg(&scene)
+            .args(["--frames", "1", "--cache"])
+            .arg(&cache)
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let passes: Vec<String> = serde_json::from_str::<serde_json::Value>(
+            &std::fs::read_to_string(out.join("timings.json")).unwrap(),
+        )
+        .unwrap()["passes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["name"].as_str().unwrap().to_string())
+            .collect();
+        let written = std::fs::read_to_string(out.join("scene.toml")).unwrap();
+        (
+            String::from_utf8_lossy(&o.stdout).to_string(),
+            passes,
+            written,
+            out,
+        )
+    };
+    let single = |p: &[String]| p.iter().any(|n| n == "single");
+    // Within a budget it cannot miss: the pass stays, the scene names no model.
+    let (stdout, passes, written, _) = run("within", &["--frame-budget-ms", "1e6"]);
+    assert!(
+        stdout.contains("is within the budget 1000000.00 ms (given)"),
+        "{stdout}"
+    );
+    assert!(single(&passes), "{passes:?}");
+    assert!(!written.contains("model ="), "{written}");
+    // Over a budget it cannot meet: halfspace, said, rendered without the pass, and named in
+    // the written scene.
+    let (stdout, passes, written, out) = run("over", &["--frame-budget-ms", "0.001"]);
+    assert!(stdout.contains("model halfspace instead"), "{stdout}");
+    assert!(
+        stdout.contains("model halfspace: exact half-space profile of every order (eta = 1): the single-scattering pass does not fit the frame budget"),
+        "{stdout}"
+    );
+    assert!(!single(&passes), "{passes:?}");
+    assert!(written.contains("model = \"halfspace\""), "{written}");
+    // The written scene renders halfspace again, with no probe (its model is given now).
+    let o = bin()
+        .arg("render")
+        .arg(out.join("scene.toml"))
+        .args(["--frames", "1", "--frame-budget-ms", "1e6", "--out"])
+        .arg(dir.join("again"))
+        .arg("--cache")
+        .arg(&cache)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let again = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        !again.contains("frame budget") && again.contains("model halfspace: given"),
+        "{again}"
+    );
+    // Without a budget one is derived from the frame without the pass, and said.
+    let (stdout, _, _, _) = run("derived", &[]);
+    assert!(stdout.contains("1.3x the frame without it"), "{stdout}");
+    // A given model is kept whatever the budget.
+    let (stdout, passes, _, _) = run(
+        "given",
+        &["--model", "halfspace-single", "--frame-budget-ms", "0.001"],
+    );
+    assert!(!stdout.contains("frame budget"), "{stdout}");
+    assert!(single(&passes), "{passes:?}");
+    // Under a target error above single scattering's share (15-20 % for skim milk), the pass
+    // is left out before anything is timed.
+    let (stdout, passes, _, _) = run("coarse", &["--target-error", "0.5"]);
+    assert!(
+        stdout.contains("single scattering is") && stdout.contains("below the target error 50.0 %"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("frame budget"), "{stdout}");
+    assert!(!single(&passes), "{passes:?}");
+    // A budget that is no time is refused, named.
+    let mut c = bin();
+    c.args(["render", "--frame-budget-ms=-1", "--out"])
+        .arg(dir.join("bad"));
+    fails_with(c, "--frame-budget-ms -1 must be a finite positive time");
+    let _ = std::fs::remove_dir_all(&dir);
+}

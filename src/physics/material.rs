@@ -30,7 +30,9 @@ pub enum Model {
 
 impl Model {
     /// The most accurate model for a medium of relative index `eta`: the tabulated profile
-    /// where it applies (eta = 1), the dipole elsewhere.
+    /// where it applies (eta = 1), the dipole elsewhere. The commands may then leave its
+    /// single-scattering pass out (the target error and the frame budget:
+    /// `preprocess::model`).
     pub fn for_eta(eta: f64) -> Model {
         if eta == 1.0 {
             Model::HalfspaceSingle

@@ -5,6 +5,7 @@
 pub mod apply;
 pub mod atlas;
 pub mod cache;
+pub mod model;
 pub mod nodes;
 pub mod operators;
 pub mod settings;
@@ -105,6 +106,7 @@ pub fn choose(
         "model {}: {}",
         m.model.name(),
         match (m.model, m.model == crate::physics::Model::for_eta(m.eta)) {
+            _ if scene.model_reason.is_some() => scene.model_reason.as_deref().unwrap_or_default(),
             (crate::physics::Model::HalfspaceSingle, true) => {
                 "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1)"
             }

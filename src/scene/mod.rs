@@ -161,6 +161,10 @@ pub struct Scene {
     pub warnings: Vec<String>,
     /// What was adapted that needs no action (long triangles split): printed with the scene.
     pub notes: Vec<String>,
+    /// Why the material's model is what it is, where a rule of the default model that needs
+    /// more than the scene (the target error, the frame budget: `preprocess::model`) chose it;
+    /// printed with the derived settings.
+    pub model_reason: Option<String>,
 }
 
 /// Edges longer than this many times the mesh's vertex spacing are split
@@ -785,6 +789,7 @@ impl Scene {
             resolved: desc,
             warnings,
             notes,
+            model_reason: None,
         })
     }
 
