@@ -172,6 +172,11 @@ pub struct ViewArgs {
     /// stops, not at every value it passes.
     #[arg(long, default_value_t = 200)]
     pub settle_ms: u64,
+    /// Frame budget in ms of the default model's single-scattering pass: where
+    /// `halfspace-single`'s frame is over it, `halfspace` is used (default: 1.3x the frame
+    /// without the pass, measured; `preprocess::model`). A given model is kept.
+    #[arg(long, value_name = "MS")]
+    pub frame_budget_ms: Option<f64>,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -382,11 +387,6 @@ pub struct PreprocessArgs {
     /// Target relative error of the render.
     #[arg(long, default_value_t = 0.02)]
     pub target_error: f64,
-    /// Frame budget in ms of the default model's single-scattering pass (`render`, `view`):
-    /// where `halfspace-single`'s frame is over it, `halfspace` is used (default: 1.3x the
-    /// frame without the pass, measured; `preprocess::model`). A given model is kept.
-    #[arg(long)]
-    pub frame_budget_ms: Option<f64>,
     /// Cache folder (default: $XDG_CACHE_HOME/translucent or ~/.cache/translucent).
     #[arg(long)]
     pub cache: Option<PathBuf>,
@@ -448,6 +448,11 @@ pub struct RenderArgs {
     /// Write every frame as frame_NNNN.png.
     #[arg(long)]
     pub save_frames: bool,
+    /// Frame budget in ms of the default model's single-scattering pass: where
+    /// `halfspace-single`'s frame is over it, `halfspace` is used (default: 1.3x the frame
+    /// without the pass, measured; `preprocess::model`). A given model is kept.
+    #[arg(long, value_name = "MS")]
+    pub frame_budget_ms: Option<f64>,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -456,6 +461,16 @@ pub struct RenderArgs {
 /// Most frames a command renders or warms up with: a hundred thousand frames are hours on a
 /// CPU device; a count beyond that is a typo, refused before anything runs or is allocated.
 pub const MAX_FRAMES: usize = 100_000;
+
+/// Refuses a frame budget that is no time.
+fn frame_budget(ms: Option<f64>) -> Result<()> {
+    match ms {
+        Some(b) if !(b.is_finite() && b > 0.0) => {
+            bail!("--frame-budget-ms {b} must be a finite positive time")
+        }
+        _ => Ok(()),
+    }
+}
 
 /// Refuses a frame count outside `min..=MAX_FRAMES`, naming the flag.
 fn frame_count(flag: &str, n: usize, min: usize) -> Result<()> {
@@ -507,6 +522,7 @@ fn image_warnings(radiance: &[f32]) -> Vec<String> {
 
 fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     frame_count("--frames", args.frames, 1)?;
+    frame_budget(args.frame_budget_ms)?;
     let scene = args.input.load()?;
     println!(
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
@@ -531,8 +547,15 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         readback_on_request: true,
         ..Default::default()
     };
-    let (scene, pre, probe) =
-        fit_frame_budget(&gpu, scene, pre, &args.pre, args.mode, options, true)?;
+    let (scene, pre, probe) = fit_frame_budget(
+        &gpu,
+        scene,
+        pre,
+        &args.pre,
+        args.frame_budget_ms,
+        args.mode,
+        options,
+    )?;
     // The scene as rendered: a rule of the default model may have chosen another model, which
     // the saved scene names.
     let resolved = scene.resolved.to_toml();
@@ -1482,11 +1505,6 @@ fn prepare_verbose(
     pre: &PreprocessArgs,
     verbose: bool,
 ) -> Result<preprocess::Preprocessed> {
-    if let Some(b) = pre.frame_budget_ms {
-        if !(b.is_finite() && b > 0.0) {
-            bail!("--frame-budget-ms {b} must be a finite positive time");
-        }
-    }
     preprocess::model::apply_target_error(scene, pre.target_error)?;
     let scene = &*scene;
     let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
@@ -1525,9 +1543,9 @@ fn fit_frame_budget(
     mut scene: Scene,
     pre: preprocess::Preprocessed,
     args: &PreprocessArgs,
+    budget_ms: Option<f64>,
     mode: Option<Blend>,
     options: impl Fn(Blend) -> Options,
-    verbose: bool,
 ) -> Result<(Scene, preprocess::Preprocessed, Option<Renderer>)> {
     use preprocess::model;
     if !model::needs_frame_probe(&scene) {
@@ -1544,20 +1562,19 @@ fn fit_frame_budget(
             frames.push(t);
         }
     }
-    let budget = model::FrameBudget::measure(&renderer.pass_names(), &frames, args.frame_budget_ms);
-    if verbose {
-        println!("# {}", budget.describe());
-    }
+    let budget = model::FrameBudget::measure(&renderer.pass_names(), &frames, budget_ms);
+    println!("# {}", budget.describe());
     if budget.fits() {
         return Ok((scene, pre, Some(renderer)));
     }
     drop(renderer);
     model::use_halfspace(&mut scene, budget.reason())?;
-    let pre = prepare_verbose(gpu, &mut scene, args, verbose)?;
+    let pre = prepare_verbose(gpu, &mut scene, args, true)?;
     Ok((scene, pre, None))
 }
 
 fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
+    frame_budget(args.frame_budget_ms)?;
     // The script is checked before anything slow happens.
     let script = match &args.script {
         None => Vec::new(),
@@ -1591,13 +1608,13 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
         scene,
         pre,
         &args.pre,
+        args.frame_budget_ms,
         args.mode,
         |mode| Options {
             mode,
             readback_on_request: true,
             ..Default::default()
         },
-        true,
     )?;
     drop(probe);
     check_validation(&gpu)?;
