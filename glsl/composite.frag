@@ -31,6 +31,13 @@ layout(constant_id = 0) const bool TEXTURED = true;
 // True where the model computes single scattering per frame (its profile then holds the
 // higher orders only).
 layout(constant_id = 1) const bool SINGLE = false;
+// True where the profile's radiance is that of a half-space (`halfspace-single`): the view ray
+// gathers the higher orders only over its length inside the object (the `single` image's
+// alpha; 0 where unknown: no factor), 1 - e^(-sigma_t s) of the half-space's infinite one, the source taken as constant
+// along it (exact at grazing exit, where the ray stays at the surface's depth). A silhouette's
+// rim and a thin part give back less than a half-space there; the walks' lobe (`volume`)
+// holds this already.
+layout(constant_id = 2) const bool CHORD = false;
 
 // The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
 // (three square roots instead of a pow, which was a third of the former tone-mapping pass on
@@ -79,7 +86,11 @@ void main() {
     vec3 lobe = exit_lobe(cos_o) * max(1.0 + in_exit_slope * (cos_o - 2.0 / 3.0), vec3(0.0));
     vec3 l = fresnel_transmittance(frame.material.x, cos_o) * lobe * b / PI;
     if (SINGLE) {
-        l += texelFetch(single, ivec2(gl_FragCoord.xy), 0).rgb;
+        vec4 s = texelFetch(single, ivec2(gl_FragCoord.xy), 0);
+        if (CHORD && s.a > 0.0) {
+            l *= 1.0 - exp(-frame.sigma_t.rgb * s.a);
+        }
+        l += s.rgb;
     }
     out_radiance = vec4(l, 1.0);
     out_display = vec4(srgb_encode(l * push.exposure), 1.0);

@@ -9,6 +9,8 @@
 // (its depth without the shadow bias, from the `entry` pass) to the point (exact for a convex
 // object; where the light's path leaves and re-enters the object, the air between is counted
 // as medium).
+// Alpha holds the length of the ray inside (to the nearest back face; 0 where the pass found
+// none, as in a pixel it did not draw), for the composite's chord factor of the higher orders.
 // The ray is cut into STEPS intervals of equal optical depth in the least extinguishing
 // channel; over each, s + d_l(s) is taken as linear between its ends (d_l looked up at both),
 // so the exponential integrates exactly per channel.
@@ -102,5 +104,5 @@ void main() {
         }
         s0 = s1;
     }
-    out_single = vec4(frame.sigma_s.rgb / (4.0 * PI) * sum, 1.0);
+    out_single = vec4(frame.sigma_s.rgb / (4.0 * PI) * sum, s_exit);
 }

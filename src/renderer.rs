@@ -477,6 +477,7 @@ impl Renderer {
                 textured: scene.texture.is_some(),
                 single,
                 single_pass,
+                chord: scene.material.model == crate::physics::Model::HalfspaceSingle,
             },
             passes::composite::CompositeTargets {
                 hdr,

@@ -25,8 +25,14 @@ fn single_error(name: &str, truth_dir: &str) -> [f64; 3] {
     let out = r.render(1).unwrap();
     let c = r.captured(0, 0).unwrap().unwrap();
     common::assert_no_validation_messages(&gpu);
-    // The pass writes alpha 1 where it drew; the truth's alpha marks its coverage.
-    let single: Vec<f32> = c.single.iter().flatten().copied().collect();
+    // The pass's alpha is the view ray's length inside; coverage is the render's alpha, as the
+    // truth's alpha marks its own.
+    let single: Vec<f32> = c
+        .single
+        .iter()
+        .zip(out.radiance.chunks_exact(4))
+        .flat_map(|(s, r)| [s[0], s[1], s[2], r[3]])
+        .collect();
     assert_eq!(single.len(), out.radiance.len());
     assert!(single.iter().all(|v| v.is_finite() && *v >= 0.0));
     let e = metrics::compare_binned(&single, &truth, Some(&noise), w, h, 4);
@@ -96,4 +102,64 @@ fn the_references_single_scattering_matches_the_truth() {
             100.0 * e.rel_rms[c]
         );
     }
+}
+
+/// The view ray's length inside the object, which the pass writes in its alpha for the
+/// composite's chord factor (`halfspace-single`), against the chord of a sphere in closed form,
+/// 2 sqrt(R^2 - b^2) for a ray passing at b from the centre: within 1 % of the diameter
+/// wherever b < 0.95 R (nearer the rim the 96-segment sphere's facets decide), and short at
+/// the silhouette, where it matters.
+#[test]
+fn the_pass_measures_the_view_rays_length_inside() {
+    let radius = 10.0;
+    let scene = common::scene(&format!(
+        "[mesh]\nbuiltin = \"sphere\"\nradius = {radius}\nsegments = 96\n[material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n[output]\nwidth = 64\nheight = 64\n"
+    ));
+    let pre = common::preprocess(&scene, SettingsOverrides::default());
+    let gpu = common::gpu();
+    let options = Options {
+        capture: true,
+        ..Default::default()
+    };
+    let (w, h) = (scene.width, scene.height);
+    let mut r = Renderer::new(&gpu, scene.clone(), &pre, options).unwrap();
+    let out = r.render(1).unwrap();
+    let c = r.captured(0, 0).unwrap().unwrap();
+    common::assert_no_validation_messages(&gpu);
+    let (center, _) = scene.bounds();
+    let center = center.as_dvec3();
+    let r2 = radius * radius;
+    let (mut checked, mut worst, mut shortest) = (0, 0.0f64, f64::INFINITY);
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            if out.radiance[4 * i + 3] < 1.0 {
+                continue;
+            }
+            let (o, d) = translucent::reference::camera_ray(&scene, x, y);
+            let to = center - o;
+            let b2 = (to - d * to.dot(d)).length_squared();
+            let got = c.single[i][3] as f64;
+            shortest = shortest.min(got);
+            if b2 < 0.95 * 0.95 * r2 {
+                let want = 2.0 * (r2 - b2).sqrt();
+                worst = worst.max((got - want).abs() / (2.0 * radius));
+                checked += 1;
+            }
+        }
+    }
+    println!(
+        "chord: {checked} pixels, worst {:.3} % of the diameter, shortest {shortest:.2} mm",
+        100.0 * worst
+    );
+    assert!(checked > 1000, "{checked}");
+    assert!(
+        worst < 0.01,
+        "chord off by {:.2} % of the diameter",
+        100.0 * worst
+    );
+    assert!(
+        shortest < 0.5 * radius,
+        "no short chord at the rim: {shortest}"
+    );
 }

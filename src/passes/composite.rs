@@ -42,6 +42,10 @@ pub struct CompositeInputs {
     pub single: ResourceId,
     /// Whether the model has the single-scattering pass (the shader adds `single` only then).
     pub single_pass: bool,
+    /// Whether the profile's radiance is scaled by the view ray's length inside (the `single`
+    /// image's alpha): the half-space's higher orders gathered over a finite chord
+    /// (`halfspace-single`).
+    pub chord: bool,
 }
 
 /// The images `composite` writes.
@@ -88,7 +92,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     depth_format: DEPTH_FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     depth_bias: None,
-                    fragment_constants: &[i.textured as u32, i.single_pass as u32],
+                    fragment_constants: &[i.textured as u32, i.single_pass as u32, i.chord as u32],
                 },
                 set,
             )?;

@@ -454,6 +454,7 @@ impl Reference {
             .has_single_pass()
             .then(|| crate::truth::Tracer::for_single_scattering(scene).ok())
             .flatten();
+        let chord = scene.material.model == crate::physics::Model::HalfspaceSingle;
         let (w, h) = (scene.width, scene.height);
         let radiance: Vec<f32> = (0..h)
             .into_par_iter()
@@ -481,8 +482,18 @@ impl Reference {
                                 let mut scratch = crate::truth::Scratch::default();
                                 t.single_scattering(o, d, SINGLE_STEPS, &mut scratch)
                             });
+                            // The half-space's higher orders gathered over the view ray's
+                            // length inside only (the composite's chord factor).
+                            let inside = chord.then(|| chord_length(bvh, o, d, hit.t));
                             let l = |c: usize| {
-                                ft * profiles[c].exit_lobe(cos_o) * b[c] / std::f64::consts::PI
+                                let gathered = inside.flatten().map_or(1.0, |s| {
+                                    1.0 - (-(scene.material.sigma_s_prime[c]
+                                        + scene.material.sigma_a[c])
+                                        * s)
+                                        .exp()
+                                });
+                                ft * profiles[c].exit_lobe(cos_o) * b[c] * gathered
+                                    / std::f64::consts::PI
                                     + ss[c]
                             };
                             [l(0) as f32, l(1) as f32, l(2) as f32, 1.0]
@@ -506,6 +517,19 @@ impl Reference {
             settings,
         }
     }
+}
+
+/// The length inside the object of the camera ray `o + t d` that enters it at `entry`: to the
+/// first crossing after it that leaves the enclosed volume; None where there is none (an open
+/// mesh).
+fn chord_length(bvh: &Bvh, o: DVec3, d: DVec3, entry: f64) -> Option<f64> {
+    let merge = 1e-9 * entry.abs().max(1.0);
+    let mut crossings = Vec::new();
+    bvh.crossings_along(o, d, f64::INFINITY, merge, &mut Vec::new(), &mut crossings);
+    crossings
+        .iter()
+        .find(|c| c.t > entry + merge && c.net < 0)
+        .map(|c| c.t - entry)
 }
 
 #[cfg(test)]
