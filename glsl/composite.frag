@@ -31,12 +31,12 @@ layout(constant_id = 0) const bool TEXTURED = true;
 // True where the model computes single scattering per frame (its profile then holds the
 // higher orders only).
 layout(constant_id = 1) const bool SINGLE = false;
-// True where the profile's radiance is that of a half-space (`halfspace-single`): the view ray
-// gathers the higher orders only over its length inside the object (the `single` image's
-// alpha; 0 where unknown: no factor), 1 - e^(-sigma_t s) of the half-space's infinite one, the source taken as constant
-// along it (exact at grazing exit, where the ray stays at the surface's depth). A silhouette's
-// rim and a thin part give back less than a half-space there; the walks' lobe (`volume`)
-// holds this already.
+// True where the profile's radiance is that of a half-space (`Model::gathers_over_chord`): the
+// view ray gathers the higher orders only over its length inside the object (the `single`
+// image's alpha; 0 where unknown: no factor), 1 - e^(-sigma_t s) of the half-space's infinite
+// one, the source taken as constant along it (exact at grazing exit, where the ray stays at the
+// surface's depth). A silhouette's rim and a thin part give back less than a half-space there;
+// the walks' lobe (`volume`) holds this already.
 layout(constant_id = 2) const bool CHORD = false;
 
 // The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)

@@ -539,23 +539,8 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     let mut set = output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)?;
     let mut scene = scene;
     let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
-    let options = |mode| Options {
-        mode,
-        // The deterministic variant (texel buffers, derived lanes), not the measured one:
-        // the lanes change the order of the global sums, and the same command must write
-        // the same image every time.
-        readback_on_request: true,
-        ..Default::default()
-    };
-    let (scene, pre, probe) = fit_frame_budget(
-        &gpu,
-        scene,
-        pre,
-        &args.pre,
-        args.frame_budget_ms,
-        args.mode,
-        options,
-    )?;
+    let (scene, pre, probe) =
+        fit_frame_budget(&gpu, scene, pre, &args.pre, args.frame_budget_ms, args.mode)?;
     // The scene as rendered: a rule of the default model may have chosen another model, which
     // the saved scene names.
     let resolved = scene.resolved.to_toml();
@@ -570,7 +555,7 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
                 &gpu,
                 scene,
                 &pre,
-                options(mode),
+                image_options(mode),
                 args.pre.cache_dir().as_deref(),
             )?
         }
@@ -1533,11 +1518,23 @@ fn prepare_verbose(
     Ok(p)
 }
 
+/// The options of `render`'s renderer, and of the frame budget's probe, for blending `mode`:
+/// the deterministic variant (texel buffers, derived lanes), not the measured one (the lanes
+/// change the order of the global sums, and the same command must write the same image every
+/// time), reading back only on request.
+fn image_options(mode: Blend) -> Options {
+    Options {
+        mode,
+        readback_on_request: true,
+        ..Default::default()
+    }
+}
+
 /// The frame budget's rule of the default model (`preprocess::model::FrameBudget`): where the
-/// default chose `halfspace-single`, a few frames of it are timed (renderer options from
-/// `options` for the blending mode, `mode` or the model's own); over the budget, `halfspace`
-/// is prepared instead. Returns the scene and preprocessing to render, and the probe's
-/// renderer when they are its own (it fitted).
+/// default chose `halfspace-single`, a few frames of it are timed (blending `mode`, or the
+/// model's own; [`image_options`]); over the budget (`budget_ms`, or derived), `halfspace` is
+/// prepared instead. Returns the scene and preprocessing to render, and the probe's renderer
+/// when they are its own (it fitted).
 fn fit_frame_budget(
     gpu: &std::sync::Arc<Gpu>,
     mut scene: Scene,
@@ -1545,7 +1542,6 @@ fn fit_frame_budget(
     args: &PreprocessArgs,
     budget_ms: Option<f64>,
     mode: Option<Blend>,
-    options: impl Fn(Blend) -> Options,
 ) -> Result<(Scene, preprocess::Preprocessed, Option<Renderer>)> {
     use preprocess::model;
     if !model::needs_frame_probe(&scene) {
@@ -1553,7 +1549,13 @@ fn fit_frame_budget(
     }
     let mode = mode.unwrap_or_else(|| Blend::for_model(scene.material.model));
     let cache = args.cache_dir();
-    let mut renderer = Renderer::cached(gpu, scene.clone(), &pre, options(mode), cache.as_deref())?;
+    let mut renderer = Renderer::cached(
+        gpu,
+        scene.clone(),
+        &pre,
+        image_options(mode),
+        cache.as_deref(),
+    )?;
     let lights = renderer.orbit_lights(0.0);
     let mut frames = Vec::with_capacity(model::PROBE_FRAMES);
     for f in 0..model::PROBE_WARMUP + model::PROBE_FRAMES {
@@ -1603,19 +1605,8 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
     // The frame budget is measured off screen, on a device of the same choice as the
     // window's, released before the window opens.
-    let (scene, pre, probe) = fit_frame_budget(
-        &gpu,
-        scene,
-        pre,
-        &args.pre,
-        args.frame_budget_ms,
-        args.mode,
-        |mode| Options {
-            mode,
-            readback_on_request: true,
-            ..Default::default()
-        },
-    )?;
+    let (scene, pre, probe) =
+        fit_frame_budget(&gpu, scene, pre, &args.pre, args.frame_budget_ms, args.mode)?;
     drop(probe);
     check_validation(&gpu)?;
     drop(gpu);

@@ -477,7 +477,7 @@ impl Renderer {
                 textured: scene.texture.is_some(),
                 single,
                 single_pass,
-                chord: scene.material.model == crate::physics::Model::HalfspaceSingle,
+                chord: scene.material.model.gathers_over_chord(),
             },
             passes::composite::CompositeTargets {
                 hdr,

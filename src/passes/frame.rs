@@ -88,8 +88,8 @@ impl MaterialUniforms {
             let f = |c: usize| factors.as_ref().map_or(1.0, |f| f[c][k] as f32);
             [f(0), f(1), f(2), 1.0]
         });
-        let (s, a) = (m.sigma_s_prime, m.sigma_a);
-        let t = [0, 1, 2].map(|c| (s[c] + a[c]) as f32);
+        let s = m.sigma_s_prime;
+        let t = m.sigma_t().map(|t| t as f32);
         MaterialUniforms {
             incidence,
             material: [m.eta as f32, 1.0, 1.0, 1.0],

@@ -60,6 +60,14 @@ impl Model {
     pub fn walks(self) -> bool {
         self == Model::Volume
     }
+
+    /// Whether the profile's radiance is a half-space's gathered over the view ray's length
+    /// inside only (the composite's chord factor, and the reference's): the half-space model
+    /// with the single-scattering pass, which measures that length. `volume`'s walks measure
+    /// their exit lobe in the object itself, which holds it already.
+    pub fn gathers_over_chord(self) -> bool {
+        self == Model::HalfspaceSingle
+    }
 }
 
 /// A homogeneous medium, per RGB channel.
@@ -230,12 +238,10 @@ impl Material {
         if !self.takes_incidence_factor() {
             return None;
         }
-        Some([0, 1, 2].map(|c| {
-            let s = self.sigma_s_prime[c];
-            let t = s + self.sigma_a[c];
-            let albedo = if t > 0.0 { s / t } else { 0.0 };
-            incidence::factors(albedo, incidence::Scaled::Multiple)
-        }))
+        Some(
+            self.albedo()
+                .map(|albedo| incidence::factors(albedo, incidence::Scaled::Multiple)),
+        )
     }
 
     /// The profile of each channel under the material's model.
@@ -264,6 +270,23 @@ impl Material {
     /// The dipole of each channel.
     pub fn dipoles(&self) -> [Dipole; 3] {
         [0, 1, 2].map(|c| Dipole::new(self.sigma_s_prime[c], self.sigma_a[c], self.eta))
+    }
+
+    /// Extinction sigma_t' = sigma_s' + sigma_a per channel (1/mm).
+    pub fn sigma_t(&self) -> [f64; 3] {
+        [0, 1, 2].map(|c| self.sigma_s_prime[c] + self.sigma_a[c])
+    }
+
+    /// Single-scattering albedo sigma_s' / sigma_t' per channel (0 where nothing extinguishes).
+    pub fn albedo(&self) -> [f64; 3] {
+        let t = self.sigma_t();
+        [0, 1, 2].map(|c| {
+            if t[c] > 0.0 {
+                self.sigma_s_prime[c] / t[c]
+            } else {
+                0.0
+            }
+        })
     }
 
     /// Total diffuse reflectance per channel, under the material's model.

@@ -102,11 +102,9 @@ pub fn choose(
     );
     // The model is the material's; said with the derived settings, with why.
     let m = &scene.material;
-    choice.reasons.push(format!(
-        "model {}: {}",
-        m.model.name(),
+    // Where a rule of the default model that needed more than the scene chose it, its reason.
+    let why = scene.model_reason.as_deref().unwrap_or_else(|| {
         match (m.model, m.model == crate::physics::Model::for_eta(m.eta)) {
-            _ if scene.model_reason.is_some() => scene.model_reason.as_deref().unwrap_or_default(),
             (crate::physics::Model::HalfspaceSingle, true) => {
                 "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1)"
             }
@@ -122,7 +120,10 @@ pub fn choose(
             }
             (_, _) => "given",
         }
-    ));
+    });
+    choice
+        .reasons
+        .push(format!("model {}: {why}", m.model.name()));
     if let Some(f) = m.incidence_factors() {
         let at = |mu: f64| f.map(|f| crate::physics::incidence::interpolate(&f, mu));
         let (a, b) = (at(0.5), at(0.1));

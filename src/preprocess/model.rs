@@ -48,10 +48,7 @@ const SHARE_NODES: usize = 64;
 /// single scattering, under light from the whole hemisphere weighted by its cosine: the
 /// quantity the `single` pass carries apart from the profile.
 pub fn single_share(material: &Material) -> [f64; 3] {
-    [0, 1, 2].map(|c| {
-        let s = material.sigma_s_prime[c];
-        let t = s + material.sigma_a[c];
-        let albedo = if t > 0.0 { s / t } else { 0.0 };
+    material.albedo().map(|albedo| {
         if albedo <= 0.0 {
             return 0.0;
         }
@@ -155,14 +152,7 @@ impl FrameBudget {
         frames: &[crate::graph::timing::FrameTiming],
         given: Option<f64>,
     ) -> FrameBudget {
-        let median = |mut v: Vec<f64>| -> f64 {
-            v.retain(|x| x.is_finite());
-            if v.is_empty() {
-                return 0.0;
-            }
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
+        let median = |v: Vec<f64>| crate::graph::timing::Stats::of(&v).median_ms;
         let chain = [PassName::Entry, PassName::Thickness, PassName::Single];
         let chain_ms = pass_names
             .iter()

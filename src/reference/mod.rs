@@ -454,7 +454,8 @@ impl Reference {
             .has_single_pass()
             .then(|| crate::truth::Tracer::for_single_scattering(scene).ok())
             .flatten();
-        let chord = scene.material.model == crate::physics::Model::HalfspaceSingle;
+        let chord = scene.material.model.gathers_over_chord();
+        let sigma_t = scene.material.sigma_t();
         let (w, h) = (scene.width, scene.height);
         let radiance: Vec<f32> = (0..h)
             .into_par_iter()
@@ -486,12 +487,9 @@ impl Reference {
                             // length inside only (the composite's chord factor).
                             let inside = chord.then(|| chord_length(bvh, o, d, hit.t));
                             let l = |c: usize| {
-                                let gathered = inside.flatten().map_or(1.0, |s| {
-                                    1.0 - (-(scene.material.sigma_s_prime[c]
-                                        + scene.material.sigma_a[c])
-                                        * s)
-                                        .exp()
-                                });
+                                let gathered = inside
+                                    .flatten()
+                                    .map_or(1.0, |s| 1.0 - (-sigma_t[c] * s).exp());
                                 ft * profiles[c].exit_lobe(cos_o) * b[c] * gathered
                                     / std::f64::consts::PI
                                     + ss[c]
