@@ -945,7 +945,7 @@ const MAX_REFERENCE_SAMPLES: f64 = 5e7;
 fn reference(args: &ReferenceArgs) -> Result<()> {
     use crate::reference::{metrics, Reference, ReferenceSettings};
     let scene = args.input.load()?;
-    Reference::supports(scene.material.model)?;
+    Reference::supports(scene.material.model, &scene.mesh)?;
     let mut settings = ReferenceSettings::for_scene(&scene);
     if let Some(s) = args.spacing_mm {
         if !(s.is_finite() && s > 0.0) {
@@ -1224,30 +1224,54 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     use crate::reference::{Reference, ReferenceSettings};
     frame_count("--frames", args.frames, 1)?;
     let scene = args.input.load()?;
-    // The scene's own model leads the chart and needs its exact model; the others are
-    // compared with the truth alone where they have none (the walks).
-    Reference::supports(scene.material.model)?;
+    // Every model is compared with its exact model where the reference integrates it, and
+    // with the truth alone where it does not (the walks; the light across the air on an
+    // object that is not convex), which needs the truth.
+    let exact = Reference::supports(scene.material.model, &scene.mesh);
+    if let Err(e) = &exact {
+        anyhow::ensure!(
+            args.truth_spp > 0,
+            "{e}; and this chart has no truth (--truth-spp 0)"
+        );
+    }
     output::create_dir(&args.out)?;
     let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
     println!("automatic setting:");
     for r in &auto.reasons {
         println!("  {r}");
     }
-    let start = std::time::Instant::now();
-    let reference = Reference::compute(&scene, ReferenceSettings::for_scene(&scene));
-    println!(
-        "reference: {} samples, {:.1} s",
-        reference.samples,
-        start.elapsed().as_secs_f64()
-    );
-    output::write_exr(
-        &args.out.join("reference.exr"),
-        reference.width,
-        reference.height,
-        &reference.radiance,
-    )?;
+    let reference = match exact {
+        Ok(()) => {
+            let start = std::time::Instant::now();
+            let reference = Reference::compute(&scene, ReferenceSettings::for_scene(&scene));
+            println!(
+                "reference: {} samples, {:.1} s",
+                reference.samples,
+                start.elapsed().as_secs_f64()
+            );
+            output::write_exr(
+                &args.out.join("reference.exr"),
+                reference.width,
+                reference.height,
+                &reference.radiance,
+            )?;
+            Some(reference)
+        }
+        Err(_) => {
+            println!(
+                "model {}: against the truth alone (no exact-model reference on this mesh)",
+                scene.material.model.name()
+            );
+            None
+        }
+    };
     let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
     let truth = chart_truth(&scene, args, &cache_dir)?;
+    anyhow::ensure!(
+        reference.is_some() || truth.is_some(),
+        "model {}: neither its exact model (not integrated on this mesh) nor the truth (none for this scene) to compare with",
+        scene.material.model.name()
+    );
     if let Some(t) = &truth {
         output::write_exr(
             &args.out.join("truth.exr"),
@@ -1268,7 +1292,7 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         ..Default::default()
     })?;
     let baselines = crate::chart::Baselines {
-        reference: Some(&reference.radiance),
+        reference: reference.as_ref().map(|r| &r.radiance[..]),
         truth: truth
             .as_ref()
             .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
@@ -1285,6 +1309,7 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             Model::Dipole,
             Model::Halfspace,
             Model::HalfspaceSingle,
+            Model::HalfspaceAir,
             Model::Volume,
         ]
         .into_iter()
@@ -1302,11 +1327,12 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             .material
             .with_model(*m)
             .with_context(|| format!("--models {}", m.name()))?;
-        if m.walks() {
+        if Reference::supports(*m, &s.mesh).is_err() {
             anyhow::ensure!(
                 truth.is_some(),
-                "--models {}: the walks' only independent check is the volumetric truth, and this chart has none (--truth-spp 0)",
-                m.name()
+                "--models {}: {} the model's only independent check is the volumetric truth, and this chart has none (--truth-spp 0)",
+                m.name(),
+                if m.walks() { "the walks' F is a Monte Carlo of the medium;" } else { "on this mesh (not convex) the light across the air is in F;" }
             );
             println!(
                 "model {}: against the truth alone (no exact-model reference)",
@@ -1411,7 +1437,12 @@ fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         );
     }
     println!(
-        "wrote chart.csv, chart.svg, chart.png, reference.exr{} to {}",
+        "wrote chart.csv, chart.svg, chart.png{}{} to {}",
+        if reference.is_some() {
+            ", reference.exr"
+        } else {
+            ""
+        },
         if truth.is_some() {
             ", truth.exr, noise.exr"
         } else {

@@ -154,6 +154,20 @@ fn bad_scene_files_are_refused_clearly() {
     ]);
     walked.arg(dir.join("ref"));
     fails_with(walked, "whose independent check is volumetric truth");
+    // Nor the light across the air on an object that is not convex.
+    let mut air = bin();
+    air.args([
+        "reference",
+        "assets/scenes/truth/bunny-skimmilk.toml",
+        "--model",
+        "halfspace-air",
+        "--out",
+    ]);
+    air.arg(dir.join("ref"));
+    fails_with(
+        air,
+        "also carries light across the air between parts of the object",
+    );
     let mut walks = bin();
     walks.args([
         "precompute",
@@ -471,12 +485,14 @@ fn chart_runs_on_a_small_scene() {
     let csv = std::fs::read_to_string(dir.join("chart.csv")).unwrap();
     let rows: Vec<&str> = csv.lines().skip(1).collect();
     // auto, kernel 5, texel x2, prune 0.05: four settings, four modes each for the scene's
-    // model (halfspace-single at eta = 1), optimized for each of the other two; the walks at
-    // their automatic setting (quick), in simple blending.
-    assert_eq!(rows.len(), 25, "{csv}");
+    // model (halfspace-single at eta = 1), optimized for each of the other three
+    // (halfspace-air against the reference of halfspace-single, which it is on the convex
+    // sphere); the walks at their automatic setting (quick), in simple blending.
+    assert_eq!(rows.len(), 29, "{csv}");
     let model_of = |r: &str| r.rsplit(',').next().unwrap().to_string();
     for (model, count) in [
         ("halfspace-single", 16),
+        ("halfspace-air", 4),
         ("dipole", 4),
         ("halfspace", 4),
         ("volume", 1),

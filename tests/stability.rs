@@ -8,9 +8,10 @@
 //!
 //! Each case is also rendered with an index-matched boundary (eta = 1) and compared with its
 //! committed volumetric truth (`tests/truth-data/stability/`, 4x4 bins, the truth's noise
-//! removed), under the dipole and under the half-space model with its single-scattering pass
-//! (optimized blending), and under the random walks (`volume`, simple blending; closed meshes
-//! only): the last three columns, where the model itself is wrong. The walks' worst channel
+//! removed), under the dipole, under the half-space model with its single-scattering pass
+//! (optimized blending), the same with the light across the air (`halfspace-air`, closed
+//! meshes only), and under the random walks (`volume`, simple blending; closed meshes only):
+//! the last four columns, where the model itself is wrong. The walks' worst channel
 //! must stay under its own bound (about 30 % above the figure measured), so that a regression
 //! of the model against reality fails too. The truth images
 //! are made by this suite: `TRANSLUCENT_WRITE_TRUTH=512 cargo test --release --test stability
@@ -96,7 +97,7 @@ fn measure(
         100.0 * bound,
         volume_bound.map_or("-".to_string(), |b| format!("{:.1}", 100.0 * b))
     );
-    let volume = truth[2].iter().copied().fold(0.0, f64::max);
+    let volume = truth[3].iter().copied().fold(0.0, f64::max);
     match volume_bound {
         Some(b) => assert!(
             volume < b,
@@ -105,7 +106,7 @@ fn measure(
             100.0 * b
         ),
         None => assert!(
-            truth[2].iter().all(|v| v.is_nan()),
+            truth[3].iter().all(|v| v.is_nan()),
             "{name}: the walks took a mesh that is not closed"
         ),
     }
@@ -124,7 +125,7 @@ fn measure(
 /// binning with the truth's noise removed. With
 /// `TRANSLUCENT_WRITE_TRUTH=SPP` the truth is traced with SPP paths per pixel and channel and
 /// written first.
-fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [[f64; 3]; 3] {
+fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [[f64; 3]; 4] {
     // "sphere r = 15 mm, ketchup" -> "sphere-r-15-mm-ketchup".
     let slug = name
         .split(|c: char| !c.is_ascii_alphanumeric())
@@ -161,11 +162,18 @@ fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [[f64; 3]; 3] {
         })
     };
     let ((w, h, truth), (_, _, sigma)) = (read(&image), read(&noise));
-    // The dipole, the default model at eta = 1 (the half-space profile with single scattering
-    // as a pass) and the walks (`volume`, in its own blending; closed meshes only: NaN where
-    // the case's mesh is open).
-    [Model::Dipole, Model::HalfspaceSingle, Model::Volume].map(|model| {
-        if model.walks() && !s.mesh.is_closed() {
+    // The dipole, the half-space profile with single scattering as a pass, the same with the
+    // light across the air (the default at eta = 1 on a closed mesh) and the walks (`volume`,
+    // in its own blending); the last two on closed meshes only: NaN where the case's mesh is
+    // open.
+    [
+        Model::Dipole,
+        Model::HalfspaceSingle,
+        Model::HalfspaceAir,
+        Model::Volume,
+    ]
+    .map(|model| {
+        if (model.walks() || model.crosses_air()) && !s.mesh.is_closed() {
             return [f64::NAN; 3];
         }
         let mut s = s.clone();

@@ -256,9 +256,10 @@ pub struct Reweighed {
 }
 
 impl Reweigher {
-    /// Whether `material`'s operators can be re-weighted (its F integrates the profile).
+    /// Whether `material`'s operators can be re-weighted (its F integrates the profile alone:
+    /// not the walks, not the light across the air, which needs the mesh's rays).
     pub fn supports(material: &Material) -> bool {
-        !material.model.walks()
+        !material.model.walks() && !material.model.crosses_air()
     }
 
     /// Uploads `geometry` and makes the pipeline.
@@ -404,6 +405,7 @@ impl Reweigher {
                 rows,
                 walks: None,
                 exit_slopes: Vec::new(),
+                air: None,
                 // One submit times the taps and F together: all of it is counted with F.
                 seconds: [0.0, device_ms * 1e-3],
             },

@@ -105,6 +105,19 @@ impl HFunction {
     }
 }
 
+/// Nodes of [`cosine_weighted_mean`]'s quadrature.
+pub const HEMISPHERE_NODES: usize = 64;
+
+/// The mean of `f(mu)` over light from the whole hemisphere weighted by its cosine (mu^2
+/// uniform on (0, 1), where the weight 2 mu dmu is uniform): the midpoint rule on
+/// [`HEMISPHERE_NODES`] nodes in mu^2.
+pub fn cosine_weighted_mean(f: impl Fn(f64) -> f64) -> f64 {
+    (0..HEMISPHERE_NODES)
+        .map(|k| f(((k as f64 + 0.5) / HEMISPHERE_NODES as f64).sqrt()))
+        .sum::<f64>()
+        / HEMISPHERE_NODES as f64
+}
+
 /// Samples of the factor over the incidence cosine (`INCIDENCE_SAMPLES` in glsl/frame.glsl):
 /// at mu_k = (k / (n - 1))^2, dense towards grazing incidence where the factor bends.
 pub const SAMPLES: usize = 16;

@@ -20,6 +20,12 @@ pub enum Model {
     /// The exact half-space profile of orders >= 2 and single scattering computed per frame
     /// along each view ray (the `thickness` and `single` passes); eta = 1 only.
     HalfspaceSingle,
+    /// As `halfspace-single`, with the light that crosses the air between parts of the object
+    /// (`preprocess::air`): F keeps no pair whose segment leaves the medium and enters it
+    /// again, and light that leaves the surface towards another part of it enters there
+    /// (interreflection, folded into F). The same as `halfspace-single` on a convex object.
+    /// eta = 1 only.
+    HalfspaceAir,
     /// As `halfspace-single`, but the global response F from random walks inside the object
     /// (`preprocess::walk`): the light of orders >= 2 that crosses thin parts, goes around
     /// concavities and reaches the far side as the volume carries it, not by the half-space
@@ -47,13 +53,31 @@ impl Model {
             Model::Dipole => "dipole",
             Model::Halfspace => "halfspace",
             Model::HalfspaceSingle => "halfspace-single",
+            Model::HalfspaceAir => "halfspace-air",
             Model::Volume => "volume",
         }
     }
 
     /// Whether single scattering is its own pass.
     pub fn has_single_pass(self) -> bool {
-        matches!(self, Model::HalfspaceSingle | Model::Volume)
+        matches!(
+            self,
+            Model::HalfspaceSingle | Model::HalfspaceAir | Model::Volume
+        )
+    }
+
+    /// Whether F integrates the half-space profile of orders >= 2 with single scattering its
+    /// own pass: the models whose lamp light takes the oblique-incidence factor, whose
+    /// profile's radiance takes the chord factor, and whose pass the default's rules may
+    /// take out.
+    pub fn profile_with_single_pass(self) -> bool {
+        matches!(self, Model::HalfspaceSingle | Model::HalfspaceAir)
+    }
+
+    /// Whether F carries the light across the air between parts of the object
+    /// (`preprocess::air`).
+    pub fn crosses_air(self) -> bool {
+        self == Model::HalfspaceAir
     }
 
     /// Whether the global response comes from random walks in the mesh.
@@ -66,7 +90,7 @@ impl Model {
     /// with the single-scattering pass, which measures that length. `volume`'s walks measure
     /// their exit lobe in the object itself, which holds it already.
     pub fn gathers_over_chord(self) -> bool {
-        self == Model::HalfspaceSingle
+        self.profile_with_single_pass()
     }
 }
 
@@ -218,7 +242,7 @@ impl Material {
 
     /// Whether [`Material::incidence_factors`] has factors (without computing them).
     pub fn takes_incidence_factor(&self) -> bool {
-        self.model == Model::HalfspaceSingle
+        self.model.profile_with_single_pass()
     }
 
     /// Per channel, the light of orders >= 2 that a half-space gives back when it enters at
@@ -252,7 +276,7 @@ impl Material {
                 self.sigma_a[c],
                 self.eta,
             )),
-            Model::Halfspace | Model::HalfspaceSingle | Model::Volume => {
+            Model::Halfspace | Model::HalfspaceSingle | Model::HalfspaceAir | Model::Volume => {
                 Profile::Tabulated(Tabulated::new(
                     HalfSpaceTable::shipped(),
                     self.sigma_s_prime[c],

@@ -2,6 +2,7 @@
 //! material: the settings chosen from the scene, the atlas, the global response's nodes, and
 //! the operators (gather, global F, local kernels, blending).
 
+pub mod air;
 pub mod apply;
 pub mod atlas;
 pub mod cache;
@@ -92,6 +93,12 @@ pub fn choose(
     if scene.material.model.walks() && !scene.mesh.is_closed() {
         anyhow::bail!(
             "model {} walks inside the object, and this mesh is not closed (an open surface has no inside: a walk leaving through a hole would never return); use a closed mesh or another model",
+            scene.material.model.name()
+        );
+    }
+    if scene.material.model.crosses_air() && !scene.mesh.is_closed() {
+        anyhow::bail!(
+            "model {} carries light across the air between parts of the object, and this mesh is not closed (an open surface has no inside and outside to tell the air by); use a closed mesh or halfspace-single",
             scene.material.model.name()
         );
     }
@@ -412,6 +419,9 @@ impl Preprocessed {
             ),
             format!("kernels: {0} x {0} RGB per texel", o.kernel_size),
         ];
+        if let Some(a) = &o.air {
+            lines.push(a.describe());
+        }
         if let Some(w) = &o.walks {
             lines.push(format!(
                 "walks: {} per node and channel, {} in all, {:.1} collisions each, {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light",

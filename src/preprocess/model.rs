@@ -27,7 +27,7 @@
 //! of the scene computed here separates those cases (README, "Models beyond the dipole").
 
 use crate::passes::PassName;
-use crate::physics::incidence::HFunction;
+use crate::physics::incidence::{cosine_weighted_mean, HFunction};
 use crate::physics::{Material, Model};
 use crate::scene::Scene;
 
@@ -40,10 +40,6 @@ pub const PROBE_WARMUP: usize = 2;
 /// Frames timed for the budget; their medians decide.
 pub const PROBE_FRAMES: usize = 5;
 
-/// Cosine-weighted hemisphere nodes of [`single_share`]'s quadrature (midpoints in mu^2, where
-/// the weight 2 mu dmu is uniform).
-const SHARE_NODES: usize = 64;
-
 /// Per channel, the fraction of the light a half-space of this material gives back that is
 /// single scattering, under light from the whole hemisphere weighted by its cosine: the
 /// quantity the `single` pass carries apart from the profile.
@@ -53,13 +49,8 @@ pub fn single_share(material: &Material) -> [f64; 3] {
             return 0.0;
         }
         let h = HFunction::new(albedo);
-        let (mut single, mut all) = (0.0, 0.0);
-        for k in 0..SHARE_NODES {
-            // mu^2 uniform on (0, 1): the cosine-weighted hemisphere.
-            let mu = ((k as f64 + 0.5) / SHARE_NODES as f64).sqrt();
-            single += h.single(mu);
-            all += h.reflectance(mu);
-        }
+        let single = cosine_weighted_mean(|mu| h.single(mu));
+        let all = cosine_weighted_mean(|mu| h.reflectance(mu));
         if all > 0.0 {
             single / all
         } else {
@@ -72,7 +63,7 @@ pub fn single_share(material: &Material) -> [f64; 3] {
 /// share of the light ([`single_share`]) is below the target in every channel; None where the
 /// pass stays (or the material's model has none).
 pub fn without_single_pass(material: &Material, target_error: f64) -> Option<String> {
-    if material.model != Model::HalfspaceSingle {
+    if !material.model.profile_with_single_pass() {
         return None;
     }
     let share = single_share(material);
@@ -93,9 +84,10 @@ pub fn is_default(scene: &Scene) -> bool {
     scene.resolved.material.model.is_none()
 }
 
-/// Whether the frame budget's rule applies: the default chose `halfspace-single`.
+/// Whether the frame budget's rule applies: the default chose a model with the
+/// single-scattering pass.
 pub fn needs_frame_probe(scene: &Scene) -> bool {
-    is_default(scene) && scene.material.model == Model::HalfspaceSingle
+    is_default(scene) && scene.material.model.profile_with_single_pass()
 }
 
 /// The target error's rule ([`without_single_pass`]) applied to a scene whose model is the

@@ -238,6 +238,8 @@ pub struct Operators {
     /// Per node, the slope of the exit lobe per channel where the walks measured it
     /// ([`super::walk::exit_slope`]); empty otherwise (the profile's lobe applies).
     pub exit_slopes: Vec<[f32; 3]>,
+    /// What the light across the air did to F (`model = "halfspace-air"`).
+    pub air: Option<super::air::AirReport>,
 }
 
 /// The material's weights of the operators' entries before pruning and blending.
@@ -253,7 +255,9 @@ pub struct Weights {
     pub walks: Option<super::walk::WalkReport>,
     /// Per node, the exit lobe's slopes the walks measured (empty otherwise).
     pub exit_slopes: Vec<[f32; 3]>,
-    /// Seconds spent on the kernels and seam taps, and on F.
+    /// What the light across the air did to F, where the model carries it.
+    pub air: Option<super::air::AirReport>,
+    /// Seconds spent on the kernels and seam taps, and on F (the air's own in its report).
     pub seconds: [f64; 2],
 }
 
@@ -277,7 +281,7 @@ impl Weights {
         let kernels_s = clock.elapsed().as_secs_f64();
 
         let clock = std::time::Instant::now();
-        let (rows, walks, exit_slopes) = if material.model.walks() {
+        let (mut rows, walks, exit_slopes) = if material.model.walks() {
             // Single scattering is its own pass wherever the walks fill F.
             let min_order = 2;
             let (walked, report) = super::walk::walk_response(
@@ -293,12 +297,19 @@ impl Weights {
             let rows = global_rows(atlas, nodes, basis, &profiles, progress);
             (rows, None, Vec::new())
         };
+        let air = material.model.crosses_air().then(|| {
+            progress("air", 0, 1);
+            let report = super::air::apply(mesh, nodes, material, &mut rows);
+            progress("air", 1, 1);
+            report
+        });
         Weights {
             kernels,
             seams,
             rows,
             walks,
             exit_slopes,
+            air,
             seconds: [kernels_s, clock.elapsed().as_secs_f64()],
         }
     }
@@ -1127,6 +1138,7 @@ impl Operators {
             seconds: [weights.seconds[0], weights.seconds[1] + prune_s, 0.0],
             walks: weights.walks,
             exit_slopes: weights.exit_slopes,
+            air: weights.air,
         };
         ops.optimized = ops.fit_near_field(atlas, nodes, profiles, &basis.supports, progress);
         // What F carries beyond each mode's W depends on F, W and the gather, not on the

@@ -61,14 +61,14 @@ pub struct WalkReport {
 
 /// Where paths of one node start: the render triangles its basis function covers, with the
 /// integral of phi_p over each and the weights at the three corners.
-struct Sources {
+pub(super) struct Sources {
     /// Per node: (triangle, corner weights), and the cumulative integral.
     triangles: Vec<Vec<(u32, [f64; 3])>>,
     cumulative: Vec<Vec<f64>>,
 }
 
 /// The weight phi_p at each corner of triangle `tri` for every node p touching it.
-fn corner_weights(mesh: &Mesh, nodes: &Nodes, tri: usize) -> Vec<(u32, [f64; 3])> {
+pub(super) fn corner_weights(mesh: &Mesh, nodes: &Nodes, tri: usize) -> Vec<(u32, [f64; 3])> {
     let mut out: Vec<(u32, [f64; 3])> = Vec::with_capacity(6);
     for k in 0..3 {
         let v = mesh.indices[3 * tri + k] as usize;
@@ -86,12 +86,12 @@ fn corner_weights(mesh: &Mesh, nodes: &Nodes, tri: usize) -> Vec<(u32, [f64; 3])
     out
 }
 
-fn triangle(mesh: &Mesh, tri: usize) -> [DVec3; 3] {
+pub(super) fn triangle(mesh: &Mesh, tri: usize) -> [DVec3; 3] {
     std::array::from_fn(|k| mesh.positions[mesh.indices[3 * tri + k] as usize].as_dvec3())
 }
 
 impl Sources {
-    fn new(mesh: &Mesh, nodes: &Nodes) -> Sources {
+    pub(super) fn new(mesh: &Mesh, nodes: &Nodes) -> Sources {
         let n = nodes.positions.len();
         let mut triangles: Vec<Vec<(u32, [f64; 3])>> = vec![Vec::new(); n];
         for tri in 0..mesh.triangle_count() {
@@ -121,12 +121,12 @@ impl Sources {
     }
 
     /// Integral of phi_p over the surface.
-    fn area(&self, p: usize) -> f64 {
+    pub(super) fn area(&self, p: usize) -> f64 {
         self.cumulative[p].last().copied().unwrap_or(0.0)
     }
 
     /// A point of the surface drawn with density phi_p / A_p: (triangle, barycentrics).
-    fn sample(&self, p: usize, rng: &mut Rng) -> (usize, [f64; 3]) {
+    pub(super) fn sample(&self, p: usize, rng: &mut Rng) -> (usize, [f64; 3]) {
         let cum = &self.cumulative[p];
         let total = cum.last().copied().unwrap_or(0.0);
         let u = rng.uniform() * total;

@@ -423,13 +423,23 @@ pub fn b_at(scene: &Scene, settings: ReferenceSettings, points: &[DVec3]) -> Vec
 pub const SINGLE_STEPS: u32 = 48;
 
 impl Reference {
-    /// Refuses a model this reference does not integrate: the volume model's F is itself a
-    /// Monte Carlo of the medium in the mesh, so its independent check is `truth`, not an
-    /// integral of a radial profile.
-    pub fn supports(model: crate::physics::Model) -> anyhow::Result<()> {
+    /// Refuses a model this reference does not integrate on `mesh`: the volume model's F is
+    /// itself a Monte Carlo of the medium in the mesh, so its independent check is `truth`, not
+    /// an integral of a radial profile; the light across the air (`halfspace-air`) is decided
+    /// per pair of nodes and traced between them, checked against `truth` too, except on a
+    /// convex object, where it carries nothing and the model is `halfspace-single`'s.
+    pub fn supports(
+        model: crate::physics::Model,
+        mesh: &crate::scene::mesh::Mesh,
+    ) -> anyhow::Result<()> {
         anyhow::ensure!(
             !model.walks(),
             "the exact-model reference integrates a radial profile; model {} fills F by random walks in the mesh, whose independent check is volumetric truth (`translucent truth`, eta = 1): compare with that instead",
+            model.name()
+        );
+        anyhow::ensure!(
+            !model.crosses_air() || mesh.is_convex(),
+            "the exact-model reference integrates a radial profile over the surface at the Euclidean distance; model {} also carries light across the air between parts of the object (F without the pairs whose segment crosses the air, and interreflection), whose independent check is volumetric truth (`translucent truth`, eta = 1); `--model halfspace-single` is the same model without the air (on a convex object, where the air carries nothing, the two are one and this reference integrates both)",
             model.name()
         );
         Ok(())

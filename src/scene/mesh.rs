@@ -272,6 +272,66 @@ impl Mesh {
         !edges.is_empty() && edges.values().all(|&n| n == 2)
     }
 
+    /// Whether the mesh bounds one convex body: closed, one connected surface, and convex at
+    /// every edge (the far corner of each edge's other triangle lies on or behind the plane of
+    /// the first, to a millionth of the object's size). A closed connected surface that is
+    /// locally convex everywhere bounds a convex body (Hadamard's theorem), so no segment
+    /// between two of its points leaves it and no point of it sees another across the air.
+    pub fn is_convex(&self) -> bool {
+        if !self.is_closed() {
+            return false;
+        }
+        let weld = self.welded();
+        let orientation = if self.signed_volume() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let tol = self.bounding_sphere().1 as f64 * 1e-6;
+        let tris = self.triangle_count();
+        // Per welded edge: the triangles on it and each one's corner off the edge.
+        let mut edges: std::collections::HashMap<(u32, u32), Vec<(usize, u32)>> =
+            std::collections::HashMap::new();
+        for t in 0..tris {
+            let v = [0, 1, 2].map(|k| weld[self.indices[3 * t + k] as usize]);
+            for k in 0..3 {
+                let (a, b) = (v[k], v[(k + 1) % 3]);
+                if a != b {
+                    edges
+                        .entry((a.min(b), a.max(b)))
+                        .or_default()
+                        .push((t, v[(k + 2) % 3]));
+                }
+            }
+        }
+        let mut parent: Vec<usize> = (0..tris).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let corner =
+            |t: usize, k: usize| self.positions[self.indices[3 * t + k] as usize].as_dvec3();
+        for sides in edges.values() {
+            let [(t1, _), (t2, far2)] = [sides[0], sides[1]];
+            let (a, b, c) = (corner(t1, 0), corner(t1, 1), corner(t1, 2));
+            let n = (b - a).cross(c - a);
+            let len = n.length();
+            if len > 0.0 {
+                let far = self.positions[far2 as usize].as_dvec3();
+                if (far - a).dot(n / len) * orientation > tol {
+                    return false;
+                }
+            }
+            let (r1, r2) = (root(&mut parent, t1), root(&mut parent, t2));
+            parent[r1] = r2;
+        }
+        let first = root(&mut parent, 0);
+        (0..tris).all(|t| root(&mut parent, t) == first)
+    }
+
     /// Per vertex, the first vertex at the same position, to a millionth of the object's size
     /// (seams of normals or texture coordinates split vertices that are one point of the
     /// surface, and generated meshes repeat seam vertices with rounding differences: a UV
@@ -924,6 +984,30 @@ fn load_options() -> tobj::LoadOptions {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Convex: a sphere and a box; not: two boxes apart, a box with a dent, an open box.
+    #[test]
+    fn convexity_is_told_by_the_edges_and_the_parts() {
+        assert!(Mesh::sphere(10.0, 24).is_convex());
+        assert!(Mesh::cuboid(Vec3::new(10.0, 4.0, 6.0), 6).is_convex());
+        let mut two = Mesh::cuboid(Vec3::splat(10.0), 4);
+        let mut other = Mesh::cuboid(Vec3::splat(10.0), 4);
+        other.transform(glam::Mat4::from_translation(Vec3::new(12.0, 0.0, 0.0)));
+        two.append(&other);
+        assert!(two.is_closed() && !two.is_convex());
+        // One vertex in the middle of the top face pushed in.
+        let mut dented = Mesh::cuboid(Vec3::splat(10.0), 4);
+        let centre = dented
+            .positions
+            .iter()
+            .position(|p| p.x.abs() < 1e-4 && p.z.abs() < 1e-4 && p.y > 4.9)
+            .unwrap();
+        dented.positions[centre].y -= 2.0;
+        assert!(dented.is_closed() && !dented.is_convex());
+        let mut open = Mesh::cuboid(Vec3::splat(10.0), 2);
+        open.indices.truncate(open.indices.len() - 3);
+        assert!(!open.is_convex());
+    }
 
     #[test]
     fn procedural_shapes_are_closed_outward_and_measure_right() {

@@ -656,13 +656,9 @@ impl Scene {
             // half-space profile of every order carries the sky's single scattering too
             // (against the truth under the shipped sky: 0.86-0.88 of its mean instead of
             // 0.75-0.81; README "Environment lighting").
-            None if environment.is_some()
-                && material.model == crate::physics::Model::HalfspaceSingle =>
-            {
-                material
-                    .with_model(crate::physics::Model::Halfspace)
-                    .context("[material]")?
-            }
+            None if environment.is_some() && material.model.profile_with_single_pass() => material
+                .with_model(crate::physics::Model::Halfspace)
+                .context("[material]")?,
             None => material,
         };
 
