@@ -28,7 +28,7 @@
 //! (`Mesh::is_convex` lets the exact-model reference integrate the model there).
 
 use super::nodes::Nodes;
-use super::walk::{corner_weights, triangle, Sources};
+use super::walk::{corner_weights, triangle, Surface};
 use crate::geometry::bvh::Bvh;
 use crate::physics::incidence::{cosine_weighted_mean, HFunction};
 use crate::physics::profile::{HalfSpaceTable, Orders, Profile, Tabulated};
@@ -155,15 +155,12 @@ pub fn transfer(
     rays: u32,
 ) -> (Vec<Vec<(u32, Rgb)>>, f64) {
     let n = nodes.positions.len();
-    let sources = Sources::new(mesh, nodes);
-    let bvh = Bvh::new(&mesh.positions, &mesh.indices);
-    let orientation = if mesh.signed_volume() < 0.0 {
-        -1.0
-    } else {
-        1.0
-    };
-    let (_, radius) = mesh.bounding_sphere();
-    let eps = 1e-6 * (radius as f64).max(1e-3);
+    let Surface {
+        sources,
+        bvh,
+        orientation,
+        eps,
+    } = Surface::new(mesh, nodes);
     let rows: Vec<(Vec<(u32, Rgb)>, f64)> = (0..n)
         .into_par_iter()
         .map(|p| {
@@ -451,6 +448,7 @@ pub fn apply(
 
 #[cfg(test)]
 mod tests {
+    use super::super::walk::Sources;
     use super::*;
     use crate::physics::Model;
     use glam::{Mat4, Vec3};

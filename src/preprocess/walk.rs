@@ -149,6 +149,32 @@ impl Sources {
     }
 }
 
+/// What tracing from the surface of a closed mesh needs: where each node's points are drawn,
+/// the ray-casting structure, the sign that turns a triangle's winding normal outward, and an
+/// offset off the surface (a millionth of the object's size).
+pub(super) struct Surface {
+    pub(super) sources: Sources,
+    pub(super) bvh: Bvh,
+    pub(super) orientation: f64,
+    pub(super) eps: f64,
+}
+
+impl Surface {
+    pub(super) fn new(mesh: &Mesh, nodes: &Nodes) -> Surface {
+        let (_, radius) = mesh.bounding_sphere();
+        Surface {
+            sources: Sources::new(mesh, nodes),
+            bvh: Bvh::new(&mesh.positions, &mesh.indices),
+            orientation: if mesh.signed_volume() < 0.0 {
+                -1.0
+            } else {
+                1.0
+            },
+            eps: 1e-6 * (radius as f64).max(1e-3),
+        }
+    }
+}
+
 /// One source node's walks: (receiver, deposit per channel and the same weighted by the exit
 /// cosine), the counters (paths, collisions, cut, re-entries) and the flux that left.
 type Column = (Vec<(u32, [f64; 6])>, [u64; 4], [f64; 3]);
@@ -165,15 +191,12 @@ pub fn walk_response(
     progress: super::operators::Progress<'_>,
 ) -> (Walked, WalkReport) {
     let n = nodes.positions.len();
-    let sources = Sources::new(mesh, nodes);
-    let bvh = Bvh::new(&mesh.positions, &mesh.indices);
-    let orientation = if mesh.signed_volume() < 0.0 {
-        -1.0
-    } else {
-        1.0
-    };
-    let (_, radius) = mesh.bounding_sphere();
-    let eps = 1e-6 * (radius as f64).max(1e-3);
+    let Surface {
+        sources,
+        bvh,
+        orientation,
+        eps,
+    } = Surface::new(mesh, nodes);
     // The reduced medium, isotropic: the truth's with g = 0.
     let medium = crate::truth::Medium::new(material, 0.0);
     let done = std::sync::atomic::AtomicU64::new(0);
