@@ -31,7 +31,6 @@ use super::nodes::Nodes;
 use super::walk::{corner_weights, triangle, Surface};
 use crate::geometry::bvh::Bvh;
 use crate::physics::incidence::{cosine_weighted_mean, HFunction};
-use crate::physics::profile::{HalfSpaceTable, Orders, Profile, Tabulated};
 use crate::physics::{Material, Rgb};
 use crate::scene::mesh::Mesh;
 use crate::truth::rng::Rng;
@@ -130,37 +129,20 @@ pub fn crosses_air(bvh: &Bvh, a: DVec3, b: DVec3) -> bool {
     l > 0.0 && bvh.occluded(a, (b - a) / l, l)
 }
 
-/// The exit lobe of every order per channel (the light a node sends across the air is all of
-/// its exitance, single scattering included).
-fn all_orders_profiles(material: &Material) -> [Profile; 3] {
-    [0, 1, 2].map(|c| {
-        Profile::Tabulated(Tabulated::new(
-            HalfSpaceTable::shipped(),
-            material.sigma_s_prime[c],
-            material.sigma_a[c],
-            Orders::All,
-        ))
-    })
-}
-
 /// G's rows: per receiving node p, (source node q, per channel G_pq) with
 /// E'_p = sum_q G_pq B_q; `rays` cosine-distributed directions per node from points drawn
 /// with density phi_p / A_p, the light leaving the point met at exit cosine mu with radiance
 /// `lobe(mu)` times a Lambertian exit's. Also the mean fraction of directions that met the
 /// object.
-pub fn transfer(
+pub(super) fn transfer(
     mesh: &Mesh,
     nodes: &Nodes,
+    surface: &Surface,
     lobe: impl Fn(f64) -> Rgb + Sync,
     rays: u32,
 ) -> (Vec<Vec<(u32, Rgb)>>, f64) {
     let n = nodes.positions.len();
-    let Surface {
-        sources,
-        bvh,
-        orientation,
-        eps,
-    } = Surface::new(mesh, nodes);
+    let (sources, bvh, eps) = (&surface.sources, &surface.bvh, surface.eps);
     let rows: Vec<(Vec<(u32, Rgb)>, f64)> = (0..n)
         .into_par_iter()
         .map(|p| {
@@ -173,7 +155,7 @@ pub fn transfer(
             for _ in 0..rays {
                 let (tri, b) = sources.sample(p, &mut rng);
                 let [v0, v1, v2] = triangle(mesh, tri);
-                let normal = (v1 - v0).cross(v2 - v0).normalize() * orientation;
+                let normal = surface.outward_normal(mesh, tri);
                 // Cosine-distributed about the outward normal.
                 let (u1, u2) = (rng.uniform(), rng.uniform());
                 let (sin, cos) = (u1.sqrt(), (1.0 - u1).sqrt());
@@ -184,9 +166,8 @@ pub fn transfer(
                 let Some(hit) = bvh.intersect(x, d, f64::INFINITY) else {
                     continue;
                 };
-                let [a, bb, c] = triangle(mesh, hit.triangle as usize);
                 // The face met must turn towards the ray (the light leaves it towards p).
-                let mu = -((bb - a).cross(c - a).normalize() * orientation).dot(d);
+                let mu = -surface.outward_normal(mesh, hit.triangle as usize).dot(d);
                 if hit.t <= 10.0 * eps || mu <= 0.0 {
                     continue;
                 }
@@ -237,28 +218,27 @@ pub struct Scales {
 impl Scales {
     /// The factors of `material`.
     pub fn of(material: &Material) -> Scales {
-        if !material.model.has_single_pass() {
+        if !material.model.profile_with_single_pass() {
             return Scales {
                 source: [1.0; 3],
                 receiver: [1.0; 3],
             };
         }
-        let per_channel = material.albedo().map(|albedo| {
+        let share = super::model::single_share(material);
+        let receiver = material.albedo().map(|albedo| {
             if albedo <= 0.0 {
-                return (1.0, 1.0);
+                return 1.0;
             }
             let h = HFunction::new(albedo);
-            let all = cosine_weighted_mean(|mu| h.reflectance(mu));
-            let multiple = cosine_weighted_mean(|mu| h.multiple(mu));
             let normal = h.multiple(1.0);
-            if multiple <= 0.0 || normal <= 0.0 {
-                return (1.0, 1.0);
+            if normal <= 0.0 {
+                return 1.0;
             }
-            (all / multiple, all / normal)
+            cosine_weighted_mean(|mu| h.reflectance(mu)) / normal
         });
         Scales {
-            source: per_channel.map(|s| s.0),
-            receiver: per_channel.map(|s| s.1),
+            source: share.map(|s| 1.0 / (1.0 - s)),
+            receiver,
         }
     }
 }
@@ -384,7 +364,8 @@ pub fn apply(
 ) -> AirReport {
     let mut report = AirReport::default();
     let clock = std::time::Instant::now();
-    let bvh = Bvh::new(&mesh.positions, &mesh.indices);
+    // One BVH for the segment tests and G's rays.
+    let surface = Surface::new(mesh, nodes);
     let positions: Vec<DVec3> = nodes.positions.iter().map(|p| p.as_dvec3()).collect();
     let normals: Vec<DVec3> = nodes.normals.iter().map(|n| n.as_dvec3()).collect();
     let pull = PULL_SPACINGS * nodes.spacing_mm;
@@ -393,6 +374,18 @@ pub fn apply(
             .flat_map(|r| r.iter().map(move |e| e.1[c]))
             .sum()
     });
+    // Whether each pair crosses the air, tested once per pair (the segment from the node of
+    // lower index): row q holds the answers for the nodes p < q.
+    let n = positions.len();
+    let pulled: Vec<DVec3> = (0..n).map(|p| positions[p] - normals[p] * pull).collect();
+    let across: Vec<Vec<bool>> = (0..n)
+        .into_par_iter()
+        .map(|q| {
+            (0..q)
+                .map(|p| crosses_air(&surface.bvh, pulled[p], pulled[q]))
+                .collect()
+        })
+        .collect();
     let counts: Vec<(u64, u64, Rgb)> = rows
         .par_iter_mut()
         .enumerate()
@@ -404,11 +397,7 @@ pub fn apply(
                     continue;
                 }
                 pairs += 1;
-                if crosses_air(
-                    &bvh,
-                    positions[p] - normals[p] * pull,
-                    positions[q] - normals[q] * pull,
-                ) {
+                if across[p.max(q)][p.min(q)] {
                     dropped += 1;
                     carried += e.1;
                     e.1 = Rgb::ZERO;
@@ -431,9 +420,15 @@ pub fn apply(
     report.seconds[0] = clock.elapsed().as_secs_f64();
 
     let clock = std::time::Instant::now();
-    let profiles = all_orders_profiles(material);
+    // The exit lobe of every order (the light a node sends across the air is all of its
+    // exitance, single scattering included): the `halfspace` model's profiles.
+    let profiles = Material {
+        model: crate::physics::Model::Halfspace,
+        ..*material
+    }
+    .profiles();
     let lobe = |mu: f64| Rgb::from_fn(|c| profiles[c].exit_lobe(mu));
-    let (g, mean_seen) = transfer(mesh, nodes, lobe, AIR_RAYS);
+    let (g, mean_seen) = transfer(mesh, nodes, &surface, lobe, AIR_RAYS);
     report.nodes = g.len() as u64;
     report.seeing_nodes = g.iter().filter(|r| !r.is_empty()).count() as u64;
     report.mean_seen = mean_seen;
@@ -632,7 +627,8 @@ mod tests {
             .map(|p| sources.area(p))
             .sum();
         let rays = 20_000;
-        let (g, _) = transfer(&mesh, &nodes, |_| Rgb([1.0; 3]), rays);
+        let surface = Surface::new(&mesh, &nodes);
+        let (g, _) = transfer(&mesh, &nodes, &surface, |_| Rgb([1.0; 3]), rays);
         let at = |p: usize, q: usize| {
             g[p].iter()
                 .find(|e| e.0 as usize == q)

@@ -173,6 +173,13 @@ impl Surface {
             eps: 1e-6 * (radius as f64).max(1e-3),
         }
     }
+
+    /// The unit normal of triangle `tri` of `mesh` (the mesh this was made from), turned
+    /// out of the object.
+    pub(super) fn outward_normal(&self, mesh: &Mesh, tri: usize) -> DVec3 {
+        let [a, b, c] = triangle(mesh, tri);
+        (b - a).cross(c - a).normalize() * self.orientation
+    }
 }
 
 /// One source node's walks: (receiver, deposit per channel and the same weighted by the exit
@@ -191,12 +198,8 @@ pub fn walk_response(
     progress: super::operators::Progress<'_>,
 ) -> (Walked, WalkReport) {
     let n = nodes.positions.len();
-    let Surface {
-        sources,
-        bvh,
-        orientation,
-        eps,
-    } = Surface::new(mesh, nodes);
+    let surface = Surface::new(mesh, nodes);
+    let (sources, bvh, eps) = (&surface.sources, &surface.bvh, surface.eps);
     // The reduced medium, isotropic: the truth's with g = 0.
     let medium = crate::truth::Medium::new(material, 0.0);
     let done = std::sync::atomic::AtomicU64::new(0);
@@ -216,7 +219,7 @@ pub fn walk_response(
                             counters[0] += 1;
                             let (tri, b) = sources.sample(p, &mut rng);
                             let [v0, v1, v2] = triangle(mesh, tri);
-                            let normal = (v1 - v0).cross(v2 - v0).normalize() * orientation;
+                            let normal = surface.outward_normal(mesh, tri);
                             let mut d = -normal;
                             let mut x = v0 * b[0] + v1 * b[1] + v2 * b[2] + d * eps;
                             let mut order = 0u32;
@@ -226,8 +229,8 @@ pub fn walk_response(
                                 if let Some(hit) = bvh.intersect(x, d, s) {
                                     if order >= min_order {
                                         left[c] += 1.0;
-                                        let [a, b, cc] = triangle(mesh, hit.triangle as usize);
-                                        let mu = ((b - a).cross(cc - a).normalize() * orientation)
+                                        let mu = surface
+                                            .outward_normal(mesh, hit.triangle as usize)
                                             .dot(d)
                                             .clamp(0.0, 1.0);
                                         for (q, w) in
@@ -254,7 +257,8 @@ pub fn walk_response(
                                         Some(h)
                                             if h.t > 10.0 * eps && {
                                                 let [a, b, c] = triangle(mesh, h.triangle as usize);
-                                                (b - a).cross(c - a).dot(d) * orientation < 0.0
+                                                (b - a).cross(c - a).dot(d) * surface.orientation
+                                                    < 0.0
                                             } =>
                                         {
                                             x = out + d * (h.t + eps);
