@@ -89,9 +89,9 @@ fn case_at(
 // 4.5 / 4.3 / 4.7 % to the figures above, while at 256x256 (the README's table) every
 // figure stayed within 0.2 points.
 
-// With the light across the air (`halfspace-air`): measured 4.5 / 3.6 / 4.0 % in skim milk
-// and 5.5 / 5.9 / 6.9 % in marble at 64x64 (marble is worse than without it here; at 256x256
-// against the 256-path truths: 6.8 / 5.5 / 4.4 and 4.3 / 4.2 / 4.2 %, the
+// With the light across the air (`halfspace-air`): measured 4.6 / 3.8 / 4.2 % in skim milk
+// and 5.7 / 6.1 / 7.1 % in marble at 64x64 (marble is worse than without it here; at 256x256
+// against the 256-path truths: 6.6 / 5.3 / 4.4 and 4.3 / 4.2 / 4.3 %, the
 // README's table).
 
 #[test]
@@ -116,8 +116,8 @@ fn bunny_in_marble() {
 // light across the air depends on the node spacing (370 nodes at 64x64, 1839 at 128x128 and
 // 256x256), and at 64x64 it is 5 % brighter than at the 256x256, where 128x128 gives
 // the same (README, `halfspace-air`). Measured: skim milk 6.4 / 4.4 / 4.8 % under
-// `halfspace-single` and 6.6 / 5.1 / 3.8 % under `halfspace-air`; marble 4.5 / 4.7 / 5.0 %
-// and 4.0 / 3.8 / 4.0 %. The truths' noise (1.0-1.1 % after 4x4 binning) keeps every bound
+// `halfspace-single` and 6.4 / 4.9 / 3.8 % under `halfspace-air`; marble 4.5 / 4.7 / 5.0 %
+// and 3.9 / 3.8 / 4.1 %. The truths' noise (1.0-1.1 % after 4x4 binning) keeps every bound
 // above 4.25 %.
 #[test]
 fn bunny_in_skim_milk_at_128() {

@@ -103,6 +103,36 @@ impl HFunction {
     pub fn multiple(&self, mu: f64) -> f64 {
         self.reflectance(mu) - self.single(mu)
     }
+
+    /// The exit lobe of every order under light from the whole hemisphere weighted by its
+    /// cosine (uniform incident radiance): the radiance leaving at cosine `mu` relative to a
+    /// Lambertian exit of the same flux. By reciprocity the radiance leaving at mu under
+    /// uniform incident radiance L is L times the reflectance of light entering at mu, so the
+    /// lobe is R(mu) / <R>, <R> the cosine-weighted mean ([`DiffuseLobe`] keeps <R>).
+    pub fn diffuse_lobe(&self) -> DiffuseLobe<'_> {
+        DiffuseLobe {
+            h: self,
+            mean: cosine_weighted_mean(|mu| self.reflectance(mu)),
+        }
+    }
+}
+
+/// See [`HFunction::diffuse_lobe`].
+#[derive(Debug, Clone, Copy)]
+pub struct DiffuseLobe<'a> {
+    h: &'a HFunction,
+    mean: f64,
+}
+
+impl DiffuseLobe<'_> {
+    /// The lobe at exit cosine `mu`.
+    pub fn at(&self, mu: f64) -> f64 {
+        if self.mean > 0.0 {
+            self.h.reflectance(mu) / self.mean
+        } else {
+            1.0
+        }
+    }
 }
 
 /// Nodes of [`cosine_weighted_mean`]'s quadrature.
@@ -190,6 +220,53 @@ mod tests {
         for mu in [0.1, 0.5, 1.0] {
             assert!(h.reflectance(mu) > 0.995, "{}", h.reflectance(mu));
         }
+    }
+
+    /// The diffuse lobe from reciprocity against the same lobe integrated directly: the
+    /// half-space's radiance for light entering at mu_0 and leaving at mu is
+    /// (w / 4 pi) E H(mu_0) H(mu) / (mu_0 + mu) (Chandrasekhar), so under cosine-weighted
+    /// incidence it goes as H(mu) int 2 mu_0 H(mu_0) / (mu + mu_0) dmu_0, normalized to the
+    /// flux of a Lambertian exit. At albedo 1 no light is absorbed and the lobe is flat
+    /// (reciprocity with every photon coming back); as absorption grows it leans to grazing.
+    #[test]
+    fn diffuse_lobe_is_the_reciprocal_of_the_incidence() {
+        for w in [0.3, 0.9, 0.99258, 0.998] {
+            let h = HFunction::new(w);
+            let lobe = h.diffuse_lobe();
+            let (nodes, weights) = gauss_legendre(200);
+            let direct = |mu: f64| {
+                let j: f64 = nodes
+                    .iter()
+                    .zip(&weights)
+                    .map(|(&m0, &wt)| wt * 2.0 * m0 * h.at(m0) / (mu + m0))
+                    .sum();
+                h.at(mu) * j
+            };
+            let flux: f64 = nodes
+                .iter()
+                .zip(&weights)
+                .map(|(&m, &wt)| wt * 2.0 * m * direct(m))
+                .sum();
+            for mu in [0.02, 0.1, 0.3, 0.5, 0.8, 1.0] {
+                let want = direct(mu) / flux;
+                assert!(
+                    (lobe.at(mu) - want).abs() < 1e-3 * want,
+                    "w {w}, mu {mu}: {} vs {want}",
+                    lobe.at(mu)
+                );
+            }
+            let mean = cosine_weighted_mean(|mu| lobe.at(mu));
+            assert!((mean - 1.0).abs() < 1e-9, "w {w}: flux {mean}");
+            assert!(lobe.at(0.05) > lobe.at(1.0), "w {w}: leans to grazing");
+        }
+        let flat = HFunction::new(1.0);
+        let lobe = flat.diffuse_lobe();
+        assert!(
+            (lobe.at(0.0) - lobe.at(1.0)).abs() < 5e-3,
+            "{} {}",
+            lobe.at(0.0),
+            lobe.at(1.0)
+        );
     }
 
     /// The Monte Carlo figures at 60 degrees: all orders +4 % (skim milk red), +7 %

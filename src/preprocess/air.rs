@@ -421,13 +421,11 @@ pub fn apply(
 
     let clock = std::time::Instant::now();
     // The exit lobe of every order (the light a node sends across the air is all of its
-    // exitance, single scattering included): the `halfspace` model's profiles.
-    let profiles = Material {
-        model: crate::physics::Model::Halfspace,
-        ..*material
-    }
-    .profiles();
-    let lobe = |mu: f64| Rgb::from_fn(|c| profiles[c].exit_lobe(mu));
+    // exitance, single scattering included) under the incidence the fold's factors assume,
+    // light weighted by its cosine: R(mu) / <R> by reciprocity (`HFunction::diffuse_lobe`).
+    let hs = material.albedo().map(HFunction::new);
+    let lobes = [0, 1, 2].map(|c| hs[c].diffuse_lobe());
+    let lobe = |mu: f64| Rgb::from_fn(|c| lobes[c].at(mu));
     let (g, mean_seen) = transfer(mesh, nodes, &surface, lobe, AIR_RAYS);
     report.nodes = g.len() as u64;
     report.seeing_nodes = g.iter().filter(|r| !r.is_empty()).count() as u64;
