@@ -117,7 +117,9 @@ fn bunny_in_marble() {
 // 256x256), and at 64x64 it is 5 % brighter than at the 256x256, where 128x128 gives
 // the same (README, `halfspace-air`). Measured: skim milk 6.4 / 4.4 / 4.8 % under
 // `halfspace-single` and 6.4 / 4.9 / 3.8 % under `halfspace-air`; marble 4.5 / 4.7 / 5.0 %
-// and 3.9 / 3.8 / 4.1 %. The truths' noise (1.0-1.1 % after 4x4 binning) keeps every bound
+// and 3.9 / 3.8 / 4.1 %. Skim milk's green under `halfspace-air` was 5.05 % with G's exit
+// lobe at normal incidence (the table's) instead of under cosine-weighted light: its bound
+// catches that. The truths' noise (1.0-1.1 % after 4x4 binning) keeps every bound
 // above 4.25 %.
 #[test]
 fn bunny_in_skim_milk_at_128() {
@@ -137,7 +139,7 @@ fn bunny_in_skim_milk_at_128() {
         128,
         Model::HalfspaceAir,
         none(),
-        [0.07, 0.053, 0.043],
+        [0.07, 0.05, 0.043],
     );
 }
 
