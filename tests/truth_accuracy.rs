@@ -123,46 +123,21 @@ fn bunny_in_marble() {
 // above 4.25 %.
 #[test]
 fn bunny_in_skim_milk_at_128() {
-    let none = SettingsOverrides::default;
-    let dir = "bunny-skimmilk-128";
-    case_at(
-        "bunny-skimmilk",
-        dir,
-        128,
-        Model::HalfspaceSingle,
-        none(),
-        [0.068, 0.047, 0.05],
-    );
-    case_at(
-        "bunny-skimmilk",
-        dir,
-        128,
-        Model::HalfspaceAir,
-        none(),
-        [0.07, 0.05, 0.043],
-    );
+    at_128("bunny-skimmilk", [0.068, 0.047, 0.05], [0.07, 0.05, 0.043]);
 }
 
 #[test]
 fn bunny_in_marble_at_128() {
-    let none = SettingsOverrides::default;
-    let dir = "bunny-marble-128";
-    case_at(
-        "bunny-marble",
-        dir,
-        128,
-        Model::HalfspaceSingle,
-        none(),
-        [0.048, 0.049, 0.052],
-    );
-    case_at(
-        "bunny-marble",
-        dir,
-        128,
-        Model::HalfspaceAir,
-        none(),
-        [0.0435, 0.0435, 0.0435],
-    );
+    at_128("bunny-marble", [0.048, 0.049, 0.052], [0.0435; 3]);
+}
+
+/// Scene `name` at 128x128 against `tests/truth-data/NAME-128`, under `halfspace-single` and
+/// `halfspace-air` with their bounds.
+fn at_128(name: &str, single: [f64; 3], air: [f64; 3]) {
+    let dir = format!("{name}-128");
+    for (model, bounds) in [(Model::HalfspaceSingle, single), (Model::HalfspaceAir, air)] {
+        case_at(name, &dir, 128, model, SettingsOverrides::default(), bounds);
+    }
 }
 
 #[test]

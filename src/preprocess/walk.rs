@@ -155,7 +155,7 @@ impl Sources {
 pub(super) struct Surface {
     pub(super) sources: Sources,
     pub(super) bvh: Bvh,
-    pub(super) orientation: f64,
+    orientation: f64,
     pub(super) eps: f64,
 }
 
@@ -255,11 +255,11 @@ pub fn walk_response(
                                     let out = x + d * (hit.t + eps);
                                     match bvh.intersect(out, d, f64::INFINITY) {
                                         Some(h)
-                                            if h.t > 10.0 * eps && {
-                                                let [a, b, c] = triangle(mesh, h.triangle as usize);
-                                                (b - a).cross(c - a).dot(d) * surface.orientation
-                                                    < 0.0
-                                            } =>
+                                            if h.t > 10.0 * eps
+                                                && surface
+                                                    .outward_normal(mesh, h.triangle as usize)
+                                                    .dot(d)
+                                                    < 0.0 =>
                                         {
                                             x = out + d * (h.t + eps);
                                             counters[3] += 1;
