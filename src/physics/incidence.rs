@@ -104,6 +104,12 @@ impl HFunction {
         self.reflectance(mu) - self.single(mu)
     }
 
+    /// Reflectance under light from the whole hemisphere weighted by its cosine (uniform
+    /// incident radiance): the cosine-weighted mean of [`HFunction::reflectance`].
+    pub fn diffuse_reflectance(&self) -> f64 {
+        cosine_weighted_mean(|mu| self.reflectance(mu))
+    }
+
     /// The exit lobe of every order under light from the whole hemisphere weighted by its
     /// cosine (uniform incident radiance): the radiance leaving at cosine `mu` relative to a
     /// Lambertian exit of the same flux. By reciprocity the radiance leaving at mu under
@@ -112,7 +118,7 @@ impl HFunction {
     pub fn diffuse_lobe(&self) -> DiffuseLobe<'_> {
         DiffuseLobe {
             h: self,
-            mean: cosine_weighted_mean(|mu| self.reflectance(mu)),
+            mean: self.diffuse_reflectance(),
         }
     }
 }

@@ -30,7 +30,7 @@
 use super::nodes::Nodes;
 use super::walk::{corner_weights, triangle, Surface};
 use crate::geometry::bvh::Bvh;
-use crate::physics::incidence::{cosine_weighted_mean, HFunction};
+use crate::physics::incidence::HFunction;
 use crate::physics::{Material, Rgb};
 use crate::scene::mesh::Mesh;
 use crate::truth::rng::Rng;
@@ -234,7 +234,7 @@ impl Scales {
             if normal <= 0.0 {
                 return 1.0;
             }
-            cosine_weighted_mean(|mu| h.reflectance(mu)) / normal
+            h.diffuse_reflectance() / normal
         });
         Scales {
             source: share.map(|s| 1.0 / (1.0 - s)),

@@ -50,7 +50,7 @@ pub fn single_share(material: &Material) -> [f64; 3] {
         }
         let h = HFunction::new(albedo);
         let single = cosine_weighted_mean(|mu| h.single(mu));
-        let all = cosine_weighted_mean(|mu| h.reflectance(mu));
+        let all = h.diffuse_reflectance();
         if all > 0.0 {
             single / all
         } else {
