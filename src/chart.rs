@@ -962,6 +962,7 @@ mod tests {
             prune_tolerance: 0.01,
             chart_angle_deg: 60.0,
             walk_paths: 2576,
+            walk_lights: [None; crate::scene::MAX_LIGHTS],
         };
         let quick = walk_sweep(&auto, true);
         assert_eq!(quick.len(), 1);

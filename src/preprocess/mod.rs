@@ -107,6 +107,11 @@ pub fn choose(
         &object_scale(scene, target_error, DEFAULT_MAX_TEXELS),
         overrides,
     );
+    if scene.material.model.walks() {
+        let (lights, why) = walk::entry_lights(&scene.lights);
+        choice.settings.walk_lights = lights;
+        choice.reasons.push(why);
+    }
     // The model is the material's; said with the derived settings, with why.
     let m = &scene.material;
     // Where a rule of the default model that needed more than the scene chose it, its reason.

@@ -21,10 +21,13 @@
 //!   On lavapipe the chain costs 3 to 9 times the rest of the frame (README, the models'
 //!   table), so the rule takes it out there; no GPU was lent to measure where it fits.
 //!
-//! `volume` is never chosen by default: it is the most accurate model where the object is thin
-//! against the light's diffusion length or curved on the scale of its mean free path (the
-//! backlit slab, the ketchup sphere) and the least accurate on the bunnies, and no property
-//! of the scene computed here separates those cases (README, "Models beyond the dipole").
+//! `volume` is never chosen by default. With its walks entering along the scene's lamps it is
+//! the most accurate model on 9 of the 11 stability cases it can run and within the issue's
+//! bounds on the bunny in marble, the ketchup sphere and the backlit slab (README, "Models
+//! beyond the dipole" and "Stability"), but its F answers the lamps where the scene places
+//! them (a moved light needs new walks, a minute on the bunny), its preprocessing is 10-20
+//! times the half-space models', and it needs the single-scattering pass that the frame budget
+//! takes out on lavapipe.
 
 use crate::passes::PassName;
 use crate::physics::incidence::{cosine_weighted_mean, HFunction};

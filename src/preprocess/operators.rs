@@ -284,12 +284,14 @@ impl Weights {
         let (mut rows, walks, exit_slopes) = if material.model.walks() {
             // Single scattering is its own pass wherever the walks fill F.
             let min_order = 2;
+            let lamps: Vec<_> = settings.walk_lights.iter().flatten().copied().collect();
             let (walked, report) = super::walk::walk_response(
                 mesh,
                 nodes,
                 material,
                 settings.walk_paths,
                 min_order,
+                &lamps,
                 progress,
             );
             (walked.rows, Some(report), walked.slopes)

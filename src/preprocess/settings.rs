@@ -40,6 +40,9 @@ pub struct Settings {
     pub chart_angle_deg: f64,
     /// Random walks per node and channel filling F (`model = "volume"`; 0 otherwise).
     pub walk_paths: u32,
+    /// The lamps the walks enter along (`model = "volume"`; none otherwise): F answers
+    /// these lights, as the scene places them ([`crate::preprocess::walk`]).
+    pub walk_lights: [Option<crate::scene::Light>; crate::scene::MAX_LIGHTS],
 }
 
 impl Settings {
@@ -269,6 +272,7 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             prune_tolerance: prune,
             chart_angle_deg: 30.0,
             walk_paths,
+            walk_lights: [None; crate::scene::MAX_LIGHTS],
         },
         reasons,
     }

@@ -41,7 +41,7 @@ pub struct Overrides {
 }
 
 /// A light, resolved.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Light {
     /// Directional, point or spot.
     pub kind: LightKind,

@@ -255,6 +255,7 @@ fn same_geometry(
     let geometry =
         |s: &crate::preprocess::settings::Settings| crate::preprocess::settings::Settings {
             walk_paths: 0,
+            walk_lights: [None; crate::scene::MAX_LIGHTS],
             ..*s
         };
     geometry(a) == geometry(b)
@@ -718,6 +719,22 @@ impl Running {
             } else {
                 tracing::debug!("camera change refused: it would enter the object or flip");
             }
+        }
+        // The walks' F answers the lamps where they were when it was walked: said, not hidden,
+        // once a light moves away from there.
+        let walked = &self.pre.settings.walk_lights;
+        let now = crate::preprocess::walk::entry_lights(&self.rig.lights(&self.view)).0;
+        let moved = |a: &Option<Light>, b: &Option<Light>| match (a, b) {
+            (Some(a), Some(b)) => {
+                a.kind != b.kind
+                    || a.direction.dot(b.direction) < 1.0 - 1e-5
+                    || a.position.distance(b.position) > 1e-3 * self.rig.radius
+                    || a.radiance.distance(b.radiance) > 1e-5 * a.radiance.max_element()
+            }
+            (a, b) => a.is_some() != b.is_some(),
+        };
+        if walked.iter().any(Option::is_some) && walked.iter().zip(&now).any(|(a, b)| moved(a, b)) {
+            self.status = "volume: F was walked for the lights where the scene placed them; moved lights get that F (save the scene and render it to walk for these)".into();
         }
         Ok(true)
     }
@@ -1864,6 +1881,7 @@ mod tests {
             prune_tolerance: 0.01,
             chart_angle_deg: 60.0,
             walk_paths: 0,
+            walk_lights: [None; crate::scene::MAX_LIGHTS],
         };
         assert!(same_geometry(
             &a,
