@@ -296,14 +296,16 @@ pub fn walk_response(
                 // Per channel: the walks' summed entry weights (their count along the normal).
                 let mut weights = [0.0f64; 3];
                 // Per channel: the source's share in the exit lobes, its mean irradiance under
-                // the lamps (1 without lamps; 0 where no lamp reaches it: it sends no light).
+                // the lamps (1 without lamps; 0 where no lamp's ray reaches it: it sends no
+                // light).
                 let mut lobe = [if lamps.is_empty() { 1.0 } else { 0.0 }; 3];
                 if sources.area(p) > 0.0 {
                     for c in 0..3 {
                         let (sigma_t, albedo) = (medium.sigma_t[c], medium.albedo[c]);
                         let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
-                        // Along the lamps where the scene has any; along the normal where it
-                        // has none, or where none of them reaches this node.
+                        // Along the lamps where the scene has any; without the shadow ray
+                        // where no lamp's ray reaches this node; along the normal where it
+                        // faces away from every lamp, or the scene has none.
                         for (along_lamps, shadows) in [(true, true), (true, false), (false, false)]
                         {
                             if (along_lamps && lamps.is_empty()) || weights[c] > 0.0 {
