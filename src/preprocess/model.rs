@@ -22,7 +22,7 @@
 //!   table), so the rule takes it out there; no GPU was lent to measure where it fits.
 //!
 //! `volume` is never chosen by default. With its walks entering along the scene's lamps it is
-//! the most accurate model on 9 of the 11 stability cases it can run and within the issue's
+//! the most accurate model on 9 of the 12 stability cases it can run and within the issue's
 //! bounds on the bunny in marble, the ketchup sphere and the backlit slab (README, "Models
 //! beyond the dipole" and "Stability"), but its F answers the lamps where the scene places
 //! them (a moved light needs new walks, a minute on the bunny), its preprocessing is 10-20
