@@ -108,9 +108,10 @@ pub fn choose(
         overrides,
     );
     if scene.material.model.walks() {
-        let (lights, why) = walk::entry_lights(&scene.lights);
-        choice.settings.walk_lights = lights;
-        choice.reasons.push(why);
+        choice.settings.walk_lights = walk::entry_lights(&scene.lights);
+        choice
+            .reasons
+            .push(walk::entry_reason(&choice.settings.walk_lights));
     }
     // The model is the material's; said with the derived settings, with why.
     let m = &scene.material;

@@ -50,27 +50,29 @@ pub const MAX_WALK_EVENTS: u64 = 10_000_000;
 /// Seed of every walk's random stream.
 pub const WALK_SEED: u64 = 0x7761_6c6b;
 
-/// The lamps of `lights` that walks enter along (directional, point and spot lights: an
-/// environment is no one direction), and the line that says so with the derived settings.
-pub fn entry_lights(lights: &[Light]) -> ([Option<Light>; MAX_LIGHTS], String) {
+/// The lamps of `lights` that walks enter along: directional, point and spot lights (an
+/// environment is no one direction).
+pub fn entry_lights(lights: &[Light]) -> [Option<Light>; MAX_LIGHTS] {
     let mut out = [None; MAX_LIGHTS];
     let lamps = lights
         .iter()
         .filter(|l| l.kind != LightKind::Environment && l.radiance.max_element() > 0.0);
-    let mut k = 0;
     for (o, l) in out.iter_mut().zip(lamps) {
         *o = Some(*l);
-        k += 1;
     }
-    let why = if k == 0 {
-        "walks enter along the inward normal: the scene has no lamp (directional, point or spot light) to enter along".to_string()
-    } else {
-        format!(
+    out
+}
+
+/// The line that says how the walks enter under `lamps` ([`entry_lights`]), with the derived
+/// settings.
+pub fn entry_reason(lamps: &[Option<Light>]) -> String {
+    match lamps.iter().flatten().count() {
+        0 => "walks enter along the inward normal: the scene has no lamp (directional, point or spot light) to enter along".to_string(),
+        k => format!(
             "walks enter along the light of the scene's {k} lamp{}, each start point weighted by the lamps' irradiance there (a shadow ray each), along the inward normal where no lamp reaches a node: F answers these lights where the scene places them",
             if k == 1 { "" } else { "s" }
-        )
-    };
-    (out, why)
+        ),
+    }
 }
 
 /// What the walks did.
@@ -556,10 +558,40 @@ mod tests {
         }
     }
 
+    /// Per source node p and channel, the fraction of the light entering its support that the
+    /// walks give back anywhere: sum_q A_q F_pq / A_p.
+    fn returned(walked: &Walked, sources: &Sources) -> Vec<[f64; 3]> {
+        let mut out = vec![[0.0f64; 3]; walked.rows.len()];
+        for (q, row) in walked.rows.iter().enumerate() {
+            for &(p, v) in row {
+                for c in 0..3 {
+                    out[p as usize][c] += v.0[c] * sources.area(q);
+                }
+            }
+        }
+        for (p, o) in out.iter_mut().enumerate() {
+            *o = o.map(|x| x / sources.area(p));
+        }
+        out
+    }
+
+    /// Two 10 x 10 x 4 mm boxes, one above the other, 1 mm apart.
+    fn two_boxes(segments: u32) -> Mesh {
+        let mut mesh = Mesh::cuboid(glam::Vec3::new(10.0, 10.0, 4.0), segments);
+        let mut other = mesh.clone();
+        mesh.transform(glam::Mat4::from_translation(glam::Vec3::new(
+            0.0, 0.0, -2.5,
+        )));
+        other.transform(glam::Mat4::from_translation(glam::Vec3::new(0.0, 0.0, 2.5)));
+        mesh.append(&other);
+        mesh
+    }
+
     /// A directional lamp at 60 degrees from the normal of a face of the large box: the walks
     /// of the face's centre node enter along its light, and give back the half-space's
     /// orders >= 2 at incidence cosine 0.5 (Chandrasekhar's H function, an independent,
-    /// exact result), which for ketchup's red is 1.17 times that at normal incidence. The faces the lamp does not reach enter along the normal and return the normal
+    /// exact result), which for ketchup's red is 1.17 times that at normal incidence. The
+    /// faces the lamp does not reach enter along the normal and return the normal
     /// incidence's.
     #[test]
     fn walks_enter_along_the_lamp() {
@@ -585,17 +617,10 @@ mod tests {
         };
         let (walked, report) = walk_response(&mesh, &nodes, &m, 40_000, 2, &[lamp], &|_, _, _| {});
         assert_eq!(report.reentries, 0);
-        let sources = Sources::new(&mesh, &nodes);
-        // Per source: the light it gives back.
-        let mut back = vec![0.0f64; nodes.positions.len()];
-        for (q, row) in walked.rows.iter().enumerate() {
-            for &(p, v) in row {
-                back[p as usize] += v.0[0] * sources.area(q);
-            }
-        }
+        let back = returned(&walked, &Sources::new(&mesh, &nodes));
         let h = crate::physics::incidence::HFunction::new(m.albedo()[0]);
         let (oblique, normal) = (h.multiple(0.5), h.multiple(1.0));
-        let got = |p: usize| back[p] / sources.area(p);
+        let got = |p: usize| back[p][0];
         println!(
             "red, orders >= 2: lit face {:.4}, H at 60 degrees {oblique:.4}; unlit face {:.4}, normal incidence {normal:.4}",
             got(top),
@@ -621,13 +646,7 @@ mod tests {
     /// to its irradiance at the point.
     #[test]
     fn entries_follow_the_lamps_irradiance_and_shadow() {
-        let mut mesh = Mesh::cuboid(glam::Vec3::new(10.0, 10.0, 4.0), 2);
-        let mut other = mesh.clone();
-        mesh.transform(glam::Mat4::from_translation(glam::Vec3::new(
-            0.0, 0.0, -2.5,
-        )));
-        other.transform(glam::Mat4::from_translation(glam::Vec3::new(0.0, 0.0, 2.5)));
-        mesh.append(&other);
+        let mesh = two_boxes(2);
         let nodes = Nodes::build(&mesh, 2.0);
         let surface = Surface::new(&mesh, &nodes);
         let lamp = |direction: glam::Vec3, radiance: f32| Light {
@@ -702,18 +721,12 @@ mod tests {
                 report.left
             );
         }
-        let sources = Sources::new(&mesh, &nodes);
-        let mut out = vec![[0.0f64; 3]; nodes.positions.len()];
-        for (q, row) in walked.rows.iter().enumerate() {
-            for &(p, v) in row {
-                for c in 0..3 {
-                    out[p as usize][c] += v.0[c] * sources.area(q);
-                }
-            }
-        }
-        for (p, o) in out.iter().enumerate() {
+        for (p, o) in returned(&walked, &Sources::new(&mesh, &nodes))
+            .iter()
+            .enumerate()
+        {
             for c in 0..3 {
-                let ratio = o[c] / sources.area(p);
+                let ratio = o[c];
                 assert!(
                     ratio <= 1.0 + 1e-6 && ratio >= 1.0 - 20.0 * straight - 1e-6,
                     "node {p} channel {c}: {ratio}"
@@ -727,13 +740,7 @@ mod tests {
     /// entered, without absorption, where a single box returns exactly what entered.
     #[test]
     fn light_that_leaves_towards_the_object_enters_it_again() {
-        let mut mesh = Mesh::cuboid(glam::Vec3::new(10.0, 10.0, 4.0), 4);
-        let mut other = mesh.clone();
-        mesh.transform(glam::Mat4::from_translation(glam::Vec3::new(
-            0.0, 0.0, -2.5,
-        )));
-        other.transform(glam::Mat4::from_translation(glam::Vec3::new(0.0, 0.0, 2.5)));
-        mesh.append(&other);
+        let mesh = two_boxes(4);
         let nodes = Nodes::build(&mesh, 2.0);
         let m = medium_of("skimmilk", false);
         let (_, report) = walk_response(&mesh, &nodes, &m, 64, 1, &[], &|_, _, _| {});
