@@ -80,12 +80,11 @@ def cast(v, f, origins, dirs):
     return out
 
 
-def main():
-    render_path, truth_path = pathlib.Path(sys.argv[1]), sys.argv[2]
-    scene = tomllib.loads((render_path.parent / "scene.toml").read_text())
-    render, truth = load(render_path), load(truth_path)
+def visible(scene, render, v, f, vn):
+    """What each pixel of `render` sees: the camera rays (all pixels), which of them meet the
+    mesh, and at those points the barycentrics, the triangle's corners, the point, the smooth
+    normal, the unit direction towards the scene's first light and whether the mesh shadows it."""
     h, w = render.shape[:2]
-    v, f, vn, varea = mesh()
     cam = scene["camera"]
     eye, target = np.array(cam["position"]), np.array(cam["target"])
     fwd = (target - eye) / np.linalg.norm(target - eye)
@@ -109,6 +108,16 @@ def main():
     light = -np.array(scene["lights"][0]["direction"], float)
     light /= np.linalg.norm(light)
     shadowed = np.isfinite(cast(v, f, x + n * 1e-3, np.repeat(light[None], len(x), 0))[0])
+    return dirs, hit, bary, corners, x, n, light, shadowed
+
+
+def main():
+    render_path, truth_path = pathlib.Path(sys.argv[1]), sys.argv[2]
+    scene = tomllib.loads((render_path.parent / "scene.toml").read_text())
+    render, truth = load(render_path), load(truth_path)
+    h, w = render.shape[:2]
+    v, f, vn, varea = mesh()
+    dirs, hit, bary, corners, x, n, light, shadowed = visible(scene, render, v, f, vn)
     d = v[None, :, :] - v[:, None, :]
     g = np.exp(-((np.linalg.norm(d, axis=2) / 4.0) ** 2)) * varea[None, :]
     concavity = (g * np.einsum("ijk,ik->ij", d, vn)).sum(1) / g.sum(1) / 4.0

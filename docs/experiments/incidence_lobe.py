@@ -20,33 +20,22 @@ ebg = importlib.util.module_from_spec(spec); spec.loader.exec_module(ebg)
 render_path, single_path, out_dir = pathlib.Path(sys.argv[1]), sys.argv[2], pathlib.Path(sys.argv[3])
 mode = sys.argv[4] if len(sys.argv) > 4 else "keep"
 scene = tomllib.loads((render_path.parent / "scene.toml").read_text())
-rd = lambda p: OpenEXR.File(str(p)).channels()['RGBA'].pixels.astype(np.float64)
-render, single = rd(render_path), rd(single_path)
+render, single = ebg.load(render_path), ebg.load(single_path)
 h, w = render.shape[:2]
 v, f, vn, varea = ebg.mesh()
-cam = scene["camera"]
-eye, target = np.array(cam["position"]), np.array(cam["target"])
-fwd = (target - eye) / np.linalg.norm(target - eye)
-right = np.cross(fwd, cam["up"]); right /= np.linalg.norm(right)
-up = np.cross(right, fwd)
-tan = np.tan(np.radians(cam["fov_deg"]) / 2)
-ys, xs = np.mgrid[0:h, 0:w]
-px, py = ((xs + 0.5) / w * 2 - 1) * tan * w / h, (1 - (ys + 0.5) / h * 2) * tan
-dirs = (fwd + px[..., None] * right + py[..., None] * up).reshape(-1, 3)
-dirs /= np.linalg.norm(dirs, axis=1)[:, None]
-t, tri, bu, bv = ebg.cast(v, f, np.repeat(eye[None], len(dirs), 0), dirs)
-hit = np.isfinite(t)
-bary = np.stack([1 - bu - bv, bu, bv], 1)[hit]
-corners = f[tri[hit]]
-x = eye + dirs[hit] * t[hit][:, None]
-n = np.einsum("ij,ijk->ik", bary, vn[corners]); n /= np.linalg.norm(n, axis=1)[:, None]
-light = -np.array(scene["lights"][0]["direction"], float); light /= np.linalg.norm(light)
-shadowed = np.isfinite(ebg.cast(v, f, x + n * 1e-3, np.repeat(light[None], len(x), 0))[0])
+dirs, hit, bary, corners, x, n, light, shadowed = ebg.visible(scene, render, v, f, vn)
 mu0 = np.clip(n @ light, 0, 1) * ~shadowed
 muo = np.clip(np.einsum("ij,ij->i", n, -dirs[hit]), 1e-3, 1)
-sig_s = np.array([0.70, 1.22, 1.90]); sig_a = np.array([0.0014, 0.0025, 0.0142])
-if "marble" in str(scene.get("material", {}).get("preset", "")):
-    sig_s = np.array([2.19, 2.62, 3.00]); sig_a = np.array([0.0021, 0.0041, 0.0071])
+# The two truth bunnies' presets (sigma_s', sigma_a per channel, 1/mm), as
+# src/physics/material.rs has them.
+PRESETS = {
+    "skimmilk": ([0.70, 1.22, 1.90], [0.0014, 0.0025, 0.0142]),
+    "marble": ([2.19, 2.62, 3.00], [0.0021, 0.0041, 0.0071]),
+}
+preset = scene.get("material", {}).get("preset")
+if preset not in PRESETS:
+    sys.exit(f"material preset {preset!r}: only {', '.join(PRESETS)} are known here")
+sig_s, sig_a = (np.array(x) for x in PRESETS[preset])
 alb = sig_s / (sig_s + sig_a)
 def hfun(wa, nq=128):
     xq, wq = np.polynomial.legendre.leggauss(nq); xq = (xq + 1) / 2; wq = wq / 2
