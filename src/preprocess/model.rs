@@ -25,8 +25,8 @@
 //! the most accurate model on 9 of the 12 stability cases it can run and within the issue's
 //! bounds on the bunny in marble, the ketchup sphere and the backlit slab (README, "Models
 //! beyond the dipole" and "Stability"), but its F answers the lamps where the scene places
-//! them (a moved light needs new walks, a minute on the bunny), its preprocessing is 10-20
-//! times the half-space models', and it needs the single-scattering pass that the frame budget
+//! them (a moved light needs new walks, a minute on the bunny), its preprocessing is 6-18
+//! times the half-space models' on the bunnies, and it needs the single-scattering pass that the frame budget
 //! takes out on lavapipe.
 
 use crate::passes::PassName;
