@@ -4,11 +4,14 @@
 // texels of the atlas only (alpha 1), so chart borders do not pull in gutter texels. Writes L
 // (linear) and its tone-mapped display value (exposure, sRGB curve); alpha marks coverage.
 #include "frame.glsl"
+#include "shadow.glsl"
 
 layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
 layout(set = 0, binding = 3) uniform sampler2D albedo_texture;
 // Single scattering along the view ray (the `single` pass), added where SINGLE.
 layout(set = 0, binding = 4) uniform sampler2D single;
+// The lights' shadow maps, for the oblique exit lobe's visibility (OBLIQUE).
+layout(set = 0, binding = 5) uniform sampler2DArrayShadow shadow_maps;
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
@@ -38,6 +41,10 @@ layout(constant_id = 1) const bool SINGLE = false;
 // surface's depth). A silhouette's rim and a thin part give back less than a half-space there;
 // the walks' lobe (`volume`) holds this already.
 layout(constant_id = 2) const bool CHORD = false;
+// True where orders >= 2 take the half-space's exit lobe of the incidence at which the lamps'
+// light enters here (`volume` in a scene without an environment, whose sky this does not
+// weigh): see oblique_exit.
+layout(constant_id = 3) const bool OBLIQUE = false;
 
 // The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
 // (three square roots instead of a pow, which was a third of the former tone-mapping pass on
@@ -72,6 +79,47 @@ vec3 local_response(vec2 atlas) {
     return imageLoad(local_b, ivec2(floor(atlas))).rgb;
 }
 
+// `volume`'s exit lobe of orders >= 2 at x (normal n, exit cosine mu) for the light the lamps
+// send in there, per channel; `walks` the lobe the walks measured (slope k of 1 + k (mu -
+// 2/3), one mean exit cosine per node over all the light through it). Chandrasekhar's
+// radiance of orders >= 2 per unit irradiance entering at mu0 is (w / 4 pi) (H(mu) H(mu0) - 1)
+// / (mu + mu0), their flux R_ms(mu0) (the table's flux is R_ms / (w / 4)), so the lamps' light
+// (irradiance e_l = E_l mu0_l V_l) leaves a half-space with the lobe
+//   h(mu) = sum_l e_l (H(mu) H(mu0_l) - 1) / (mu + mu0_l) / sum_l e_l flux(mu0_l),
+// whose mean cosine is that of the slope k_h = sum_l e_l flux(mu0_l) k(mu0_l) / sum_l e_l
+// flux(mu0_l). What the walks measured beyond a half-space's at that incidence (a thin part,
+// the far side, light from elsewhere) stays: h(mu) (1 + (k - k_h) (mu - 2/3)). The walks'
+// lobe alone where no lamp reaches x. It takes the incidence at x for that of the light
+// leaving there, which entered within a few diffusion lengths (exact on a flat, evenly lit
+// surface).
+vec3 oblique_exit(vec3 x, vec3 n, float mu, vec3 k, vec3 walks) {
+    vec3 h_mu = halfspace_h(mu);
+    float eta = frame.material.x;
+    vec3 radiance = vec3(0.0);
+    vec3 flux = vec3(0.0);
+    vec3 slope = vec3(0.0);
+    uint lights = frame.counts.x;
+    for (uint i = 0u; i < lights; ++i) {
+        vec3 wi;
+        vec3 irradiance;
+        light_at(frame.lights[i], x, wi, irradiance);
+        float mu0 = dot(n, wi);
+        if (mu0 <= 0.0) {
+            continue;
+        }
+        vec3 e = irradiance
+            * (mu0 * fresnel_transmittance(eta, mu0) * shadow_visibility(shadow_maps, i, x, n));
+        radiance += e * (h_mu * halfspace_h(mu0) - 1.0) / (mu + mu0);
+        vec3 f = e * halfspace_flux(mu0);
+        flux += f;
+        slope += f * halfspace_slope(mu0);
+    }
+    bvec3 lit = greaterThan(flux, vec3(0.0));
+    vec3 safe = max(flux, vec3(1e-30));
+    vec3 lobe = radiance / safe * max(1.0 + (k - slope / safe) * (mu - 2.0 / 3.0), vec3(0.0));
+    return mix(walks, lobe, lit);
+}
+
 void main() {
     vec3 n = normalize(in_normal);
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
@@ -84,6 +132,10 @@ void main() {
         b *= texture(albedo_texture, in_uv).rgb;
     }
     vec3 lobe = exit_lobe(cos_o) * max(1.0 + in_exit_slope * (cos_o - 2.0 / 3.0), vec3(0.0));
+    if (OBLIQUE) {
+        // (`volume`: its exit_lobe samples are 1.)
+        lobe = oblique_exit(in_position, n, cos_o, in_exit_slope, lobe);
+    }
     vec3 l = fresnel_transmittance(frame.material.x, cos_o) * lobe * b / PI;
     if (SINGLE) {
         vec4 s = texelFetch(single, ivec2(gl_FragCoord.xy), 0);

@@ -42,6 +42,11 @@ layout(std140, set = 0, binding = 0) uniform Frame {
     vec4 exit_lobe[EXIT_LOBE_SAMPLES]; // rgb: exit radiance / Lambertian at cosines (i + 0.5) / 16
     vec4 incidence[INCIDENCE_SAMPLES]; // rgb: the model's light entering at cosine (k / 15)^2
                                        // relative to normal incidence (1 for the dipole)
+    // `volume`'s oblique exit lobe (zero for the other models), at the cosines (k / 15)^2, rgb:
+    vec4 halfspace_h[INCIDENCE_SAMPLES];     // Chandrasekhar's H
+    vec4 halfspace_flux[INCIDENCE_SAMPLES];  // the half-space's reflectance of orders >= 2 / (w / 4)
+    vec4 halfspace_slope[INCIDENCE_SAMPLES]; // the slope k of 1 + k (mu - 2/3) with the mean exit
+                                             // cosine of their lobe
     vec4 environment[MAX_SH_COEFFICIENTS]; // rgb: the environment's SH coefficients, turned, scaled
 } frame;
 
@@ -54,14 +59,45 @@ vec3 exit_lobe(float mu) {
     return mix(frame.exit_lobe[i].rgb, frame.exit_lobe[i + 1].rgb, f);
 }
 
+// Where cosine mu falls between the incidence samples (k / 15)^2: the lower sample i and the
+// fraction f towards the next, linear in sqrt(mu).
+void incidence_sample(float mu, out int i, out float f) {
+    float x = sqrt(clamp(mu, 0.0, 1.0)) * float(INCIDENCE_SAMPLES - 1);
+    i = min(int(floor(x)), INCIDENCE_SAMPLES - 2);
+    f = x - float(i);
+}
+
 // The light a half-space gives back (the model's orders) when it enters at cosine mu, relative
 // to normal incidence, at which the profile is tabulated: linear in sqrt(mu) between the
 // samples. Mirrors physics::incidence::interpolate.
 vec3 incidence_factor(float mu) {
-    float x = sqrt(clamp(mu, 0.0, 1.0)) * float(INCIDENCE_SAMPLES - 1);
-    int i = min(int(floor(x)), INCIDENCE_SAMPLES - 2);
-    float f = x - float(i);
+    int i;
+    float f;
+    incidence_sample(mu, i, f);
     return mix(frame.incidence[i].rgb, frame.incidence[i + 1].rgb, f);
+}
+
+// `volume`'s tables of the half-space's orders >= 2 (frame.halfspace_*) at cosine mu, per
+// channel, linear in sqrt(mu) between the samples (physics::incidence::HalfspaceSamples).
+vec3 halfspace_h(float mu) {
+    int i;
+    float f;
+    incidence_sample(mu, i, f);
+    return mix(frame.halfspace_h[i].rgb, frame.halfspace_h[i + 1].rgb, f);
+}
+
+vec3 halfspace_flux(float mu) {
+    int i;
+    float f;
+    incidence_sample(mu, i, f);
+    return mix(frame.halfspace_flux[i].rgb, frame.halfspace_flux[i + 1].rgb, f);
+}
+
+vec3 halfspace_slope(float mu) {
+    int i;
+    float f;
+    incidence_sample(mu, i, f);
+    return mix(frame.halfspace_slope[i].rgb, frame.halfspace_slope[i + 1].rgb, f);
 }
 
 // Direction towards the light (normalised) and the irradiance it delivers at x, before the

@@ -478,6 +478,8 @@ impl Renderer {
                 single,
                 single_pass,
                 chord: scene.material.model.gathers_over_chord(),
+                shadow_maps,
+                oblique: scene.material.model.oblique_exit() && scene.environment.is_none(),
             },
             passes::composite::CompositeTargets {
                 hdr,

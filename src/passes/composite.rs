@@ -2,6 +2,9 @@
 //! HDR image whose alpha marks covered pixels, and the same radiance tone-mapped (exposure,
 //! sRGB curve) into the RGBA8 display image as a second attachment. (The tone mapping was a
 //! compute pass of its own over every pixel; here it costs the covered fragments only.)
+//! For `volume` the lamps' shadow maps are read too: orders >= 2 leave with the half-space's
+//! lobe of the incidence at which the lamps' light enters each pixel (`oblique_exit` in
+//! glsl/composite.frag).
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::PassName;
@@ -46,6 +49,11 @@ pub struct CompositeInputs {
     /// image's alpha): the half-space's higher orders gathered over a finite chord
     /// (`halfspace-single`).
     pub chord: bool,
+    /// The lights' shadow maps (read where `oblique`).
+    pub shadow_maps: ResourceId,
+    /// Whether orders >= 2 take the half-space's exit lobe of the lamps' incidence at each
+    /// pixel (`Model::oblique_exit`, in a scene without an environment light).
+    pub oblique: bool,
 }
 
 /// The images `composite` writes.
@@ -68,6 +76,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
         .access(i.local, Access::StorageRead(Stage::Fragment))
         .access(i.texture, Access::Sampled(Stage::Fragment))
         .access(i.single, Access::Sampled(Stage::Fragment))
+        .access(i.shadow_maps, Access::Sampled(Stage::Fragment))
         .access(t.hdr, Access::ColorAttachment)
         .access(t.display, Access::ColorAttachment)
         .access(t.depth, Access::DepthAttachment)
@@ -79,6 +88,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                 .storage_image(2, i.local)
                 .sampled(3, i.texture, Sampler::linear(gpu, true)?)
                 .sampled(4, i.single, Sampler::nearest(gpu)?)
+                .sampled(5, i.shadow_maps, Sampler::shadow(gpu)?)
                 .finish()?;
             let pipeline = Pipeline::graphics::<f32>(
                 gpu,
@@ -92,7 +102,12 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     depth_format: DEPTH_FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     depth_bias: None,
-                    fragment_constants: &[i.textured as u32, i.single_pass as u32, i.chord as u32],
+                    fragment_constants: &[
+                        i.textured as u32,
+                        i.single_pass as u32,
+                        i.chord as u32,
+                        i.oblique as u32,
+                    ],
                 },
                 set,
             )?;

@@ -33,6 +33,9 @@ pub struct FrameUniforms {
     shadow_inverse: [[[f32; 4]; 4]; MAX_SHADOW_LAYERS],
     exit_lobe: [[f32; 4]; EXIT_LOBE_SAMPLES],
     incidence: [[f32; 4]; INCIDENCE_SAMPLES],
+    halfspace_h: [[f32; 4]; INCIDENCE_SAMPLES],
+    halfspace_flux: [[f32; 4]; INCIDENCE_SAMPLES],
+    halfspace_slope: [[f32; 4]; INCIDENCE_SAMPLES],
     environment: [[f32; 4]; MAX_SH_COEFFICIENTS],
 }
 
@@ -57,6 +60,9 @@ pub struct MaterialUniforms {
     sigma_t: [f32; 4],
     exit_lobe: [[f32; 4]; EXIT_LOBE_SAMPLES],
     incidence: [[f32; 4]; INCIDENCE_SAMPLES],
+    halfspace_h: [[f32; 4]; INCIDENCE_SAMPLES],
+    halfspace_flux: [[f32; 4]; INCIDENCE_SAMPLES],
+    halfspace_slope: [[f32; 4]; INCIDENCE_SAMPLES],
 }
 
 impl MaterialUniforms {
@@ -88,10 +94,29 @@ impl MaterialUniforms {
             let f = |c: usize| factors.as_ref().map_or(1.0, |f| f[c][k] as f32);
             [f(0), f(1), f(2), 1.0]
         });
+        // The half-space's H function, flux and lobe slope of orders >= 2 at the incidence
+        // samples, for the composite's oblique exit lobe (`volume` only; zero for the others,
+        // which do not read them).
+        let mut halfspace_h = [[0.0; 4]; INCIDENCE_SAMPLES];
+        let mut halfspace_flux = [[0.0; 4]; INCIDENCE_SAMPLES];
+        let mut halfspace_slope = [[0.0; 4]; INCIDENCE_SAMPLES];
+        if m.model.oblique_exit() {
+            for (c, albedo) in m.albedo().into_iter().enumerate() {
+                let t = crate::physics::incidence::halfspace_samples(albedo);
+                for k in 0..INCIDENCE_SAMPLES {
+                    halfspace_h[k][c] = t.h[k] as f32;
+                    halfspace_flux[k][c] = t.flux[k] as f32;
+                    halfspace_slope[k][c] = t.slope[k] as f32;
+                }
+            }
+        }
         let s = m.sigma_s_prime;
         let t = m.sigma_t().map(|t| t as f32);
         MaterialUniforms {
             incidence,
+            halfspace_h,
+            halfspace_flux,
+            halfspace_slope,
             material: [m.eta as f32, 1.0, 1.0, 1.0],
             sigma_s: [s[0] as f32, s[1] as f32, s[2] as f32, 0.0],
             sigma_t: [t[0], t[1], t[2], 0.0],
@@ -123,6 +148,9 @@ impl FrameUniforms {
         u.sigma_t = material.sigma_t;
         u.exit_lobe = material.exit_lobe;
         u.incidence = material.incidence;
+        u.halfspace_h = material.halfspace_h;
+        u.halfspace_flux = material.halfspace_flux;
+        u.halfspace_slope = material.halfspace_slope;
         let mut layer = 0usize;
         // An environment's sun goes last (the illumination pass treats it apart).
         let ordered = lights

@@ -80,6 +80,17 @@ impl Model {
         self == Model::HalfspaceAir
     }
 
+    /// Whether the composite gives orders >= 2 the half-space's exit lobe of the incidence at
+    /// which the lamps' light enters at each pixel (`physics::incidence::HFunction::
+    /// multiple_lobe`), keeping of the walks' measured lobe what goes beyond the half-space's
+    /// slope there: `volume`, whose walks enter along the lamps but measure one linear lobe
+    /// per node. Measured on the truth bunnies and the stability cases (README, "Models beyond
+    /// the dipole"); the half-space models keep the profile's lobe, which their reference
+    /// computes.
+    pub fn oblique_exit(self) -> bool {
+        self == Model::Volume
+    }
+
     /// Whether the global response comes from random walks in the mesh.
     pub fn walks(self) -> bool {
         self == Model::Volume

@@ -21,13 +21,14 @@
 //!   On lavapipe the chain costs 3 to 9 times the rest of the frame (README, the models'
 //!   table), so the rule takes it out there; no GPU was lent to measure where it fits.
 //!
-//! `volume` is never chosen by default. With its walks entering along the scene's lamps it is
-//! the most accurate model on 9 of the 12 stability cases it can run and within the issue's
-//! bounds on the bunny in marble, the ketchup sphere and the backlit slab (README, "Models
-//! beyond the dipole" and "Stability"), but its F answers the lamps where the scene places
-//! them (a moved light needs new walks, a minute on the bunny), its preprocessing is 6-18
-//! times the half-space models' on the bunnies, and it needs the single-scattering pass that the frame budget
-//! takes out on lavapipe.
+//! `volume` is never chosen by default. With its walks entering along the scene's lamps and the
+//! composite's oblique exit lobe it is the most accurate model on 9 of the 12 stability cases
+//! it can run, within the issue's bounds on the bunny in marble, the ketchup sphere and the
+//! backlit slab and the most accurate on the bunny in skim milk (README, "Models beyond the
+//! dipole" and "Stability"), but its F answers the lamps where the scene places them (a moved
+//! light needs new walks, a minute on the bunny), its preprocessing is 6-18 times the
+//! half-space models' on the bunnies, and it needs the single-scattering pass that the frame
+//! budget takes out on lavapipe.
 
 use crate::passes::PassName;
 use crate::physics::incidence::{cosine_weighted_mean, HFunction};
