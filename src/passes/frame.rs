@@ -223,11 +223,12 @@ mod tests {
 
     #[test]
     fn uniform_layout_matches_std140() {
-        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 + 16 + 36 vec4.
+        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 (exit lobe) + 16
+        // (incidence) + 3 x 16 (the half-space's H, flux and slope) + 36 vec4.
         assert_eq!(std::mem::size_of::<GpuLight>(), 80);
         assert_eq!(
             std::mem::size_of::<FrameUniforms>(),
-            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16 + 16 * 16 + 36 * 16
+            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16 + 16 * 16 + 3 * 16 * 16 + 36 * 16
         );
     }
 }
