@@ -449,8 +449,10 @@ pub struct RenderArgs {
     #[arg(long)]
     pub save_frames: bool,
     /// Frame budget in ms of the default model's single-scattering pass: where
-    /// `halfspace-single`'s frame is over it, `halfspace` is used (default: 1.3x the frame
-    /// without the pass, measured; `preprocess::model`). A given model is kept.
+    /// `halfspace-single`'s frame is over it, `halfspace` is used; where it is within and the
+    /// mesh is closed and lit by lamps, `volume` is prepared and used if its frame is within
+    /// too (default: 1.3x the frame without the pass, measured; `preprocess::model`). A given
+    /// model is kept.
     #[arg(long, value_name = "MS")]
     pub frame_budget_ms: Option<f64>,
     /// Preprocessing controls.
@@ -539,8 +541,15 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     let mut set = output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)?;
     let mut scene = scene;
     let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
-    let (scene, pre, probe) =
-        fit_frame_budget(&gpu, scene, pre, &args.pre, args.frame_budget_ms, args.mode)?;
+    let (scene, pre, probe) = fit_frame_budget(
+        &gpu,
+        scene,
+        pre,
+        &args.pre,
+        args.frame_budget_ms,
+        args.mode,
+        true,
+    )?;
     // The scene as rendered: a rule of the default model may have chosen another model, which
     // the saved scene names.
     let resolved = scene.resolved.to_toml();
@@ -1564,8 +1573,10 @@ fn image_options(mode: Blend) -> Options {
 /// The frame budget's rule of the default model (`preprocess::model::FrameBudget`): where the
 /// default chose `halfspace-single`, a few frames of it are timed (blending `mode`, or the
 /// model's own; [`image_options`]); over the budget (`budget_ms`, or derived), `halfspace` is
-/// prepared instead. Returns the scene and preprocessing to render, and the probe's renderer
-/// when they are its own (it fitted).
+/// prepared instead. Within it and where `walks` (`render`, not the viewer, which moves the
+/// lamps), `volume` is prepared where the scene allows it (`model::volume_reason`) and timed
+/// against the same budget; over it, `halfspace-single` renders after all. Returns the scene
+/// and preprocessing to render, and the probe's renderer when they are its own (it fitted).
 fn fit_frame_budget(
     gpu: &std::sync::Arc<Gpu>,
     mut scene: Scene,
@@ -1573,36 +1584,59 @@ fn fit_frame_budget(
     args: &PreprocessArgs,
     budget_ms: Option<f64>,
     mode: Option<Blend>,
+    walks: bool,
 ) -> Result<(Scene, preprocess::Preprocessed, Option<Renderer>)> {
     use preprocess::model;
     if !model::needs_frame_probe(&scene) {
         return Ok((scene, pre, None));
     }
-    let mode = mode.unwrap_or_else(|| Blend::for_model(scene.material.model));
     let cache = args.cache_dir();
-    let mut renderer = Renderer::cached(
-        gpu,
-        scene.clone(),
-        &pre,
-        image_options(mode),
-        cache.as_deref(),
-    )?;
-    let lights = renderer.orbit_lights(0.0);
-    let mut frames = Vec::with_capacity(model::PROBE_FRAMES);
-    for f in 0..model::PROBE_WARMUP + model::PROBE_FRAMES {
-        let t = renderer.frame(&lights)?;
-        if f >= model::PROBE_WARMUP {
-            frames.push(t);
+    // A few frames of `scene`'s model timed, with the renderer that rendered them.
+    let probe = |scene: &Scene,
+                 pre: &preprocess::Preprocessed,
+                 budget_ms: Option<f64>|
+     -> Result<(model::FrameBudget, Renderer)> {
+        let mode = mode.unwrap_or_else(|| Blend::for_model(scene.material.model));
+        let mut renderer = Renderer::cached(
+            gpu,
+            scene.clone(),
+            pre,
+            image_options(mode),
+            cache.as_deref(),
+        )?;
+        let lights = renderer.orbit_lights(0.0);
+        let mut frames = Vec::with_capacity(model::PROBE_FRAMES);
+        for f in 0..model::PROBE_WARMUP + model::PROBE_FRAMES {
+            let t = renderer.frame(&lights)?;
+            if f >= model::PROBE_WARMUP {
+                frames.push(t);
+            }
         }
-    }
-    let budget = model::FrameBudget::measure(&renderer.pass_names(), &frames, budget_ms);
+        let budget = model::FrameBudget::measure(&renderer.pass_names(), &frames, budget_ms);
+        Ok((budget, renderer))
+    };
+    let (budget, renderer) = probe(&scene, &pre, budget_ms)?;
     println!("# {}", budget.describe());
-    if budget.fits() {
+    if !budget.fits() {
+        drop(renderer);
+        model::use_halfspace(&mut scene, budget.reason())?;
+        let pre = prepare_verbose(gpu, &mut scene, args, true)?;
+        return Ok((scene, pre, None));
+    }
+    let Some(why) = walks.then(|| model::volume_reason(&scene)).flatten() else {
         return Ok((scene, pre, Some(renderer)));
+    };
+    drop(renderer);
+    let mut walked = scene.clone();
+    model::use_model(&mut walked, crate::physics::Model::Volume, why)?;
+    let walked_pre = prepare_verbose(gpu, &mut walked, args, true)?;
+    // The same budget, now given: the frame without the chain was measured above.
+    let (volume, renderer) = probe(&walked, &walked_pre, Some(budget.budget_ms))?;
+    println!("# {}", volume.describe_volume());
+    if volume.fits() {
+        return Ok((walked, walked_pre, Some(renderer)));
     }
     drop(renderer);
-    model::use_halfspace(&mut scene, budget.reason())?;
-    let pre = prepare_verbose(gpu, &mut scene, args, true)?;
     Ok((scene, pre, None))
 }
 
@@ -1636,8 +1670,15 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
     // The frame budget is measured off screen, on a device of the same choice as the
     // window's, released before the window opens.
-    let (scene, pre, probe) =
-        fit_frame_budget(&gpu, scene, pre, &args.pre, args.frame_budget_ms, args.mode)?;
+    let (scene, pre, probe) = fit_frame_budget(
+        &gpu,
+        scene,
+        pre,
+        &args.pre,
+        args.frame_budget_ms,
+        args.mode,
+        false,
+    )?;
     drop(probe);
     check_validation(&gpu)?;
     drop(gpu);

@@ -826,8 +826,9 @@ fn precompute_times_the_material_reweighting() {
 }
 
 /// The default model at eta = 1 keeps its single-scattering pass only within the frame budget
-/// and above the target error (`preprocess::model`); a given model is kept; the model rendered
-/// is the one the written scene names, so that it renders the same again.
+/// and above the target error (`preprocess::model`), and `render` goes on to the walks where
+/// they fit too; a given model is kept; the model rendered is the one the written scene names,
+/// so that it renders the same again.
 #[test]
 fn the_default_model_keeps_single_scattering_only_within_budget_and_target() {
     let dir = temp_dir("frame-budget");
@@ -866,14 +867,23 @@ fn the_default_model_keeps_single_scattering_only_within_budget_and_target() {
         )
     };
     let single = |p: &[String]| p.iter().any(|n| n == "single");
-    // Within a budget it cannot miss: the pass stays, the scene names no model.
+    // Within a budget it cannot miss: the pass stays, and on this closed, lamp-lit sphere the
+    // walks follow (timed again, within too), named in the written scene.
     let (stdout, passes, written, _) = run("within", &["--frame-budget-ms", "1e6"]);
     assert!(
         stdout.contains("is within the budget 1000000.00 ms (given)"),
         "{stdout}"
     );
+    assert!(
+        stdout.contains(
+            "model volume: F from random walks inside the mesh along the light of its 1 lamp"
+        ) && stdout.contains("volume's frame")
+            && stdout.contains("is within the budget 1000000.00 ms"),
+        "{stdout}"
+    );
     assert!(single(&passes), "{passes:?}");
-    assert!(!written.contains("model ="), "{written}");
+    assert!(written.contains("model = \"volume\""), "{written}");
+
     // Over a budget it cannot meet: halfspace, said, rendered without the pass, and named in
     // the written scene.
     let (stdout, passes, written, out) = run("over", &["--frame-budget-ms", "0.001"]);
