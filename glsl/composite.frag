@@ -93,7 +93,10 @@ vec3 local_response(vec2 atlas) {
 // leaving there, which entered within a few diffusion lengths (exact on a flat, evenly lit
 // surface).
 vec3 oblique_exit(vec3 x, vec3 n, float mu, vec3 k, vec3 walks) {
-    vec3 h_mu = halfspace_h(mu);
+    vec3 h_mu;
+    vec3 unused_flux;
+    vec3 unused_slope;
+    halfspace_at(mu, h_mu, unused_flux, unused_slope);
     float eta = frame.material.x;
     vec3 radiance = vec3(0.0);
     vec3 flux = vec3(0.0);
@@ -107,12 +110,17 @@ vec3 oblique_exit(vec3 x, vec3 n, float mu, vec3 k, vec3 walks) {
         if (mu0 <= 0.0) {
             continue;
         }
+        // As the illumination pass weighs it (at eta = 1 the transmittance is 1 but where
+        // 1 - mu0^2 rounds to 1).
         vec3 e = irradiance
             * (mu0 * fresnel_transmittance(eta, mu0) * shadow_visibility(shadow_maps, i, x, n));
-        radiance += e * (h_mu * halfspace_h(mu0) - 1.0) / (mu + mu0);
-        vec3 f = e * halfspace_flux(mu0);
-        flux += f;
-        slope += f * halfspace_slope(mu0);
+        vec3 h0;
+        vec3 flux0;
+        vec3 slope0;
+        halfspace_at(mu0, h0, flux0, slope0);
+        radiance += e * (h_mu * h0 - 1.0) / (mu + mu0);
+        flux += e * flux0;
+        slope += e * flux0 * slope0;
     }
     bvec3 lit = greaterThan(flux, vec3(0.0));
     vec3 safe = max(flux, vec3(1e-30));

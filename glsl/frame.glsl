@@ -78,26 +78,15 @@ vec3 incidence_factor(float mu) {
 }
 
 // `volume`'s tables of the half-space's orders >= 2 (frame.halfspace_*) at cosine mu, per
-// channel, linear in sqrt(mu) between the samples (physics::incidence::HalfspaceSamples).
-vec3 halfspace_h(float mu) {
+// channel, linear in sqrt(mu) between the samples (physics::incidence::HalfspaceSamples): H,
+// the flux R_ms / (w / 4) and the lobe's slope.
+void halfspace_at(float mu, out vec3 h, out vec3 flux, out vec3 slope) {
     int i;
     float f;
     incidence_sample(mu, i, f);
-    return mix(frame.halfspace_h[i].rgb, frame.halfspace_h[i + 1].rgb, f);
-}
-
-vec3 halfspace_flux(float mu) {
-    int i;
-    float f;
-    incidence_sample(mu, i, f);
-    return mix(frame.halfspace_flux[i].rgb, frame.halfspace_flux[i + 1].rgb, f);
-}
-
-vec3 halfspace_slope(float mu) {
-    int i;
-    float f;
-    incidence_sample(mu, i, f);
-    return mix(frame.halfspace_slope[i].rgb, frame.halfspace_slope[i + 1].rgb, f);
+    h = mix(frame.halfspace_h[i].rgb, frame.halfspace_h[i + 1].rgb, f);
+    flux = mix(frame.halfspace_flux[i].rgb, frame.halfspace_flux[i + 1].rgb, f);
+    slope = mix(frame.halfspace_slope[i].rgb, frame.halfspace_slope[i + 1].rgb, f);
 }
 
 // Direction towards the light (normalised) and the irradiance it delivers at x, before the
