@@ -21,6 +21,11 @@ layout(location = 4) in vec3 in_global;
 // Slope k of the exit lobe 1 + k (mu - 2/3) measured by the walks (0 elsewhere: the profile's
 // lobe in the uniforms applies).
 layout(location = 5) in vec3 in_exit_slope;
+// Drift a of the exit lobe along the surface per channel, measured by the walks (0 elsewhere):
+// light flowing along the surface leaves leaning the way it flows, + a . w_o.
+layout(location = 6) in vec3 in_drift_r;
+layout(location = 7) in vec3 in_drift_g;
+layout(location = 8) in vec3 in_drift_b;
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_display;
@@ -144,6 +149,11 @@ void main() {
         // (`volume`: its exit_lobe samples are 1.)
         lobe = oblique_exit(in_position, n, cos_o, in_exit_slope, lobe);
     }
+    // The drift along the surface (an interpolated vector: its part along n is taken out). It
+    // keeps the flux of either lobe (odd in the azimuth); the walks bound it so that the
+    // linear lobe stays non-negative, the max holds where the oblique lobe is lower.
+    vec3 t = v - n * dot(n, v);
+    lobe = max(lobe + vec3(dot(in_drift_r, t), dot(in_drift_g, t), dot(in_drift_b, t)), vec3(0.0));
     vec3 l = fresnel_transmittance(frame.material.x, cos_o) * lobe * b / PI;
     if (SINGLE) {
         vec4 s = texelFetch(single, ivec2(gl_FragCoord.xy), 0);

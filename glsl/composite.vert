@@ -11,6 +11,9 @@ layout(location = 3) in vec2 in_atlas;
 layout(location = 4) in uvec3 in_nodes;
 layout(location = 5) in vec3 in_weights;
 layout(location = 6) in vec3 in_exit_slope;
+layout(location = 7) in vec3 in_drift_r;
+layout(location = 8) in vec3 in_drift_g;
+layout(location = 9) in vec3 in_drift_b;
 
 layout(set = 0, binding = 1) uniform samplerBuffer node_radiosity;
 
@@ -20,6 +23,9 @@ layout(location = 2) out vec2 out_uv;
 layout(location = 3) out vec2 out_atlas;
 layout(location = 4) out vec3 out_global;
 layout(location = 5) out vec3 out_exit_slope;
+layout(location = 6) out vec3 out_drift_r;
+layout(location = 7) out vec3 out_drift_g;
+layout(location = 8) out vec3 out_drift_b;
 
 void main() {
     out_position = in_position;
@@ -27,6 +33,9 @@ void main() {
     out_uv = in_uv;
     out_atlas = in_atlas;
     out_exit_slope = in_exit_slope;
+    out_drift_r = in_drift_r;
+    out_drift_g = in_drift_g;
+    out_drift_b = in_drift_b;
     out_global = in_weights.x * texelFetch(node_radiosity, int(in_nodes.x)).rgb
         + in_weights.y * texelFetch(node_radiosity, int(in_nodes.y)).rgb
         + in_weights.z * texelFetch(node_radiosity, int(in_nodes.z)).rgb;

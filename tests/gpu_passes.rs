@@ -1062,3 +1062,106 @@ fn oblique_light_leaves_with_the_half_spaces_lobe() {
     assert!(span[0] > 1.03, "{span:?}");
     assert!(worst < 0.01, "{:.3} %", 100.0 * worst);
 }
+
+/// The walks' drift of the exit lobe in the composite against the CPU: a wide, thin marble box
+/// lit along its normal, rendered twice from the same preprocessing but for the drift, once 0
+/// and once a fixed vector along the top per channel (the walks' slope fixed at k). What leaves
+/// by orders >= 2 (the radiance less the `single` pass) then differs only by the drift: per
+/// pixel, with the view direction's part t along the top, their ratio is (L + a . t) / L, L the
+/// half-space's lobe at normal incidence with the walks' slope, h(mu, 1) (1 + (k - k_h(1)) (mu -
+/// 2/3)). The camera looks at the top 14 degrees above it, so that t is long and a . t differs
+/// from pixel to pixel.
+#[test]
+fn the_exit_lobe_leans_along_the_walks_drift() {
+    let text = "[mesh]\nbuiltin = \"box\"\nsize = [120.0, 4.0, 120.0]\nsegments = 16\n\
+         [camera]\nposition = [0.0, 22.0, 80.0]\ntarget = [0.0, 2.0, 0.0]\nup = [0.0, 1.0, 0.0]\nfov_deg = 30.0\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [0.0, -1.0, 0.0]\n\
+         [material]\npreset = \"marble\"\neta = 1.0\nmodel = \"volume\"\n\
+         [output]\nwidth = 48\nheight = 48\n";
+    let box_ = scene(text);
+    let mut pre = common::preprocess(
+        &box_,
+        SettingsOverrides {
+            texel_mm: Some(1.0),
+            walk_paths: Some(64),
+            ..Default::default()
+        },
+    );
+    let k = 0.2;
+    assert_eq!(pre.ops.exit_drifts.len(), pre.nodes.positions.len());
+    pre.ops.exit_slopes.fill([k as f32; 3]);
+    pre.ops.exit_drifts.fill([[0.0; 3]; 3]);
+    let drift = [[0.3f32, 0.0, -0.2], [0.1, 0.0, 0.25], [-0.25, 0.0, 0.0]];
+    let mut leaning = pre.clone();
+    leaning.ops.exit_drifts.fill(drift);
+    let gpu = common::gpu();
+    let options = || Options {
+        capture: true,
+        ..Default::default()
+    };
+    let frames = [&pre, &leaning].map(|p| {
+        let mut r = Renderer::new(&gpu, box_.clone(), p, options()).unwrap();
+        r.frame(&box_.lights).unwrap();
+        let out = r.output(Vec::new()).unwrap();
+        let single = r.captured(0, 0).unwrap().unwrap().single;
+        (0..single.len())
+            .map(|i| {
+                std::array::from_fn::<f64, 3, _>(|c| {
+                    if out.radiance[4 * i + 3] < 1.0 {
+                        f64::NAN
+                    } else {
+                        (out.radiance[4 * i + c] - single[i][c]) as f64
+                    }
+                })
+            })
+            .collect::<Vec<_>>()
+    });
+    common::assert_no_validation_messages(&gpu);
+    let top = box_
+        .mesh
+        .positions
+        .iter()
+        .map(|p| p.y as f64)
+        .fold(f64::MIN, f64::max);
+    let h: [_; 3] = box_
+        .material
+        .albedo()
+        .map(translucent::physics::incidence::HFunction::new);
+    let (mut checked, mut worst, mut span) = (0, 0.0f64, [f64::MAX, f64::MIN]);
+    for y in 0..box_.height {
+        for x in 0..box_.width {
+            let i = (y * box_.width + x) as usize;
+            let (o, d) = translucent::reference::camera_ray(&box_, x, y);
+            let at = o + d * ((top - o.y) / d.y);
+            if d.y >= 0.0 || at.x.abs() > 20.0 || at.z.abs() > 20.0 {
+                continue;
+            }
+            let mu = -d.y;
+            // Towards the camera, along the top.
+            let t = glam::DVec3::new(-d.x, 0.0, -d.z);
+            for c in 0..3 {
+                let (flat, leaned) = (frames[0][i][c], frames[1][i][c]);
+                assert!(
+                    flat > 0.0 && leaned.is_finite(),
+                    "pixel ({x}, {y}) channel {c}: {flat} {leaned}"
+                );
+                let lobe = h[c].multiple_lobe(mu, 1.0)
+                    * (1.0 + (k - h[c].multiple_lobe_slope(1.0)) * (mu - 2.0 / 3.0));
+                let want = (lobe + glam::Vec3::from(drift[c]).as_dvec3().dot(t)) / lobe;
+                worst = worst.max((leaned / flat / want - 1.0).abs());
+                span = [span[0].min(want), span[1].max(want)];
+            }
+            checked += 1;
+        }
+    }
+    println!(
+        "exit drift: {checked} pixels, worst {:.3} % off the CPU lobe (ratio {:.3}-{:.3})",
+        100.0 * worst,
+        span[0],
+        span[1]
+    );
+    assert!(checked > 200, "{checked}");
+    // Without the drift the ratio is 1.
+    assert!(span[0] < 0.8 && span[1] > 1.2, "{span:?}");
+    assert!(worst < 0.005, "{:.3} %", 100.0 * worst);
+}

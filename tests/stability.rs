@@ -205,7 +205,7 @@ fn thin_slab_lit_from_behind() {
         &s,
         SettingsOverrides::default(),
         0.25,
-        Some(0.04),
+        Some(0.043),
     );
 }
 
@@ -226,7 +226,7 @@ fn two_surfaces_across_an_air_gap() {
         &s,
         SettingsOverrides::default(),
         0.10,
-        Some(0.075),
+        Some(0.077),
     );
 }
 
@@ -253,7 +253,7 @@ fn concave_corner() {
 
 #[test]
 fn low_and_high_albedo() {
-    for (preset, bound, volume) in [("ketchup", 0.03, 0.07), ("cream", 0.045, 0.024)] {
+    for (preset, bound, volume) in [("ketchup", 0.03, 0.033), ("cream", 0.045, 0.026)] {
         let s = scene(&format!("[mesh]\nbuiltin = \"sphere\"\nradius = 15.0\nsegments = 48\n{LIGHT_ABOVE}[material]\npreset = \"{preset}\"\n{SMALL}"));
         measure(
             &format!("sphere r = 15 mm, {preset}"),
@@ -278,12 +278,12 @@ fn texels_far_larger_and_far_smaller_than_the_peak() {
         texel_mm: Some(10.0 * z),
         ..Default::default()
     };
-    measure("texel = 10 z_r (marble)", &s, large, 0.10, Some(0.31));
+    measure("texel = 10 z_r (marble)", &s, large, 0.10, Some(0.30));
     let small = SettingsOverrides {
         texel_mm: Some(0.5 * z),
         ..Default::default()
     };
-    measure("texel = z_r / 2 (marble)", &s, small, 0.015, Some(0.02));
+    measure("texel = z_r / 2 (marble)", &s, small, 0.015, Some(0.021));
 }
 
 #[test]
@@ -295,7 +295,7 @@ fn object_much_smaller_than_the_diffusion_length() {
         &s,
         SettingsOverrides::default(),
         0.065,
-        Some(0.11),
+        Some(0.09),
     );
 }
 
@@ -315,9 +315,9 @@ fn coarse_mesh() {
 fn chart_seams_under_a_moving_light() {
     // A cube: every edge is a chart seam. The light sweeps across the top edges.
     for (k, (dir, volume)) in [
-        ("[1.0, -0.2, 0.0]", 0.165),
-        ("[0.0, -1.0, 0.0]", 0.125),
-        ("[-1.0, -0.2, 0.3]", 0.125),
+        ("[1.0, -0.2, 0.0]", 0.063),
+        ("[0.0, -1.0, 0.0]", 0.063),
+        ("[-1.0, -0.2, 0.3]", 0.06),
     ]
     .iter()
     .enumerate()
@@ -354,6 +354,6 @@ fn degenerate_and_sliver_triangles() {
         &s,
         SettingsOverrides::default(),
         0.02,
-        Some(0.02),
+        Some(0.023),
     );
 }

@@ -58,7 +58,7 @@ pub fn global_entry_pairs(ops: &crate::preprocess::operators::Operators, mode: B
         .sum()
 }
 
-/// One vertex of the atlas mesh (80 bytes).
+/// One vertex of the atlas mesh (112 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct AtlasVertex {
@@ -77,6 +77,10 @@ pub struct AtlasVertex {
     /// Slope of the exit lobe per channel, interpolated from the nodes' (location 6; 0 where
     /// the profile's lobe applies, see `preprocess::walk::exit_slope`).
     pub exit_slope: [f32; 3],
+    /// Drift of the exit lobe along the surface per channel (R, G, B at locations 7, 8, 9),
+    /// interpolated from the nodes' (0 where the walks did not measure it, see
+    /// `preprocess::walk::exit_drift`).
+    pub exit_drift: [[f32; 3]; 3],
 }
 
 const _: () = assert!(std::mem::size_of::<AtlasVertex>() as u64 == Item::AtlasVertices.bytes());
@@ -90,7 +94,7 @@ pub const ATLAS_VERTEX_BINDINGS: [vk::VertexInputBindingDescription; 1] =
     }];
 
 /// Attributes of [`AtlasVertex`].
-pub const ATLAS_VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 7] = [
+pub const ATLAS_VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 10] = [
     vk::VertexInputAttributeDescription {
         location: 0,
         binding: 0,
@@ -132,6 +136,24 @@ pub const ATLAS_VERTEX_ATTRIBUTES: [vk::VertexInputAttributeDescription; 7] = [
         binding: 0,
         format: vk::Format::R32G32B32_SFLOAT,
         offset: 64,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 7,
+        binding: 0,
+        format: vk::Format::R32G32B32_SFLOAT,
+        offset: 76,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 8,
+        binding: 0,
+        format: vk::Format::R32G32B32_SFLOAT,
+        offset: 88,
+    },
+    vk::VertexInputAttributeDescription {
+        location: 9,
+        binding: 0,
+        format: vk::Format::R32G32B32_SFLOAT,
+        offset: 100,
     },
 ];
 
@@ -664,12 +686,20 @@ impl SubsurfaceData {
                 let mut nodes = [0u32; 3];
                 let mut weights = [0f32; 3];
                 let mut exit_slope = [0f32; 3];
+                let mut exit_drift = [[0f32; 3]; 3];
                 for (k, (n, w)) in pre.nodes.prolong[v].iter().take(3).enumerate() {
                     nodes[k] = *n;
                     weights[k] = *w;
                     if let Some(s) = ops.exit_slopes.get(*n as usize) {
                         for c in 0..3 {
                             exit_slope[c] += w * s[c];
+                        }
+                    }
+                    if let Some(d) = ops.exit_drifts.get(*n as usize) {
+                        for (e, d) in exit_drift.iter_mut().zip(d) {
+                            for j in 0..3 {
+                                e[j] += w * d[j];
+                            }
                         }
                     }
                 }
@@ -681,6 +711,7 @@ impl SubsurfaceData {
                     nodes,
                     weights,
                     exit_slope,
+                    exit_drift,
                 }
             })
             .collect();

@@ -443,9 +443,16 @@ impl Preprocessed {
             let n = o.exit_slopes.len().max(1) as f64;
             let mean: [f64; 3] =
                 std::array::from_fn(|c| o.exit_slopes.iter().map(|s| s[c] as f64).sum::<f64>() / n);
+            let drift: [f64; 3] = std::array::from_fn(|c| {
+                o.exit_drifts
+                    .iter()
+                    .map(|d| glam::Vec3::from(d[c]).length() as f64)
+                    .sum::<f64>()
+                    / n
+            });
             lines.push(format!(
-                "exit lobe 1 + k (mu - 2/3) per node: mean k {:.3} / {:.3} / {:.3}",
-                mean[0], mean[1], mean[2]
+                "exit lobe 1 + k (mu - 2/3) + a . w per node: mean k {:.3} / {:.3} / {:.3}, mean |a| {:.3} / {:.3} / {:.3}",
+                mean[0], mean[1], mean[2], drift[0], drift[1], drift[2]
             ));
         }
         lines.extend([

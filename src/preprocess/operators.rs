@@ -238,6 +238,9 @@ pub struct Operators {
     /// Per node, the slope of the exit lobe per channel where the walks measured it
     /// ([`super::walk::exit_slope`]); empty otherwise (the profile's lobe applies).
     pub exit_slopes: Vec<[f32; 3]>,
+    /// Per node and channel, the exit lobe's drift along the surface where the walks measured
+    /// it ([`super::walk::exit_drift`]); empty otherwise.
+    pub exit_drifts: Vec<[[f32; 3]; 3]>,
     /// What the light across the air did to F (`model = "halfspace-air"`).
     pub air: Option<super::air::AirReport>,
 }
@@ -255,6 +258,8 @@ pub struct Weights {
     pub walks: Option<super::walk::WalkReport>,
     /// Per node, the exit lobe's slopes the walks measured (empty otherwise).
     pub exit_slopes: Vec<[f32; 3]>,
+    /// Per node, the exit lobe's drifts the walks measured (empty otherwise).
+    pub exit_drifts: Vec<[[f32; 3]; 3]>,
     /// What the light across the air did to F, where the model carries it.
     pub air: Option<super::air::AirReport>,
     /// Seconds spent on the kernels and seam taps, and on F (the air's own in its report).
@@ -281,7 +286,7 @@ impl Weights {
         let kernels_s = clock.elapsed().as_secs_f64();
 
         let clock = std::time::Instant::now();
-        let (mut rows, walks, exit_slopes) = if material.model.walks() {
+        let (mut rows, walks, exit_slopes, exit_drifts) = if material.model.walks() {
             // Single scattering is its own pass wherever the walks fill F.
             let min_order = 2;
             let lamps: Vec<_> = settings.walk_lights.iter().flatten().copied().collect();
@@ -294,10 +299,10 @@ impl Weights {
                 &lamps,
                 progress,
             );
-            (walked.rows, Some(report), walked.slopes)
+            (walked.rows, Some(report), walked.slopes, walked.drifts)
         } else {
             let rows = global_rows(atlas, nodes, basis, &profiles, progress);
-            (rows, None, Vec::new())
+            (rows, None, Vec::new(), Vec::new())
         };
         let air = material.model.crosses_air().then(|| {
             progress("air", 0, 1);
@@ -311,6 +316,7 @@ impl Weights {
             rows,
             walks,
             exit_slopes,
+            exit_drifts,
             air,
             seconds: [kernels_s, clock.elapsed().as_secs_f64()],
         }
@@ -1140,6 +1146,7 @@ impl Operators {
             seconds: [weights.seconds[0], weights.seconds[1] + prune_s, 0.0],
             walks: weights.walks,
             exit_slopes: weights.exit_slopes,
+            exit_drifts: weights.exit_drifts,
             air: weights.air,
         };
         ops.optimized = ops.fit_near_field(atlas, nodes, profiles, &basis.supports, progress);

@@ -264,10 +264,29 @@ impl Surface {
     }
 }
 
-/// One source node's walks: (receiver, deposit per channel and the same weighted by the exit
-/// cosine), the counters (paths, collisions, cut, re-entries), the flux that left and the
-/// source's weight in the exit lobes per channel.
-type Column = (Vec<(u32, [f64; 6])>, [u64; 4], [f64; 3], [f64; 3]);
+/// Per receiver of one source node's walks: the deposit per channel (0..3), the same weighted
+/// by the exit cosine (3..6) and by the exit direction's component along the receiving
+/// triangle (6..15: x, y, z per channel).
+type Deposit = [f64; DEPOSIT];
+const DEPOSIT: usize = 15;
+
+/// The channel of deposit slot `i`.
+fn deposit_channel(i: usize) -> usize {
+    if i < 6 {
+        i % 3
+    } else {
+        (i - 6) / 3
+    }
+}
+
+/// One source node's walks: (receiver, deposit), the counters (paths, collisions, cut,
+/// re-entries), the flux that left and the source's weight in the exit lobes per channel.
+type Column = (Vec<(u32, Deposit)>, [u64; 4], [f64; 3], [f64; 3]);
+
+/// Source nodes walked at a time: their columns are summed into F and the lobes in node
+/// order before the next block starts (the sums do not depend on the threads, and the
+/// columns of one block are all that is held besides F).
+const SOURCE_BLOCK: usize = 128;
 
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
 /// walks did, `paths` paths per node and channel, counting exits after `min_order` or more
@@ -287,183 +306,241 @@ pub fn walk_response(
     // The reduced medium, isotropic: the truth's with g = 0.
     let medium = crate::truth::Medium::new(material, 0.0);
     let done = std::sync::atomic::AtomicU64::new(0);
-    // Per source p: its column (receiver, deposit per channel) and the counters.
-    let columns: Vec<Column> = (0..n)
-        .into_par_iter()
-        .map_init(
-            || (vec![[0.0f64; 6]; n], vec![false; n], Vec::<u32>::new()),
-            |(acc, seen, touched), p| {
-                let mut counters = [0u64; 4]; // paths, events, truncated, re-entries
-                let mut left = [0.0; 3];
-                // Per channel: the walks' summed entry weights (their count along the normal).
-                let mut weights = [0.0f64; 3];
-                // Per channel: the source's share in the exit lobes, its mean irradiance under
-                // the lamps (1 without lamps; 0 where no lamp's ray reaches it: it sends no
-                // light).
-                let mut lobe = [if lamps.is_empty() { 1.0 } else { 0.0 }; 3];
-                if sources.area(p) > 0.0 {
-                    for c in 0..3 {
-                        let (sigma_t, albedo) = (medium.sigma_t[c], medium.albedo[c]);
-                        let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
-                        // Along the lamps where the scene has any; without the shadow ray
-                        // where no lamp's ray reaches this node; along the normal where it
-                        // faces away from every lamp, or the scene has none.
-                        for (along_lamps, shadows) in [(true, true), (true, false), (false, false)]
-                        {
-                            if (along_lamps && lamps.is_empty()) || weights[c] > 0.0 {
-                                continue;
+    // Per source p: its column (receiver, deposit) and the counters.
+    let walk_source = |(acc, seen, touched): &mut (Vec<Deposit>, Vec<bool>, Vec<u32>),
+                       p: usize|
+     -> Column {
+        let mut counters = [0u64; 4]; // paths, events, truncated, re-entries
+        let mut left = [0.0; 3];
+        // Per channel: the walks' summed entry weights (their count along the normal).
+        let mut weights = [0.0f64; 3];
+        // Per channel: the source's share in the exit lobes, its mean irradiance under
+        // the lamps (1 without lamps; 0 where no lamp's ray reaches it: it sends no
+        // light).
+        let mut lobe = [if lamps.is_empty() { 1.0 } else { 0.0 }; 3];
+        if sources.area(p) > 0.0 {
+            for c in 0..3 {
+                let (sigma_t, albedo) = (medium.sigma_t[c], medium.albedo[c]);
+                let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
+                // Along the lamps where the scene has any; without the shadow ray
+                // where no lamp's ray reaches this node; along the normal where it
+                // faces away from every lamp, or the scene has none.
+                for (along_lamps, shadows) in [(true, true), (true, false), (false, false)] {
+                    if (along_lamps && lamps.is_empty()) || weights[c] > 0.0 {
+                        continue;
+                    }
+                    let first = along_lamps && shadows;
+                    for _ in 0..paths {
+                        let (tri, b) = sources.sample(p, &mut rng);
+                        let [v0, v1, v2] = triangle(mesh, tri);
+                        let normal = surface.outward_normal(mesh, tri);
+                        let at = v0 * b[0] + v1 * b[1] + v2 * b[2];
+                        let (mut d, weight) = if along_lamps {
+                            match surface.entry(lamps, at, normal, c, shadows, &mut rng) {
+                                Some(entry) => entry,
+                                None => continue,
                             }
-                            let first = along_lamps && shadows;
-                            for _ in 0..paths {
-                                let (tri, b) = sources.sample(p, &mut rng);
-                                let [v0, v1, v2] = triangle(mesh, tri);
-                                let normal = surface.outward_normal(mesh, tri);
-                                let at = v0 * b[0] + v1 * b[1] + v2 * b[2];
-                                let (mut d, weight) = if along_lamps {
-                                    match surface.entry(lamps, at, normal, c, shadows, &mut rng) {
-                                        Some(entry) => entry,
-                                        None => continue,
-                                    }
-                                } else {
-                                    (-normal, 1.0)
-                                };
-                                counters[0] += 1;
-                                weights[c] += weight;
-                                let mut x = at + d * eps;
-                                let mut order = 0u32;
-                                let mut events = 0u64;
-                                loop {
-                                    let s = -(1.0 - rng.uniform()).ln() / sigma_t;
-                                    if let Some(hit) = bvh.intersect(x, d, s) {
-                                        if order >= min_order {
-                                            left[c] += weight;
-                                            let mu = surface
-                                                .outward_normal(mesh, hit.triangle as usize)
-                                                .dot(d)
-                                                .clamp(0.0, 1.0);
-                                            for (q, w) in
-                                                corner_weights(mesh, nodes, hit.triangle as usize)
-                                            {
-                                                let phi = hit.bary[0] * w[0]
-                                                    + hit.bary[1] * w[1]
-                                                    + hit.bary[2] * w[2];
-                                                if !seen[q as usize] {
-                                                    seen[q as usize] = true;
-                                                    touched.push(q);
-                                                }
-                                                acc[q as usize][c] += phi * weight;
-                                                acc[q as usize][3 + c] += phi * mu * weight;
-                                            }
+                        } else {
+                            (-normal, 1.0)
+                        };
+                        counters[0] += 1;
+                        weights[c] += weight;
+                        let mut x = at + d * eps;
+                        let mut order = 0u32;
+                        let mut events = 0u64;
+                        loop {
+                            let s = -(1.0 - rng.uniform()).ln() / sigma_t;
+                            if let Some(hit) = bvh.intersect(x, d, s) {
+                                if order >= min_order {
+                                    left[c] += weight;
+                                    let normal =
+                                        surface.outward_normal(mesh, hit.triangle as usize);
+                                    let mu = normal.dot(d).clamp(0.0, 1.0);
+                                    // Along the surface it leaves through.
+                                    let along = d - normal * normal.dot(d);
+                                    for (q, w) in corner_weights(mesh, nodes, hit.triangle as usize)
+                                    {
+                                        let phi = hit.bary[0] * w[0]
+                                            + hit.bary[1] * w[1]
+                                            + hit.bary[2] * w[2];
+                                        if !seen[q as usize] {
+                                            seen[q as usize] = true;
+                                            touched.push(q);
                                         }
-                                        // On through the air (eta = 1: straight on): into the
-                                        // object again where the line meets it, gone otherwise.
-                                        // A hit within a few eps is the exit's own edge
-                                        // (rounding), and one through a face turned away
-                                        // is not an entry: neither is taken.
-                                        let out = x + d * (hit.t + eps);
-                                        match bvh.intersect(out, d, f64::INFINITY) {
-                                            Some(h)
-                                                if h.t > 10.0 * eps
-                                                    && surface
-                                                        .outward_normal(mesh, h.triangle as usize)
-                                                        .dot(d)
-                                                        < 0.0 =>
-                                            {
-                                                x = out + d * (h.t + eps);
-                                                counters[3] += 1;
-                                                continue;
-                                            }
-                                            _ => break,
+                                        let a = &mut acc[q as usize];
+                                        a[c] += phi * weight;
+                                        a[3 + c] += phi * mu * weight;
+                                        for (j, x) in along.to_array().iter().enumerate() {
+                                            a[6 + 3 * c + j] += phi * x * weight;
                                         }
                                     }
-                                    x += d * s;
-                                    order += 1;
-                                    events += 1;
-                                    if rng.uniform() >= albedo {
-                                        break;
-                                    }
-                                    if events >= MAX_WALK_EVENTS {
-                                        counters[2] += 1;
-                                        break;
-                                    }
-                                    let (u1, u2) = (rng.uniform(), rng.uniform());
-                                    let cos = 1.0 - 2.0 * u1;
-                                    let sin = (1.0 - cos * cos).max(0.0).sqrt();
-                                    let phi = 2.0 * PI * u2;
-                                    d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
                                 }
-                                counters[1] += events;
+                                // On through the air (eta = 1: straight on): into the
+                                // object again where the line meets it, gone otherwise.
+                                // A hit within a few eps is the exit's own edge
+                                // (rounding), and one through a face turned away
+                                // is not an entry: neither is taken.
+                                let out = x + d * (hit.t + eps);
+                                match bvh.intersect(out, d, f64::INFINITY) {
+                                    Some(h)
+                                        if h.t > 10.0 * eps
+                                            && surface
+                                                .outward_normal(mesh, h.triangle as usize)
+                                                .dot(d)
+                                                < 0.0 =>
+                                    {
+                                        x = out + d * (h.t + eps);
+                                        counters[3] += 1;
+                                        continue;
+                                    }
+                                    _ => break,
+                                }
                             }
-                            if first {
-                                lobe[c] = weights[c] / paths.max(1) as f64;
+                            x += d * s;
+                            order += 1;
+                            events += 1;
+                            if rng.uniform() >= albedo {
+                                break;
                             }
+                            if events >= MAX_WALK_EVENTS {
+                                counters[2] += 1;
+                                break;
+                            }
+                            let (u1, u2) = (rng.uniform(), rng.uniform());
+                            let cos = 1.0 - 2.0 * u1;
+                            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+                            let phi = 2.0 * PI * u2;
+                            d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
                         }
+                        counters[1] += events;
+                    }
+                    if first {
+                        lobe[c] = weights[c] / paths.max(1) as f64;
                     }
                 }
-                touched.sort_unstable();
-                // A_p of flux spread over the walks by their weights.
-                let scale: [f64; 3] = std::array::from_fn(|c| {
-                    if weights[c] > 0.0 {
-                        sources.area(p) / weights[c]
-                    } else {
-                        0.0
-                    }
-                });
-                let column = touched
-                    .drain(..)
-                    .map(|q| {
-                        seen[q as usize] = false;
-                        let v = std::mem::take(&mut acc[q as usize]);
-                        (q, std::array::from_fn(|i| v[i] * scale[i % 3]))
-                    })
-                    .collect();
-                let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if k.is_multiple_of(64) {
-                    progress("walks", k, n as u64);
-                }
-                (
-                    column,
-                    counters,
-                    std::array::from_fn(|c| left[c] * scale[c]),
-                    lobe,
-                )
-            },
+            }
+        }
+        touched.sort_unstable();
+        // A_p of flux spread over the walks by their weights.
+        let scale: [f64; 3] = std::array::from_fn(|c| {
+            if weights[c] > 0.0 {
+                sources.area(p) / weights[c]
+            } else {
+                0.0
+            }
+        });
+        let column = touched
+            .drain(..)
+            .map(|q| {
+                seen[q as usize] = false;
+                let v = std::mem::take(&mut acc[q as usize]);
+                (q, std::array::from_fn(|i| v[i] * scale[deposit_channel(i)]))
+            })
+            .collect();
+        let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if k.is_multiple_of(64) {
+            progress("walks", k, n as u64);
+        }
+        (
+            column,
+            counters,
+            std::array::from_fn(|c| left[c] * scale[c]),
+            lobe,
         )
-        .collect();
-    progress("walks", n as u64, n as u64);
+    };
     let mut report = WalkReport {
         paths_per_node: paths,
         ..WalkReport::default()
     };
     let mut rows: Vec<Vec<(u32, Rgb)>> = vec![Vec::new(); n];
-    // Per receiver: what left through its support, and that weighted by the exit cosine.
-    let mut exits = vec![[0.0f64; 6]; n];
+    // Per receiver: what left through its support, and that weighted by the exit cosine and
+    // by the exit direction along the surface, each source weighted by its lobe weight.
+    let mut exits = vec![[0.0f64; DEPOSIT]; n];
     let mut entered = 0.0;
-    for (p, (column, counters, left, lobe)) in columns.into_iter().enumerate() {
-        report.paths += counters[0];
-        report.events += counters[1];
-        report.truncated += counters[2];
-        report.reentries += counters[3];
-        entered += sources.area(p);
-        for c in 0..3 {
-            report.left[c] += left[c];
-        }
-        for (q, v) in column {
-            for (i, (e, x)) in exits[q as usize].iter_mut().zip(v).enumerate() {
-                *e += x * lobe[i % 3];
+    for start in (0..n).step_by(SOURCE_BLOCK) {
+        let block: Vec<Column> = (start..(start + SOURCE_BLOCK).min(n))
+            .into_par_iter()
+            .map_init(
+                || {
+                    (
+                        vec![[0.0f64; DEPOSIT]; n],
+                        vec![false; n],
+                        Vec::<u32>::new(),
+                    )
+                },
+                walk_source,
+            )
+            .collect();
+        for (i, (column, counters, left, lobe)) in block.into_iter().enumerate() {
+            let p = start + i;
+            report.paths += counters[0];
+            report.events += counters[1];
+            report.truncated += counters[2];
+            report.reentries += counters[3];
+            entered += sources.area(p);
+            for c in 0..3 {
+                report.left[c] += left[c];
             }
-            let aq = sources.area(q as usize);
-            if aq > 0.0 {
-                rows[q as usize].push((p as u32, Rgb([v[0] / aq, v[1] / aq, v[2] / aq])));
+            for (q, v) in column {
+                for (i, (e, x)) in exits[q as usize].iter_mut().zip(v).enumerate() {
+                    *e += x * lobe[deposit_channel(i)];
+                }
+                let aq = sources.area(q as usize);
+                if aq > 0.0 {
+                    rows[q as usize].push((p as u32, Rgb([v[0] / aq, v[1] / aq, v[2] / aq])));
+                }
             }
         }
     }
+    progress("walks", n as u64, n as u64);
     report.left = report.left.map(|l| l / entered.max(1e-300));
-    let slopes = exits
+    let slopes: Vec<[f32; 3]> = exits
         .iter()
         .map(|e| std::array::from_fn(|c| exit_slope(e[3 + c], e[c])))
         .collect();
-    (Walked { rows, slopes }, report)
+    let drifts = exits
+        .iter()
+        .zip(&slopes)
+        .map(|(e, k)| {
+            std::array::from_fn(|c| {
+                exit_drift(
+                    DVec3::new(e[6 + 3 * c], e[7 + 3 * c], e[8 + 3 * c]),
+                    e[c],
+                    k[c],
+                )
+            })
+        })
+        .collect();
+    (
+        Walked {
+            rows,
+            slopes,
+            drifts,
+        },
+        report,
+    )
+}
+
+/// The drift a of the exit lobe 1 + k (mu - 2/3) + a . w (w the exit direction, a along the
+/// surface) whose mean exit direction along the surface is `along_weighted / total`: light
+/// that flows along the surface under the object's own gradient of light (from the lit side
+/// towards the terminator and into the shadow, round a bend) leaves leaning the way it flows,
+/// as the diffusion radiance L = (phi + 3 J . w) / (4 pi) does with the flux J along the
+/// surface. The term keeps the flux (it is odd in the azimuth) and its mean along the surface
+/// is a / 4 (the integral of (a . w) w mu over the hemisphere is pi a / 4). Bounded to
+/// |a| <= 1 - 2 k / 3, where the lobe stays non-negative at grazing exit; 0 where nothing left.
+pub fn exit_drift(along_weighted: DVec3, total: f64, k: f32) -> [f32; 3] {
+    if total <= 0.0 {
+        return [0.0; 3];
+    }
+    let a = 4.0 * along_weighted / total;
+    let bound = (1.0 - 2.0 * k as f64 / 3.0).max(0.0);
+    let a = if a.length() > bound {
+        a * (bound / a.length())
+    } else {
+        a
+    };
+    a.as_vec3().to_array()
 }
 
 /// The slope k of the linear exit lobe 1 + k (mu - 2/3) (radiance over that of a Lambertian
@@ -485,6 +562,9 @@ pub struct Walked {
     /// Per node, the exit lobe's slope per channel ([`exit_slope`]) of everything that left
     /// through its support, each source weighted by its mean irradiance under the lamps.
     pub slopes: Vec<[f32; 3]>,
+    /// Per node and channel, the exit lobe's drift along the surface ([`exit_drift`]), a
+    /// vector in the mesh's frame, weighted as the slopes are.
+    pub drifts: Vec<[[f32; 3]; 3]>,
 }
 
 #[cfg(test)]
@@ -779,6 +859,90 @@ mod tests {
                 "triangle {tri}: drawn {got:.4}, phi's share {want:.4}"
             );
         }
+    }
+
+    /// The drift's mapping against a quadrature of the lobe over the hemisphere: the lobe
+    /// 1 + k (mu - 2/3) + a . w keeps the flux of a Lambertian exit for every a along the
+    /// surface, and its mean exit direction along the surface is a / 4.
+    #[test]
+    fn exit_drifts_follow_the_mean_direction_along_the_surface() {
+        let (k, a) = (0.4, DVec3::new(0.3, -0.2, 0.0));
+        let (mut flux, mut along) = (0.0, DVec3::ZERO);
+        let n = 400;
+        for i in 0..n {
+            let mu = (i as f64 + 0.5) / n as f64;
+            let sin = (1.0 - mu * mu).sqrt();
+            for j in 0..n {
+                let phi = 2.0 * PI * (j as f64 + 0.5) / n as f64;
+                let w = DVec3::new(sin * phi.cos(), sin * phi.sin(), mu);
+                let lobe = 1.0 + k * (mu - 2.0 / 3.0) + a.dot(w);
+                // d omega = d mu d phi; radiance over that of a Lambertian exit of unit flux
+                let weight = lobe * mu / PI * (1.0 / n as f64) * (2.0 * PI / n as f64);
+                flux += weight;
+                along += DVec3::new(w.x, w.y, 0.0) * weight;
+            }
+        }
+        assert!((flux - 1.0).abs() < 1e-4, "flux {flux}");
+        let got = exit_drift(along, flux, k as f32);
+        for j in 0..3 {
+            assert!((got[j] as f64 - a[j]).abs() < 1e-3, "{got:?} vs {a}");
+        }
+        // Bounded to 1 - 2 k / 3, where the lobe is 0 at grazing exit against the drift.
+        let got = exit_drift(DVec3::new(0.0, 0.5, 0.0), 1.0, 0.75);
+        assert!((got[1] - 0.5).abs() < 1e-6 && got[0] == 0.0, "{got:?}");
+        assert_eq!(exit_drift(DVec3::X, 1.0, 1.5), [0.0; 3]);
+        assert_eq!(exit_drift(DVec3::X, 0.0, 0.0), [0.0; 3]);
+    }
+
+    /// A 20 mm cube of skim milk lit from above: the light flows from the lit top down the
+    /// sides, so it leaves the sides leaning down (a . z < 0), and the middle of the top,
+    /// lit evenly around it, without a drift along any side beyond the walks' noise.
+    #[test]
+    fn light_leaves_the_sides_of_a_cube_lit_from_above_leaning_down() {
+        let mesh = Mesh::cuboid(glam::Vec3::splat(20.0), 8);
+        let nodes = Nodes::build(&mesh, 2.5);
+        let m = medium_of("skimmilk", true);
+        let lamp = Light {
+            kind: LightKind::Directional,
+            position: glam::Vec3::ZERO,
+            direction: glam::Vec3::new(0.0, 0.0, -1.0),
+            radiance: glam::Vec3::ONE,
+            cos_cone: -1.0,
+            rotation: glam::Quat::IDENTITY,
+        };
+        let (walked, _) = walk_response(&mesh, &nodes, &m, 4000, 2, &[lamp], &|_, _, _| {});
+        let mut sides = Vec::new();
+        for (p, x) in nodes.positions.iter().enumerate() {
+            let on_side = (x.x.abs() - 10.0).abs() < 1e-3 || (x.y.abs() - 10.0).abs() < 1e-3;
+            // Away from the cube's edges and corners.
+            if on_side && x.z.abs() < 6.0 && x.x.abs().min(x.y.abs()) < 6.0 {
+                sides.push(walked.drifts[p]);
+            }
+        }
+        let centre = nodes
+            .positions
+            .iter()
+            .position(|x| x.x.abs() < 1e-3 && x.y.abs() < 1e-3 && x.z > 9.0)
+            .unwrap();
+        let mean_down: [f64; 3] = std::array::from_fn(|c| {
+            -sides.iter().map(|d| d[c][2] as f64).sum::<f64>() / sides.len() as f64
+        });
+        let leaning: [usize; 3] =
+            std::array::from_fn(|c| sides.iter().filter(|d| d[c][2] < 0.0).count());
+        let centre_drift = walked.drifts[centre].map(|a| glam::Vec3::from(a).length());
+        println!(
+            "{} side nodes, leaning down {leaning:?}, mean -a.z {:.3} / {:.3} / {:.3}; |a| at the top's centre {centre_drift:?}",
+            sides.len(),
+            mean_down[0],
+            mean_down[1],
+            mean_down[2],
+        );
+        assert!(sides.len() >= 16, "{}", sides.len());
+        // Red carries the most light down the sides (its diffusion length is the cube's size).
+        assert!(leaning[0] * 10 >= sides.len() * 9, "{leaning:?}");
+        assert!(mean_down.iter().all(|&d| d > 0.1), "{mean_down:?}");
+        assert!(mean_down[0] > mean_down[2], "{mean_down:?}");
+        assert!(centre_drift.iter().all(|&a| a < 0.12), "{centre_drift:?}");
     }
 
     #[test]
