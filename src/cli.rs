@@ -1617,27 +1617,33 @@ fn fit_frame_budget(
     };
     let (budget, renderer) = probe(&scene, &pre, budget_ms)?;
     println!("# {}", budget.describe());
-    if !budget.fits() {
-        drop(renderer);
-        model::use_halfspace(&mut scene, budget.reason())?;
-        let pre = prepare_verbose(gpu, &mut scene, args, true)?;
-        return Ok((scene, pre, None));
+    let mut renderer = Some(renderer);
+    let choice = model::choose_by_budget(&budget, |budget_ms| -> Result<_> {
+        let Some(why) = walks.then(|| model::volume_reason(&scene)).flatten() else {
+            return Ok(None);
+        };
+        // One renderer at a time on the device.
+        renderer = None;
+        let mut walked = scene.clone();
+        model::use_model(&mut walked, crate::physics::Model::Volume, why)?;
+        let walked_pre = prepare_verbose(gpu, &mut walked, args, true)?;
+        // The same budget, now given: the frame without the chain was measured above.
+        let (volume, walked_renderer) = probe(&walked, &walked_pre, Some(budget_ms))?;
+        println!("# {}", volume.describe_volume());
+        Ok(Some((volume, (walked, walked_pre, walked_renderer))))
+    })?;
+    match choice {
+        model::BudgetChoice::Volume((walked, walked_pre, walked_renderer)) => {
+            Ok((walked, walked_pre, Some(walked_renderer)))
+        }
+        model::BudgetChoice::HalfspaceSingle => Ok((scene, pre, renderer)),
+        model::BudgetChoice::Halfspace => {
+            drop(renderer);
+            model::use_halfspace(&mut scene, budget.reason())?;
+            let pre = prepare_verbose(gpu, &mut scene, args, true)?;
+            Ok((scene, pre, None))
+        }
     }
-    let Some(why) = walks.then(|| model::volume_reason(&scene)).flatten() else {
-        return Ok((scene, pre, Some(renderer)));
-    };
-    drop(renderer);
-    let mut walked = scene.clone();
-    model::use_model(&mut walked, crate::physics::Model::Volume, why)?;
-    let walked_pre = prepare_verbose(gpu, &mut walked, args, true)?;
-    // The same budget, now given: the frame without the chain was measured above.
-    let (volume, renderer) = probe(&walked, &walked_pre, Some(budget.budget_ms))?;
-    println!("# {}", volume.describe_volume());
-    if volume.fits() {
-        return Ok((walked, walked_pre, Some(renderer)));
-    }
-    drop(renderer);
-    Ok((scene, pre, None))
 }
 
 fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {

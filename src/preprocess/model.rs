@@ -246,8 +246,82 @@ impl FrameBudget {
     }
 }
 
+/// What `render`'s default renders after the frame probes ([`choose_by_budget`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum BudgetChoice<T> {
+    /// `halfspace-single`'s frame is over the budget: `halfspace`.
+    Halfspace,
+    /// `halfspace-single`: its frame is within the budget, and the walks do not apply or
+    /// their frame is over it.
+    HalfspaceSingle,
+    /// `volume`: its frame is within the same budget (with what its probe made).
+    Volume(T),
+}
+
+/// The default's decision from `halfspace-single`'s probe `single` and, only where that
+/// fits, `volume`'s: `probe_volume` gets the budget and returns `volume`'s probe with what it
+/// made (the walked scene, its renderer), or `None` where the walks do not apply. It is not
+/// called where `halfspace-single` is over the budget.
+pub fn choose_by_budget<T, E>(
+    single: &FrameBudget,
+    probe_volume: impl FnOnce(f64) -> Result<Option<(FrameBudget, T)>, E>,
+) -> Result<BudgetChoice<T>, E> {
+    if !single.fits() {
+        return Ok(BudgetChoice::Halfspace);
+    }
+    Ok(match probe_volume(single.budget_ms)? {
+        Some((volume, made)) if volume.fits() => BudgetChoice::Volume(made),
+        _ => BudgetChoice::HalfspaceSingle,
+    })
+}
+
 #[cfg(test)]
 mod tests {
+    /// Each branch of the default's decision, from probes made up: `volume` where both frames
+    /// fit the one budget, `halfspace-single` where the walks' frame is over it (the branch no
+    /// device run can reach deterministically) or the walks do not apply, `halfspace` without
+    /// probing the walks where `halfspace-single` is over it.
+    #[test]
+    fn the_budget_chooses_the_walks_only_where_both_frames_fit() {
+        let budget = 30.0;
+        let single = FrameBudget::new(25.0, 5.0, Some(budget));
+        let probe = |frame_ms: f64| {
+            move |given: f64| -> Result<Option<(FrameBudget, &str)>, ()> {
+                assert_eq!(given, budget, "the walks are timed against the same budget");
+                Ok(Some((
+                    FrameBudget::new(frame_ms, 5.0, Some(given)),
+                    "walked",
+                )))
+            }
+        };
+        assert_eq!(
+            choose_by_budget(&single, probe(29.0)),
+            Ok(BudgetChoice::Volume("walked"))
+        );
+        assert_eq!(
+            choose_by_budget(&single, probe(31.0)),
+            Ok(BudgetChoice::HalfspaceSingle)
+        );
+        assert_eq!(
+            choose_by_budget(&single, |_| Ok::<Option<(FrameBudget, ())>, ()>(None)),
+            Ok(BudgetChoice::HalfspaceSingle)
+        );
+        let over = FrameBudget::new(31.0, 5.0, Some(budget));
+        assert_eq!(
+            choose_by_budget(&over, |_| -> Result<Option<(FrameBudget, ())>, ()> {
+                panic!("the walks are probed only where halfspace-single fits")
+            }),
+            Ok(BudgetChoice::Halfspace)
+        );
+        // A probe's error is the decision's.
+        assert_eq!(
+            choose_by_budget(&single, |_| Err::<Option<(FrameBudget, ())>, _>(
+                "no device"
+            )),
+            Err("no device")
+        );
+    }
+
     use super::*;
 
     /// At normal incidence single scattering is (w / 2) (1 - ln 2) of a reflectance
