@@ -998,61 +998,31 @@ fn oblique_light_leaves_with_the_half_spaces_lobe() {
             ..Default::default()
         };
         let mut r = Renderer::new(&gpu, oblique.clone(), &pre, options).unwrap();
-        [&oblique, &normal].map(|s| {
-            r.frame(&s.lights).unwrap();
-            let out = r.output(Vec::new()).unwrap();
-            let single = r.captured(0, 0).unwrap().unwrap().single;
-            // Orders >= 2 per pixel, NaN where the pixel is not covered.
-            (0..single.len())
-                .map(|i| {
-                    std::array::from_fn::<f64, 3, _>(|c| {
-                        if out.radiance[4 * i + 3] < 1.0 {
-                            f64::NAN
-                        } else {
-                            (out.radiance[4 * i + c] - single[i][c]) as f64
-                        }
-                    })
-                })
-                .collect::<Vec<_>>()
-        })
+        [&oblique, &normal].map(|s| orders_beyond_single(&mut r, &s.lights))
     };
     common::assert_no_validation_messages(&gpu);
-    let top = oblique
-        .mesh
-        .positions
-        .iter()
-        .map(|p| p.y as f64)
-        .fold(f64::MIN, f64::max);
     let h: [_; 3] = oblique
         .material
         .albedo()
         .map(translucent::physics::incidence::HFunction::new);
     let (mut checked, mut worst, mut span) = (0, 0.0f64, [f64::MAX, f64::MIN]);
-    for y in 0..oblique.height {
-        for x in 0..oblique.width {
-            let i = (y * oblique.width + x) as usize;
-            let (o, d) = translucent::reference::camera_ray(&oblique, x, y);
-            let at = o + d * ((top - o.y) / d.y);
-            if d.y >= 0.0 || at.x.abs() > 20.0 || at.z.abs() > 20.0 {
-                continue;
-            }
-            let mu = -d.y;
-            for c in 0..3 {
-                let (a, b) = (frames[0][i][c], frames[1][i][c]);
-                assert!(
-                    a.is_finite() && b > 0.0,
-                    "pixel ({x}, {y}) channel {c}: {a} {b}"
-                );
-                let lobe = |mu0: f64| {
-                    let slope = k - h[c].multiple_lobe_slope(mu0);
-                    h[c].multiple_lobe(mu, mu0) * (1.0 + slope * (mu - 2.0 / 3.0))
-                };
-                let want = lobe(mu0) / lobe(1.0);
-                worst = worst.max((a / b / want - 1.0).abs());
-                span = [span[0].min(want), span[1].max(want)];
-            }
-            checked += 1;
+    for (x, y, i, d) in top_middle_pixels(&oblique) {
+        let mu = -d.y;
+        for c in 0..3 {
+            let (a, b) = (frames[0][i][c], frames[1][i][c]);
+            assert!(
+                a.is_finite() && b > 0.0,
+                "pixel ({x}, {y}) channel {c}: {a} {b}"
+            );
+            let lobe = |mu0: f64| {
+                let slope = k - h[c].multiple_lobe_slope(mu0);
+                h[c].multiple_lobe(mu, mu0) * (1.0 + slope * (mu - 2.0 / 3.0))
+            };
+            let want = lobe(mu0) / lobe(1.0);
+            worst = worst.max((a / b / want - 1.0).abs());
+            span = [span[0].min(want), span[1].max(want)];
         }
+        checked += 1;
     }
     println!(
         "oblique lobe: {checked} pixels, worst {:.3} % off Chandrasekhar's (lobe {:.3}-{:.3})",
@@ -1104,58 +1074,31 @@ fn the_exit_lobe_leans_along_the_walks_drift() {
     };
     let frames = [&pre, &leaning].map(|p| {
         let mut r = Renderer::new(&gpu, box_.clone(), p, options()).unwrap();
-        r.frame(&box_.lights).unwrap();
-        let out = r.output(Vec::new()).unwrap();
-        let single = r.captured(0, 0).unwrap().unwrap().single;
-        (0..single.len())
-            .map(|i| {
-                std::array::from_fn::<f64, 3, _>(|c| {
-                    if out.radiance[4 * i + 3] < 1.0 {
-                        f64::NAN
-                    } else {
-                        (out.radiance[4 * i + c] - single[i][c]) as f64
-                    }
-                })
-            })
-            .collect::<Vec<_>>()
+        orders_beyond_single(&mut r, &box_.lights)
     });
     common::assert_no_validation_messages(&gpu);
-    let top = box_
-        .mesh
-        .positions
-        .iter()
-        .map(|p| p.y as f64)
-        .fold(f64::MIN, f64::max);
     let h: [_; 3] = box_
         .material
         .albedo()
         .map(translucent::physics::incidence::HFunction::new);
     let (mut checked, mut worst, mut span) = (0, 0.0f64, [f64::MAX, f64::MIN]);
-    for y in 0..box_.height {
-        for x in 0..box_.width {
-            let i = (y * box_.width + x) as usize;
-            let (o, d) = translucent::reference::camera_ray(&box_, x, y);
-            let at = o + d * ((top - o.y) / d.y);
-            if d.y >= 0.0 || at.x.abs() > 20.0 || at.z.abs() > 20.0 {
-                continue;
-            }
-            let mu = -d.y;
-            // Towards the camera, along the top.
-            let t = glam::DVec3::new(-d.x, 0.0, -d.z);
-            for c in 0..3 {
-                let (flat, leaned) = (frames[0][i][c], frames[1][i][c]);
-                assert!(
-                    flat > 0.0 && leaned.is_finite(),
-                    "pixel ({x}, {y}) channel {c}: {flat} {leaned}"
-                );
-                let lobe = h[c].multiple_lobe(mu, 1.0)
-                    * (1.0 + (k - h[c].multiple_lobe_slope(1.0)) * (mu - 2.0 / 3.0));
-                let want = (lobe + glam::Vec3::from(drift[c]).as_dvec3().dot(t)) / lobe;
-                worst = worst.max((leaned / flat / want - 1.0).abs());
-                span = [span[0].min(want), span[1].max(want)];
-            }
-            checked += 1;
+    for (x, y, i, d) in top_middle_pixels(&box_) {
+        let mu = -d.y;
+        // Towards the camera, along the top.
+        let t = glam::DVec3::new(-d.x, 0.0, -d.z);
+        for c in 0..3 {
+            let (flat, leaned) = (frames[0][i][c], frames[1][i][c]);
+            assert!(
+                flat > 0.0 && leaned.is_finite(),
+                "pixel ({x}, {y}) channel {c}: {flat} {leaned}"
+            );
+            let lobe = h[c].multiple_lobe(mu, 1.0)
+                * (1.0 + (k - h[c].multiple_lobe_slope(1.0)) * (mu - 2.0 / 3.0));
+            let want = (lobe + glam::Vec3::from(drift[c]).as_dvec3().dot(t)) / lobe;
+            worst = worst.max((leaned / flat / want - 1.0).abs());
+            span = [span[0].min(want), span[1].max(want)];
         }
+        checked += 1;
     }
     println!(
         "exit drift: {checked} pixels, worst {:.3} % off the CPU lobe (ratio {:.3}-{:.3})",
@@ -1167,4 +1110,45 @@ fn the_exit_lobe_leans_along_the_walks_drift() {
     // Without the drift the ratio is 1.
     assert!(span[0] < 0.8 && span[1] > 1.2, "{span:?}");
     assert!(worst < 0.005, "{:.3} %", 100.0 * worst);
+}
+
+/// What a frame of `r` under `lights` leaves by orders >= 2, per pixel: the radiance less the
+/// captured `single` pass, NaN where the pixel is not covered.
+fn orders_beyond_single(r: &mut Renderer, lights: &[translucent::scene::Light]) -> Vec<[f64; 3]> {
+    r.frame(lights).unwrap();
+    let out = r.output(Vec::new()).unwrap();
+    let single = r.captured(0, 0).unwrap().unwrap().single;
+    (0..single.len())
+        .map(|i| {
+            std::array::from_fn(|c| {
+                if out.radiance[4 * i + 3] < 1.0 {
+                    f64::NAN
+                } else {
+                    (out.radiance[4 * i + c] - single[i][c]) as f64
+                }
+            })
+        })
+        .collect()
+}
+
+/// The pixels of `scene` (a flat box seen from above) whose camera ray meets the box's top
+/// within 20 mm of its middle: (x, y, pixel index, ray direction).
+fn top_middle_pixels(scene: &Scene) -> Vec<(u32, u32, usize, glam::DVec3)> {
+    let top = scene
+        .mesh
+        .positions
+        .iter()
+        .map(|p| p.y as f64)
+        .fold(f64::MIN, f64::max);
+    let mut out = Vec::new();
+    for y in 0..scene.height {
+        for x in 0..scene.width {
+            let (o, d) = translucent::reference::camera_ray(scene, x, y);
+            let at = o + d * ((top - o.y) / d.y);
+            if d.y < 0.0 && at.x.abs() <= 20.0 && at.z.abs() <= 20.0 {
+                out.push((x, y, (y * scene.width + x) as usize, d));
+            }
+        }
+    }
+    out
 }

@@ -80,11 +80,9 @@ def cast(v, f, origins, dirs):
     return out
 
 
-def visible(scene, render, v, f, vn):
-    """What each pixel of `render` sees: the camera rays (all pixels), which of them meet the
-    mesh, and at those points the barycentrics, the triangle's corners, the point, the smooth
-    normal, the unit direction towards the scene's first light and whether the mesh shadows it."""
-    h, w = render.shape[:2]
+def camera_rays(scene, h, w):
+    """The eye and the unit ray through each pixel centre of an h x w image, row by row (the
+    renderer's pixel centres)."""
     cam = scene["camera"]
     eye, target = np.array(cam["position"]), np.array(cam["target"])
     fwd = (target - eye) / np.linalg.norm(target - eye)
@@ -95,7 +93,15 @@ def visible(scene, render, v, f, vn):
     ys, xs = np.mgrid[0:h, 0:w]
     px, py = ((xs + 0.5) / w * 2 - 1) * tan * w / h, (1 - (ys + 0.5) / h * 2) * tan
     dirs = (fwd + px[..., None] * right + py[..., None] * up).reshape(-1, 3)
-    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    return eye, dirs / np.linalg.norm(dirs, axis=1)[:, None]
+
+
+def visible(scene, render, v, f, vn):
+    """What each pixel of `render` sees: the camera rays (all pixels), which of them meet the
+    mesh, and at those points the barycentrics, the triangle's corners, the point, the smooth
+    normal, the unit direction towards the scene's first light and whether the mesh shadows it."""
+    h, w = render.shape[:2]
+    eye, dirs = camera_rays(scene, h, w)
     t, tri, bu, bv = cast(v, f, np.repeat(eye[None], len(dirs), 0), dirs)
     hit = np.isfinite(t)
     if (hit.reshape(h, w) != (render[..., 3] > 0)).any():

@@ -29,17 +29,8 @@ spec.loader.exec_module(ebg)
 
 def sphere(scene, h, w):
     """Per pixel: the lamp's cosine at the visible point (NaN where the ray misses)."""
-    cam = scene["camera"]
-    eye, target = np.array(cam["position"]), np.array(cam["target"])
-    fwd = (target - eye) / np.linalg.norm(target - eye)
-    right = np.cross(fwd, cam["up"])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
-    tan = np.tan(np.radians(cam["fov_deg"]) / 2)
-    ys, xs = np.mgrid[0:h, 0:w]
-    px, py = ((xs + 0.5) / w * 2 - 1) * tan * w / h, (1 - (ys + 0.5) / h * 2) * tan
-    d = fwd + px[..., None] * right + py[..., None] * up
-    d /= np.linalg.norm(d, axis=-1)[..., None]
+    eye, d = ebg.camera_rays(scene, h, w)
+    d = d.reshape(h, w, 3)
     radius = scene["mesh"]["radius"]
     b = (d * eye).sum(-1)
     disc = b * b - (eye @ eye - radius * radius)
