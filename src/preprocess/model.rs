@@ -23,10 +23,10 @@
 //!
 //! Where `halfspace-single`'s frame fits the budget, `render` goes one model further: `volume`
 //! ([`volume_reason`]), when the mesh is closed and lamps light it (the walks enter along their
-//! light) and no environment does. With its walks entering along the lamps and the composite's
-//! oblique exit lobe it is the most accurate model on three of the four truth scenes,
-//! level with `halfspace-air` on the fourth, and on 9 of the 12 stability cases it can run
-//! (README, "Models beyond the dipole" and "Stability"). Its frame is `halfspace-single`'s and
+//! light) and no environment does. With its walks entering along the lamps, the composite's
+//! oblique exit lobe and the walks' drift of the lobe along the surface it is the most
+//! accurate model on all four of the truth scenes and on 11 of the 12 stability cases
+//! it can run (README, "Models beyond the dipole" and "Stability"). Its frame is `halfspace-single`'s and
 //! the composite's lookups of the lamps' shadow maps, so it is timed again the same way and
 //! kept only within the same budget; otherwise `halfspace-single` renders. `view` stops at
 //! `halfspace-single`: the walks' F answers the lamps where the scene places them, and the
@@ -277,6 +277,8 @@ pub fn choose_by_budget<T, E>(
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     /// Each branch of the default's decision, from probes made up: `volume` where both frames
     /// fit the one budget, `halfspace-single` where the walks' frame is over it (the branch no
     /// device run can reach deterministically) or the walks do not apply, `halfspace` without
@@ -321,8 +323,6 @@ mod tests {
             Err("no device")
         );
     }
-
-    use super::*;
 
     /// At normal incidence single scattering is (w / 2) (1 - ln 2) of a reflectance
     /// 1 - H(1) sqrt(1 - w); at grazing incidence w / 2 of 1 - sqrt(1 - w) (H(0) = 1). The

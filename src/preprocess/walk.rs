@@ -355,9 +355,10 @@ pub fn walk_response(
                                     left[c] += weight;
                                     let normal =
                                         surface.outward_normal(mesh, hit.triangle as usize);
-                                    let mu = normal.dot(d).clamp(0.0, 1.0);
+                                    let cos = normal.dot(d);
+                                    let mu = cos.clamp(0.0, 1.0);
                                     // Along the surface it leaves through.
-                                    let along = d - normal * normal.dot(d);
+                                    let along = d - normal * cos;
                                     for (q, w) in corner_weights(mesh, nodes, hit.triangle as usize)
                                     {
                                         let phi = hit.bary[0] * w[0]
