@@ -124,8 +124,9 @@ fn broken_inputs_are_refused() {
 #[test]
 fn device_limits_are_refused_before_allocation() {
     // 0.01 mm texels on the bunny: 55 M texels, kernels far beyond maxTexelBufferElements.
-    // The estimate refuses it before the preprocessing starts (which would take hours).
-    let start = std::time::Instant::now();
+    // The estimate refuses it before the preprocessing starts, which would take hours: the
+    // watchdog, far beyond the fraction of a second the refusal takes, catches a refusal that
+    // comes only after it.
     let mut c = bin();
     c.args([
         "render",
@@ -135,11 +136,10 @@ fn device_limits_are_refused_before_allocation() {
         "--frames",
         "1",
     ]);
-    fails_with(c, "maxTexelBufferElements");
-    assert!(
-        start.elapsed().as_secs() < 20,
-        "refused only after {:?}",
-        start.elapsed()
+    common::fails_within(
+        c,
+        "maxTexelBufferElements",
+        std::time::Duration::from_secs(60),
     );
     // A 16384 x 16384 image needs 11 GiB of images: refused by the memory report's check,
     // before any device allocation.

@@ -351,23 +351,38 @@ fn refuses_what_it_cannot_trace() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A time budget stops the tracing after at least one sample per half.
+/// A time budget stops the tracing once another round as long as the last would overrun it,
+/// after at least one sample per half. Checked by the work done under a clock the test
+/// controls (each reading a tenth of a second later), not by the wall time of a shared machine.
 #[test]
 fn time_budget() {
     let scene = ketchup_slab();
-    // A cap that would take minutes to reach: a budget that is ignored fails the time and
-    // sample checks instead of hanging.
     let cap = 2_000_000;
-    let s = TruthSettings {
+    let s = |budget: f64| TruthSettings {
         spp: cap,
-        time_s: Some(0.3),
+        time_s: Some(budget),
         ..Default::default()
     };
-    let t = truth::compute(&scene, &s, &quiet).unwrap();
-    assert!(t.spp >= 2 && t.spp.is_multiple_of(2), "{}", t.spp);
-    // The margin covers rounds that wait behind the other tests' work in rayon's shared pool.
-    assert!(t.seconds < 20.0, "{} s for a 0.3 s budget", t.seconds);
-    assert!(t.spp < cap);
+    let ticks = std::sync::atomic::AtomicU32::new(0);
+    let clock = || 0.1 * ticks.fetch_add(1, std::sync::atomic::Ordering::Relaxed) as f64;
+    // The rounds end at 0.1, 0.2, 0.3, ... s (the first reading, 0, is the start); a budget
+    // of 0.35 s allows the rounds ending at 0.1 and 0.2 and the one ending at 0.3, after which
+    // another would end past the budget.
+    let t = truth::compute_with_clock(&scene, &s(0.35), &|_| {}, &clock).unwrap();
+    assert_eq!(t.spp, 6, "3 rounds of one sample per half");
+    // A budget shorter than the first round still gives one sample per half.
+    ticks.store(0, std::sync::atomic::Ordering::Relaxed);
+    let t = truth::compute_with_clock(&scene, &s(0.01), &|_| {}, &clock).unwrap();
+    assert_eq!(t.spp, 2);
+    // With the real clock the budget ends the run long before the cap: a hang watchdog only,
+    // its bound 60 s for a 0.3 s budget.
+    let t = truth::compute(&scene, &s(0.3), &quiet).unwrap();
+    assert!(
+        t.spp >= 2 && t.spp.is_multiple_of(2) && t.spp < cap,
+        "{}",
+        t.spp
+    );
+    assert!(t.seconds < 60.0, "{} s for a 0.3 s budget", t.seconds);
 }
 
 /// The chart's cached truth: traced once, then loaded; a corrupt file is traced again.

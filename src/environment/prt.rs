@@ -87,12 +87,11 @@ pub struct Transfer {
     pub seconds: f64,
 }
 
-/// Seconds per ray and thread of [`transfer`], measured on the bunny (23 343 texels x 256 rays
-/// in 1.45-1.9 s on 2 threads).
+/// Seconds per ray and thread of [`transfer`], calibrated on the bunny on 2 cores.
 const SECONDS_PER_RAY: f64 = 5.5e-7;
 
-/// Estimated seconds of [`transfer`] over `texels` texels on this machine's threads (within
-/// `preprocess::ESTIMATE_TIME_FACTOR` of the time measured on the bunny: tests/environment.rs).
+/// Estimated seconds of [`transfer`] over `texels` texels on this machine's threads: its work,
+/// `texels x settings.rays` shadow rays, at the calibrated cost per ray.
 pub fn estimate_seconds(texels: u64, settings: PrtSettings) -> f64 {
     let threads = rayon::current_num_threads().max(1) as f64;
     texels as f64 * settings.rays as f64 * SECONDS_PER_RAY / threads

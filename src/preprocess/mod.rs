@@ -182,7 +182,7 @@ pub fn choose(
 }
 
 /// What a preprocessing run will produce and cost, estimated from the mesh and the settings
-/// before it starts (calibrated on the bunny and a 10 000-vertex sphere on 2 cores).
+/// before it starts.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Estimate {
     /// Covered texels.
@@ -197,13 +197,57 @@ pub struct Estimate {
     pub device_bytes_max: u64,
     /// Elements of the kernel texel buffer.
     pub kernel_elements: u64,
-    /// Seconds, on this machine's threads.
+    /// The work the run does, in counts.
+    pub work: Work,
+    /// Seconds on this machine's threads: [`Work::seconds`].
     pub seconds: f64,
 }
 
-/// How far [`Estimate::seconds`] may be from the measured preprocessing time, either way
-/// (tests/estimate.rs).
-pub const ESTIMATE_TIME_FACTOR: f64 = 4.0;
+/// The work of a preprocessing run in counts that follow from the mesh and the settings alone.
+/// Its seconds are these counts at per-unit costs ([`Work::seconds`]); the counts are what
+/// tests check against a run, since the costs differ from machine to machine and with load.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Work {
+    /// Kernel taps integrated: texels x kernel_size^2.
+    pub kernel_taps: u64,
+    /// Entries of F evaluated before pruning: nodes^2.
+    pub dense_entries: u64,
+    /// Products of the near-field fit (optimized blending): per node, a least-squares system
+    /// over the nodes within the fit's reach (the reference window's half diagonal plus a
+    /// spacing) and the texels of their supports (`operators::fit_near_field`).
+    pub fit_products: f64,
+    /// Triangles of the mesh (welding, adjacency, chart growth, simplification: partly serial).
+    pub triangles: u64,
+    /// Collisions of the random walks that fill F (`model = "volume"`; 0 otherwise).
+    pub walk_collisions: f64,
+}
+
+/// Seconds per unit of [`Work`] on one thread, calibrated on 2 cores over meshes from a
+/// 704-triangle box to a 235 000-triangle bunny, long-triangle meshes included: kernel taps,
+/// dense entries and fit products (parallel), triangles (a serial and a parallel share), walk
+/// collisions (a ray cast through the BVH and a scattering event each).
+mod cost {
+    pub const KERNEL_TAP: f64 = 5.0e-7;
+    pub const DENSE_ENTRY: f64 = 6.0e-7;
+    pub const FIT_PRODUCT: f64 = 9.0e-8;
+    pub const TRIANGLE_SERIAL: f64 = 2.0e-6;
+    pub const TRIANGLE_PARALLEL: f64 = 5.0e-6;
+    pub const WALK_COLLISION: f64 = 0.6e-6;
+}
+
+impl Work {
+    /// Seconds of this work at the calibrated per-unit costs on `threads` threads.
+    pub fn seconds(&self, threads: usize) -> f64 {
+        let threads = threads.max(1) as f64;
+        (cost::KERNEL_TAP * self.kernel_taps as f64
+            + cost::DENSE_ENTRY * self.dense_entries as f64
+            + cost::FIT_PRODUCT * self.fit_products
+            + cost::TRIANGLE_PARALLEL * self.triangles as f64
+            + cost::WALK_COLLISION * self.walk_collisions)
+            / threads
+            + cost::TRIANGLE_SERIAL * self.triangles as f64
+    }
+}
 
 /// Estimates a preprocessing run (see [`Estimate`]).
 pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
@@ -234,15 +278,17 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
         Item::LocalResponse,
         Item::ChartIds,
     ]);
-    let threads = rayon::current_num_threads().max(1) as f64;
-    // The near-field fit (optimized blending): per node, a least-squares system over the nodes
-    // within the fit's reach (the reference window's half diagonal plus a spacing) and the
-    // texels of their supports (`operators::fit_near_field`).
     let (h, sp) = (s.texel_mm, s.node_spacing_mm);
     let reach = 0.5 * operators::FIT_WINDOW_TEXELS * h * std::f64::consts::SQRT_2 + sp;
     let near_nodes = (std::f64::consts::PI * reach * reach / (0.866 * sp * sp)).max(1.0);
     let near_texels = std::f64::consts::PI * (reach + sp) * (reach + sp) / (h * h);
-    let fit_work = nodes as f64 * (near_texels * near_nodes.min(16.0) + near_nodes.powi(3));
+    let work = Work {
+        kernel_taps: texels.saturating_mul(kk),
+        dense_entries: nodes * nodes,
+        fit_products: nodes as f64 * (near_texels * near_nodes.min(16.0) + near_nodes.powi(3)),
+        triangles: mesh.triangle_count() as u64,
+        walk_collisions: walk_collisions(material, nodes, s.walk_paths),
+    };
     Estimate {
         texels,
         nodes,
@@ -250,47 +296,28 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
         device_bytes_min,
         device_bytes_max: device_bytes_min + counts.bytes(Item::GlobalEntries),
         kernel_elements,
-        // Calibrated on 2 cores (tests/estimate.rs asserts it within ESTIMATE_TIME_FACTOR of
-        // the measured time on six meshes, from a 704-triangle box to a 235 000-triangle
-        // bunny, long-triangle meshes included). The mesh term (welding, adjacency and
-        // chart growth, simplification) is partly serial. The fit term lies between the
-        // bunny's constrained fit (the whole estimate 1.1-1.4x of the measured time) and a
-        // ketchup sphere's, whose constrained solves run longer (0.58-0.66x with the earlier
-        // iterative solver; at the earlier 2/3 of this coefficient that scene came to 0.23x,
-        // outside the 4x bound, on a busy run).
-        seconds: (2.5e-7 * (texels * kk) as f64
-            + 3.0e-7 * (nodes * nodes) as f64
-            + 4.5e-8 * fit_work)
-            * 2.0
-            / threads
-            + (2.0e-6 + 5.0e-6 / threads) * mesh.triangle_count() as f64
-            + walk_seconds(material, nodes, s.walk_paths) / threads,
+        work,
+        seconds: work.seconds(rayon::current_num_threads()),
     }
 }
 
-/// Seconds on one thread of the walks that fill F (`model = "volume"`; 0 otherwise):
-/// nodes x walks x collisions per walk at [`WALK_SECONDS_PER_COLLISION`]. A walk from the
-/// surface of a half-space of albedo a collides about 1 / sqrt(1 - a) times (the bunny in skim
-/// milk, a = 0.998: 22, measured 19.9; ketchup: 1.0-2.0, measured 1.5); thin objects end
-/// their walks sooner (the 2 mm slab: 4.8), so this bounds the time from above there.
-fn walk_seconds(material: &Material, nodes: u64, walk_paths: u32) -> f64 {
+/// Collisions of the walks that fill F (`model = "volume"`; 0 otherwise): nodes x walks x
+/// collisions per walk. A walk from the surface of a half-space of albedo a collides about
+/// 1 / sqrt(1 - a) times; thin objects end their walks sooner, so this bounds the count from
+/// above there.
+pub fn walk_collisions(material: &Material, nodes: u64, walk_paths: u32) -> f64 {
     if walk_paths == 0 {
         return 0.0;
     }
-    let collisions: f64 = (0..3)
+    let per_walk: f64 = (0..3)
         .map(|c| {
             let (s, a) = (material.sigma_s_prime[c], material.sigma_a[c]);
             let albedo = s / (s + a).max(1e-300);
             (1.0 / (1.0 - albedo).max(1e-6).sqrt()).min(1e3)
         })
         .sum();
-    nodes as f64 * walk_paths as f64 * collisions * WALK_SECONDS_PER_COLLISION
+    nodes as f64 * walk_paths as f64 * per_walk
 }
-
-/// Seconds per collision of a walk on one thread (ray cast through the BVH, scattering):
-/// measured 0.49 us on the bunny, 0.62 us on a ketchup sphere, 0.83 us on the 2 mm slab
-/// (2 cores).
-pub const WALK_SECONDS_PER_COLLISION: f64 = 0.6e-6;
 
 impl Estimate {
     /// One line for people.

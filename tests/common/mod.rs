@@ -94,8 +94,52 @@ pub fn stderr(o: &Output) -> String {
 }
 
 /// Runs `cmd` and expects exit code 1 with `needle` in the message and no panic.
-pub fn fails_with(mut cmd: Command, needle: &str) {
-    let o = cmd.output().unwrap();
+pub fn fails_with(cmd: Command, needle: &str) {
+    fails_within(cmd, needle, std::time::Duration::from_secs(600));
+}
+
+/// Runs `cmd` to its end, killing it and failing after `limit`: a watchdog for hangs, never a
+/// speed expectation (its limit lies far beyond the time the command needs).
+pub fn output_within(mut cmd: Command, limit: std::time::Duration) -> Output {
+    let mut child = cmd
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The pipes are drained beside the wait, so that a chatty command cannot block on them.
+    let mut out = child.stdout.take().unwrap();
+    let mut err = child.stderr.take().unwrap();
+    let read_out = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        std::io::Read::read_to_end(&mut out, &mut v).map(|_| v)
+    });
+    let read_err = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        std::io::Read::read_to_end(&mut err, &mut v).map(|_| v)
+    });
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{cmd:?} ran past its watchdog of {limit:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    Output {
+        status,
+        stdout: read_out.join().unwrap().unwrap(),
+        stderr: read_err.join().unwrap().unwrap(),
+    }
+}
+
+/// [`fails_with`] under a watchdog of `limit` ([`output_within`]).
+pub fn fails_within(cmd: Command, needle: &str, limit: std::time::Duration) {
+    let o = output_within(cmd, limit);
     let err = stderr(&o);
     assert!(!o.status.success(), "expected failure, got success: {err}");
     assert!(
