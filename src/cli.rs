@@ -605,23 +605,22 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     }
     report.warnings = [scene_warnings, seen].concat();
     let out = &args.out;
-    output::write_png(
+    output::encode_png(
         &set.path("render.png"),
         result.width,
         result.height,
         &result.display,
     )?;
-    output::write_exr(
+    output::encode_exr(
         &set.path("render.exr"),
         result.width,
         result.height,
         &result.radiance,
     )?;
-    output::write_timings(&set.path("timings.json"), &report)?;
-    output::write_trace(&set.path("trace.json"), &result.pass_names, &result.frames)?;
-    output::write_atomic(&set.path("scene.toml"), |p| {
-        Ok(std::fs::write(p, &resolved)?)
-    })?;
+    output::encode_timings(&set.path("timings.json"), &report)?;
+    output::encode_trace(&set.path("trace.json"), &result.pass_names, &result.frames)?;
+    std::fs::write(set.path("scene.toml"), &resolved)
+        .with_context(|| format!("cannot write scene.toml in '{}'", args.out.display()))?;
     set.commit()?;
     println!("device: {} ({})", report.device, report.driver);
     println!(
@@ -1030,6 +1029,12 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
 
 fn compare(args: &CompareArgs) -> Result<()> {
     use crate::reference::metrics;
+    if !(args.full_scale.is_finite() && args.full_scale > 0.0) {
+        bail!(
+            "--full-scale {} must be a finite positive relative error (0.1 is 10 %)",
+            args.full_scale
+        );
+    }
     let (w, h, a) = output::read_exr(&args.render)?;
     let (w2, h2, b) = output::read_exr(&args.reference)?;
     finite_image(&args.render, &a)?;
@@ -1659,7 +1664,13 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
             } else {
                 s.clone()
             };
-            crate::viewer::script::parse(&text)?
+            let steps = crate::viewer::script::parse(&text)?;
+            if steps.is_empty() {
+                anyhow::bail!(
+                    "--script has no commands (a script drives the viewer: \"frames 3; screenshot; quit\")"
+                );
+            }
+            steps
         }
     };
     let scene = args.input.load()?;
@@ -1909,6 +1920,7 @@ fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
 }
 
 fn sky(args: &SkyArgs) -> Result<()> {
+    crate::output::check_replaceable(&args.out)?;
     if !(8..=16384).contains(&args.width) || !args.width.is_multiple_of(2) {
         anyhow::bail!("--width = {} must be even, between 8 and 16384", args.width);
     }
@@ -1928,6 +1940,8 @@ fn tabulate(args: &TabulateArgs) -> Result<()> {
     if args.paths == 0 || args.paths > 1 << 40 {
         anyhow::bail!("--paths must be between 1 and 2^40, not {}", args.paths);
     }
+    // Refused before hours of paths, not after.
+    crate::output::check_replaceable(&args.out)?;
     let radii = table_radii();
     let albedos = table_albedos();
     let clock = std::time::Instant::now();

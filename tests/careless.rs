@@ -373,7 +373,7 @@ fn outputs_land_as_a_set() {
     std::fs::write(out.join("render.png"), b"old").unwrap();
     let stale = out.join(".render.exr.4194999.tmp");
     std::fs::write(&stale, b"left by a killed run").unwrap();
-    fails_with(render_cmd(&out, 16), "a folder of that name is in the way");
+    fails_with(render_cmd(&out, 16), "exists and is a folder");
     assert_eq!(std::fs::read(out.join("render.png")).unwrap(), b"old");
     assert!(!out.join("render.exr").exists() && !out.join("timings.json").exists());
     let names: Vec<String> = std::fs::read_dir(&out)

@@ -351,6 +351,28 @@ fn refuses_what_it_cannot_trace() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// An open surface (a single quad, a cube without its top) is refused: a path cannot tell
+/// inside from outside there (the quad once returned radiance up to 86 where the closed
+/// sphere's is 0.09).
+#[test]
+fn open_meshes_are_refused() {
+    let dir = common::temp_dir("truth-open");
+    let quad = "v -10 0 -10\nv 10 0 -10\nv 10 0 10\nv -10 0 10\nf 1 3 2\nf 1 4 3\n";
+    let open_box = "v 0 0 0\nv 10 0 0\nv 10 10 0\nv 0 10 0\nv 0 0 10\nv 10 0 10\nv 10 10 10\nv 0 10 10\n\
+                    f 1 3 2\nf 1 4 3\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n";
+    for (name, obj) in [("quad.obj", quad), ("open-box.obj", open_box)] {
+        let path = dir.join(name);
+        std::fs::write(&path, obj).unwrap();
+        let scene = common::scene(&format!(
+            "[mesh]\nobj = {:?}\n[material]\npreset = \"ketchup\"\neta = 1.0\n[output]\nwidth = 16\nheight = 16\n",
+            path.to_str().unwrap()
+        ));
+        let e = truth::compute(&scene, &TruthSettings::default(), &quiet).unwrap_err();
+        assert!(e.to_string().contains("closed surface"), "{name}: {e}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A time budget stops the tracing once another round as long as the last would overrun it,
 /// after at least one sample per half. Checked by the work done under a clock the test
 /// controls (each reading a tenth of a second later), not by the wall time of a shared machine.

@@ -487,6 +487,32 @@ fn a_bad_script_is_refused_before_the_window_opens() {
     common::fails_with(cmd, "unknown command 'spin'");
 }
 
+/// Steps a script asks for that the viewer cannot honour stop the script with the step named:
+/// a zoom that would take the camera 50 radii away (it was ignored without a word), a light
+/// beyond the largest radiance a scene file takes (it was clamped with only a log line).
+#[test]
+fn steps_the_viewer_cannot_honour_stop_the_script() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer-refused");
+    for (script, needle) in [
+        (
+            "frames 1; zoom 0.00001; frames 1; quit",
+            "Zoom(1e-5) refused",
+        ),
+        (
+            "frames 1; light-intensity 0 1e38; frames 1; quit",
+            "exceeds 1e20",
+        ),
+    ] {
+        let mut view = scripted_view(&x, script, &dir.join("cache"), &dir);
+        view.args(["--width", "64", "--height", "64"]);
+        let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
+        assert!(!ok, "{script}: accepted\n{stdout}");
+        assert!(stderr.contains(needle), "{script}: {stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn xdotool(display: &str, args: &[&str]) -> String {
     let o = Command::new("xdotool")
         .env("DISPLAY", display)

@@ -411,6 +411,12 @@ impl Environment {
 pub fn decode(bytes: &[u8]) -> Result<(u32, u32, Vec<[f32; 3]>)> {
     if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
         use exr::prelude::*;
+        // The declared size, checked before the decoder allocates what the header claims.
+        let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+            .context("not a readable OpenEXR image")?;
+        for header in &meta.headers {
+            check_declared_size(header.layer_size.width(), header.layer_size.height())?;
+        }
         let image = read()
             .no_deep_data()
             .largest_resolution_level()
@@ -430,13 +436,6 @@ pub fn decode(bytes: &[u8]) -> Result<(u32, u32, Vec<[f32; 3]>)> {
             .from_buffered(std::io::Cursor::new(bytes))
             .context("not a readable OpenEXR image with RGB channels")?;
         let size = image.layer_data.size;
-        if size.width() > MAX_INPUT_WIDTH as usize || size.height() > MAX_INPUT_WIDTH as usize {
-            bail!(
-                "{} x {}: at most {MAX_INPUT_WIDTH} pixels a side are read",
-                size.width(),
-                size.height()
-            );
-        }
         Ok((
             size.width() as u32,
             size.height() as u32,
@@ -445,6 +444,8 @@ pub fn decode(bytes: &[u8]) -> Result<(u32, u32, Vec<[f32; 3]>)> {
     } else if bytes.starts_with(b"#?") {
         let decoder = image::codecs::hdr::HdrDecoder::new(std::io::Cursor::new(bytes))
             .context("not a readable Radiance HDR image")?;
+        let (w, h) = image::ImageDecoder::dimensions(&decoder);
+        check_declared_size(w as usize, h as usize)?;
         let image = image::DynamicImage::from_decoder(decoder)
             .context("not a readable Radiance HDR image")?
             .into_rgb32f();
@@ -453,6 +454,19 @@ pub fn decode(bytes: &[u8]) -> Result<(u32, u32, Vec<[f32; 3]>)> {
     } else {
         bail!("neither OpenEXR nor Radiance HDR (by its first bytes)")
     }
+}
+
+/// Refuses a map whose header declares more than [`MAX_INPUT_WIDTH`] pixels a side, or more
+/// pixels than the widest equirectangular map read, before its pixels are allocated.
+fn check_declared_size(w: usize, h: usize) -> Result<()> {
+    let most = MAX_INPUT_WIDTH as usize;
+    if w > most || h > most || w.saturating_mul(h) > most * most / 2 {
+        bail!(
+            "its header declares {w} x {h} pixels: at most {MAX_INPUT_WIDTH} x {} are read",
+            MAX_INPUT_WIDTH / 2
+        );
+    }
+    Ok(())
 }
 
 /// The pixels within `r` of pixel `i` (itself included) of a `w` x `h` map, across its left
@@ -571,6 +585,33 @@ fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Maps whose headers declare 65536 x 32768 pixels in a few hundred bytes are refused by
+    /// their declared size, before the decoder allocates 24 GiB for them.
+    #[test]
+    fn declared_sizes_are_checked_before_allocation() {
+        let dir = std::env::temp_dir().join(format!("translucent-declared-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("small.exr");
+        crate::output::write_exr(&path, 8, 4, &[1.0; 8 * 4 * 4]).unwrap();
+        let mut exr = std::fs::read(&path).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(decode(&exr).is_ok());
+        // Both windows (box2i: x min, y min, x max, y max) stretched to 65536 x 32768.
+        for name in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+            let at = exr.windows(name.len()).position(|w| w == name).unwrap() + name.len() + 4;
+            exr[at + 8..at + 12].copy_from_slice(&65535i32.to_le_bytes());
+            exr[at + 12..at + 16].copy_from_slice(&32767i32.to_le_bytes());
+        }
+        let hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 32768 +X 65536\n\x02\x02\x80\x00";
+        for bytes in [&exr[..], &hdr[..]] {
+            let e = format!("{:#}", decode(bytes).unwrap_err());
+            assert!(
+                e.contains("declares 65536 x 32768 pixels: at most 16384 x 8192"),
+                "{e}"
+            );
+        }
+    }
 
     #[test]
     fn directions_and_coordinates_invert() {

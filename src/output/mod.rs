@@ -14,10 +14,59 @@ fn temporary(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
 }
 
-/// Writes a file through a temporary name and a rename.
+/// Refuses `path` as a target to replace when something other than a regular file is there: a
+/// rename would put a file in place of a device, a FIFO, a socket or a symbolic link (the link
+/// replaced, not its target written), and cannot replace a folder.
+pub fn check_replaceable(path: &Path) -> Result<()> {
+    match std::fs::symlink_metadata(path) {
+        Ok(meta) if !meta.file_type().is_file() => {
+            let what = if meta.file_type().is_symlink() {
+                "a symbolic link"
+            } else if meta.is_dir() {
+                "a folder"
+            } else {
+                "not a regular file (a device, FIFO or socket)"
+            };
+            anyhow::bail!(
+                "'{}' exists and is {what}: it is not replaced; choose another output name",
+                path.display()
+            )
+        }
+        _ => Ok(()),
+    }
+}
+
+/// A name the viewer's commands write under their output folder: one plain file name, so that
+/// what they write stays inside that folder.
+pub fn plain_name(name: &str) -> Result<&str> {
+    let plain = !name.is_empty()
+        && name != "."
+        && name != ".."
+        && !name.starts_with('.')
+        && !name.contains(['/', '\\', '\0'])
+        && name.chars().all(|c| !c.is_control());
+    if !plain {
+        anyhow::bail!(
+            "'{name}' is not a plain file name (no folders, no leading dot): the viewer writes only inside its output folder"
+        );
+    }
+    Ok(name)
+}
+
+/// Writes a file through a temporary name and a rename. Refuses a target that is not a regular
+/// file ([`check_replaceable`]), and removes the temporaries of killed runs in its folder.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    check_replaceable(path)?;
+    if let Some(dir) = path.parent() {
+        remove_stale_temporaries(if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir
+        });
+    }
     let tmp = temporary(path);
     let result = write(&tmp).and_then(|_| {
+        check_replaceable(path)?;
         std::fs::rename(&tmp, path)
             .with_context(|| format!("cannot move {} into place", path.display()))
     });
@@ -71,6 +120,9 @@ impl OutputSet {
         }
         create_dir(dir)?;
         remove_stale_temporaries(dir);
+        for name in names {
+            check_replaceable(&dir.join(name))?;
+        }
         Ok(OutputSet {
             dir: dir.to_path_buf(),
             names,
@@ -100,12 +152,7 @@ impl OutputSet {
             if !tmp.is_file() {
                 anyhow::bail!("'{}' was not written", target.display());
             }
-            if target.is_dir() {
-                anyhow::bail!(
-                    "cannot write '{}': a folder of that name is in the way",
-                    target.display()
-                );
-            }
+            check_replaceable(target)?;
         }
         for (tmp, target) in &self.files {
             std::fs::rename(tmp, target)
@@ -145,31 +192,38 @@ pub fn remove_stale_temporaries(dir: &Path) {
     }
 }
 
-/// Writes tightly packed RGBA8 pixels as PNG.
+/// Writes tightly packed RGBA8 pixels as PNG ([`write_atomic`]).
 pub fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
-    write_atomic(path, |tmp| {
-        image::save_buffer_with_format(
-            tmp,
-            rgba,
-            width,
-            height,
-            image::ColorType::Rgba8,
-            image::ImageFormat::Png,
-        )?;
-        Ok(())
-    })
+    write_atomic(path, |tmp| encode_png(tmp, width, height, rgba))
 }
 
-/// Writes linear RGBA f32 pixels (row-major, top row first) as an OpenEXR file.
+/// Writes PNG to `path` directly: for an [`OutputSet`]'s temporary paths.
+pub fn encode_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
+    image::save_buffer_with_format(
+        path,
+        rgba,
+        width,
+        height,
+        image::ColorType::Rgba8,
+        image::ImageFormat::Png,
+    )?;
+    Ok(())
+}
+
+/// Writes linear RGBA f32 pixels (row-major, top row first) as an OpenEXR file
+/// ([`write_atomic`]).
 pub fn write_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<()> {
-    write_atomic(path, |tmp| {
-        let w = width as usize;
-        exr::prelude::write_rgba_file(tmp, w, height as usize, |x, y| {
-            let i = 4 * (y * w + x);
-            (rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3])
-        })?;
-        Ok(())
-    })
+    write_atomic(path, |tmp| encode_exr(tmp, width, height, rgba))
+}
+
+/// Writes OpenEXR to `path` directly: for an [`OutputSet`]'s temporary paths.
+pub fn encode_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<()> {
+    let w = width as usize;
+    exr::prelude::write_rgba_file(path, w, height as usize, |x, y| {
+        let i = 4 * (y * w + x);
+        (rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3])
+    })?;
+    Ok(())
 }
 
 /// Writes a radiance image as `DIR/NAME.exr` (linear) and `DIR/NAME.png` (tone-mapped with
@@ -249,17 +303,25 @@ pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
         .collect()
 }
 
-/// Writes `timings.json`.
+/// Writes `timings.json` ([`write_atomic`]).
 pub fn write_timings(path: &Path, report: &TimingReport) -> Result<()> {
-    write_atomic(path, |tmp| {
-        std::fs::write(tmp, serde_json::to_string_pretty(report)?)?;
-        Ok(())
-    })
+    write_atomic(path, |tmp| encode_timings(tmp, report))
 }
 
-/// Writes `trace.json` in Chrome trace-event format: one track for the GPU passes, one for
-/// the host's frame wall time. Frames are laid end to end on the host clock.
+/// Writes `timings.json` to `path` directly: for an [`OutputSet`]'s temporary paths.
+pub fn encode_timings(path: &Path, report: &TimingReport) -> Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(report)?)?;
+    Ok(())
+}
+
+/// Writes `trace.json` ([`write_atomic`], [`encode_trace`]).
 pub fn write_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) -> Result<()> {
+    write_atomic(path, |tmp| encode_trace(tmp, pass_names, frames))
+}
+
+/// Writes `trace.json` to `path` directly, in Chrome trace-event format: one track for the GPU
+/// passes, one for the host's frame wall time. Frames are laid end to end on the host clock.
+pub fn encode_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) -> Result<()> {
     let mut events = Vec::new();
     events.push(serde_json::json!({"name": "thread_name", "ph": "M", "pid": 1, "tid": 1, "args": {"name": "GPU passes"}}));
     events.push(serde_json::json!({"name": "thread_name", "ph": "M", "pid": 1, "tid": 2, "args": {"name": "host frame (wall)"}}));
@@ -283,10 +345,8 @@ pub fn write_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) -
         t0_us += frame.wall_ms * 1e3;
     }
     let trace = serde_json::json!({"traceEvents": events, "displayTimeUnit": "ms"});
-    write_atomic(path, |tmp| {
-        std::fs::write(tmp, serde_json::to_string(&trace)?)?;
-        Ok(())
-    })
+    std::fs::write(path, serde_json::to_string(&trace)?)?;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -313,6 +373,47 @@ mod tests {
         assert!(write_png(&bad, 1, 1, &[0, 0, 0, 255]).is_err());
         assert!(!bad.exists());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn only_regular_files_are_replaced_and_stale_temporaries_go() {
+        let dir = std::env::temp_dir().join(format!("translucent-replace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let target = dir.join("target.txt");
+        std::fs::write(&target, b"kept").unwrap();
+        let link = dir.join("link.txt");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let folder = dir.join("folder");
+        std::fs::create_dir(&folder).unwrap();
+        for (path, needle) in [(&link, "a symbolic link"), (&folder, "a folder")] {
+            let e = write_png(path, 1, 1, &[0, 0, 0, 255]).unwrap_err();
+            assert!(format!("{e:#}").contains(needle), "{e:#}");
+        }
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"kept");
+        // A regular file is replaced; a temporary left by a process that is gone (no pid is
+        // above 2^22 on Linux) is removed by the next write in its folder.
+        let stale = dir.join(".cache.bin.4294967.tmp");
+        std::fs::write(&stale, b"left by a killed run").unwrap();
+        write_atomic(&target, |p| Ok(std::fs::write(p, b"new")?)).unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        assert!(!stale.exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn plain_names_stay_in_their_folder() {
+        for ok in ["shot", "scene-001", "a b", "x.y"] {
+            assert_eq!(plain_name(ok).unwrap(), ok);
+        }
+        for bad in [
+            "", ".", "..", "../x", "/abs", "a/b", ".hidden", "a\\b", "a\nb",
+        ] {
+            assert!(plain_name(bad).is_err(), "{bad:?}");
+        }
     }
 
     #[test]

@@ -254,6 +254,12 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
     };
 
     let walk_paths = if !material.model.walks() {
+        if let Some(n) = o.walk_paths {
+            reasons.push(format!(
+                "{n} walks per node and channel given, not used: model {} fills F without walks",
+                material.model.name()
+            ));
+        }
         0
     } else if let Some(n) = o.walk_paths {
         reasons.push(format!("{n} walks per node and channel: given"));

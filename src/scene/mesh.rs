@@ -257,6 +257,12 @@ impl Mesh {
     /// exactly two triangles. Inside and outside, and the signed volume, mean something only
     /// then.
     pub fn is_closed(&self) -> bool {
+        let edges = self.edge_triangle_counts();
+        !edges.is_empty() && edges.values().all(|&n| n == 2)
+    }
+
+    /// Per edge (vertices welded by position, the smaller index first), the triangles on it.
+    fn edge_triangle_counts(&self) -> std::collections::HashMap<(u32, u32), u32> {
         let weld = self.welded();
         let mut edges: std::collections::HashMap<(u32, u32), u32> =
             std::collections::HashMap::new();
@@ -269,7 +275,16 @@ impl Mesh {
                 *edges.entry((a.min(b), a.max(b))).or_default() += 1;
             }
         }
-        !edges.is_empty() && edges.values().all(|&n| n == 2)
+        edges
+    }
+
+    /// Whether the surface has no border: every edge (vertices welded by position) is shared by
+    /// an even number of triangles, so that crossing the surface always changes inside to
+    /// outside. Closed meshes have none; neither have closed parts that share a face or an
+    /// edge (two boxes stacked), which [`Mesh::is_closed`] does not count as closed.
+    pub fn is_borderless(&self) -> bool {
+        let edges = self.edge_triangle_counts();
+        !edges.is_empty() && edges.values().all(|&n| n % 2 == 0)
     }
 
     /// Whether the mesh bounds one convex body: closed, one connected surface, and convex at

@@ -172,9 +172,15 @@ pub struct Scene {
 /// builtin spheres and boxes stay below too: `tests/careless.rs` only_long_triangles_are_split).
 pub const LONG_EDGE_SPACINGS: f64 = 3.0;
 
-/// Largest radius of the object after units and transform, mm (10 km): f32 positions keep
-/// better than 1 mm there, and products of coordinates stay far from overflow.
+/// Largest radius of the object after units and transform, and largest distance of any of its
+/// points from the origin, mm (10 km): f32 positions keep better than 1 mm there, and products
+/// of coordinates stay far from overflow.
 pub const MAX_RADIUS_MM: f32 = 1e7;
+
+/// Largest distance of the object's farthest point from the origin, in object radii: f32
+/// positions there are spaced at most 1e-4 of the radius (2^-23 x 839), far below any texel.
+/// A small object moved far away would otherwise be cut into slivers of its rounding.
+pub const MAX_OFFSET_RADII: f32 = 839.0;
 
 /// Largest colour x intensity of a light: irradiance in the passes is multiplied by kernel
 /// sums, profile values and the exposure in f32; 1e20 leaves eighteen decades of headroom
@@ -390,6 +396,12 @@ impl Scene {
             bail!(
                 "the object, placed in the scene, has its centre at {:?} and a radius of {radius:e} mm: at most {MAX_RADIUS_MM:e} mm (f32 coordinates; check [mesh] units and [transform])",
                 center.to_array()
+            );
+        }
+        let far = center.length() + radius;
+        if far > MAX_RADIUS_MM || (radius > 0.0 && far > MAX_OFFSET_RADII * radius) {
+            bail!(
+                "the object, placed in the scene, reaches {far:e} mm from the origin with a radius of {radius:e} mm: at most {MAX_RADIUS_MM:e} mm and {MAX_OFFSET_RADII} radii (f32 coordinates lose the object's detail farther out; check [transform] translate)",
             );
         }
         let mut warnings = Vec::new();

@@ -115,6 +115,12 @@ pub enum TruthError {
          (remove `texture` from [mesh] to compare the medium alone)"
     )]
     Texture,
+    /// A surface with a border.
+    #[error(
+        "truth traces a medium bounded by a closed surface; this mesh has a border (an edge \
+         shared by an odd number of triangles), so a path cannot tell inside from outside"
+    )]
+    Open,
 }
 
 /// The medium of one scene, per channel.
@@ -431,6 +437,9 @@ pub fn validate(scene: &Scene, settings: &TruthSettings) -> Result<(), TruthErro
     }
     if scene.texture.is_some() {
         return Err(TruthError::Texture);
+    }
+    if !scene.mesh.is_borderless() {
+        return Err(TruthError::Open);
     }
     Ok(())
 }

@@ -426,6 +426,8 @@ struct Running {
     size_changed: bool,
     shot: Option<String>,
     shots: usize,
+    /// Whether the last action's camera change was refused ([`Rig::valid`]).
+    refused_view: bool,
     drag: Option<(MouseButton, PhysicalPosition<f64>)>,
     cursor: PhysicalPosition<f64>,
     shift: bool,
@@ -713,11 +715,13 @@ impl Running {
             }
             Action::Quit => return Ok(false),
         }
+        self.refused_view = false;
         if v != self.view {
             if self.rig.valid(&v) {
                 self.view = v;
             } else {
                 tracing::debug!("camera change refused: it would enter the object or flip");
+                self.refused_view = true;
             }
         }
         // The walks' F answers the lamps where they were when it was walked: said, not hidden,
@@ -1031,7 +1035,16 @@ impl Running {
         }
         self.bake_light_turn();
         let center = self.rig.center;
+        let before = self.rig.lights[i];
         edit(&mut self.rig.lights[i], center);
+        let peak = self.rig.lights[i].radiance.max_element() as f64;
+        if peak.is_nan() || peak > crate::scene::MAX_RADIANCE {
+            self.rig.lights[i] = before;
+            bail!(
+                "light {i}: colour x intensity {peak:e} exceeds {:e}, as in a scene file",
+                crate::scene::MAX_RADIANCE
+            );
+        }
         self.lights_changed()
     }
 
@@ -1050,6 +1063,7 @@ impl Running {
     /// Writes `<name>.toml` under `out`: the scene as shown (camera, lights, material,
     /// settings' image size), which `render` reproduces.
     fn save_scene(&mut self, out: &std::path::Path, name: &str) -> Result<()> {
+        output::plain_name(name)?;
         let mut desc = self.scene.resolved.clone();
         let c = self.rig.camera(&self.view);
         let f = |v: Vec3| v.as_dvec3().to_array();
@@ -1338,6 +1352,7 @@ impl Running {
         name: &str,
         window: Option<swapchain::WindowPixels>,
     ) -> Result<()> {
+        output::plain_name(name)?;
         output::create_dir(out)?;
         let renderer = self.renderer.as_ref().context("no renderer")?;
         let o = renderer.output(Vec::new())?;
@@ -1623,6 +1638,7 @@ impl App {
             size_changed: false,
             shot: None,
             shots: 0,
+            refused_view: false,
             drag: None,
             cursor: PhysicalPosition::new(0.0, 0.0),
             shift: false,
@@ -1676,8 +1692,17 @@ impl App {
                 Step::Act(a) => {
                     tracing::info!(?a, "script");
                     let shot = matches!(a, Action::Screenshot(_));
+                    let said = format!("{a:?}");
                     if !running.apply(a, settings)? {
                         return Ok(false);
+                    }
+                    // A mouse that drags too far stops at the limit; a script that asks for
+                    // it is told.
+                    if running.refused_view {
+                        bail!(
+                            "script: {said} refused: the camera would enter the object, pass \
+                             over its pole, pan beyond its radius or move 50 radii away"
+                        );
                     }
                     if shot {
                         // The screenshot is the next frame: render it before going on.

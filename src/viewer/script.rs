@@ -106,6 +106,15 @@ fn finite(v: f32, what: &str) -> Result<f32> {
 }
 
 /// The light kinds a light can be made into here (environment lights come from scene files).
+/// Largest window side a script may ask for: the largest image side (as `[output]`'s).
+const MAX_WINDOW: u32 = 16384;
+
+/// An optional output name, checked to be a plain file name inside the output folder.
+fn plain(word: Option<&str>) -> Result<Option<String>> {
+    word.map(|w| crate::output::plain_name(w).map(str::to_string))
+        .transpose()
+}
+
 fn light_kind(word: Option<&str>) -> Result<LightKind> {
     match word.context("missing light kind")? {
         "directional" => Ok(LightKind::Directional),
@@ -284,11 +293,11 @@ fn parse_step(words: &[&str]) -> Result<Step> {
         ),
         "remove-light" => (Step::Act(Action::RemoveLight(index(0)?)), 1),
         "screenshot" => (
-            Step::Act(Action::Screenshot(args.first().map(|s| s.to_string()))),
+            Step::Act(Action::Screenshot(plain(args.first().copied())?)),
             1,
         ),
         "save-scene" => (
-            Step::Act(Action::SaveScene(args.first().map(|s| s.to_string()))),
+            Step::Act(Action::SaveScene(plain(args.first().copied())?)),
             1,
         ),
         "ui" => (Step::Act(Action::ToggleUi), 0),
@@ -298,6 +307,9 @@ fn parse_step(words: &[&str]) -> Result<Step> {
             let h: u32 = number(args.get(1).copied(), "height")?;
             if w == 0 || h == 0 {
                 bail!("resize needs a positive size");
+            }
+            if w > MAX_WINDOW || h > MAX_WINDOW {
+                bail!("resize {w} {h}: at most {MAX_WINDOW} pixels a side");
             }
             (Step::Act(Action::Resize(w, h)), 2)
         }
@@ -401,6 +413,12 @@ mod tests {
             ("add-light environment", "unknown light kind"),
             ("light-colour 0 1 1", "missing colour component"),
             ("sigma-a 1 2 3 4", "too many arguments"),
+            ("save-scene /tmp/x", "not a plain file name"),
+            ("save-scene ../../x", "not a plain file name"),
+            ("screenshot /abs/path", "not a plain file name"),
+            ("screenshot ..", "not a plain file name"),
+            ("screenshot .hidden", "not a plain file name"),
+            ("resize 100000 100000", "at most 16384 pixels a side"),
         ] {
             let e = format!("{:#}", parse(text).unwrap_err());
             assert!(e.contains(needle), "{text}: {e}");

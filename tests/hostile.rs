@@ -1,0 +1,134 @@
+//! Hostile and careless input, round three (see docs/robustness.md): writers never replace what
+//! is not a regular file, and what they were pointed at is left as it was.
+
+mod common;
+
+use common::{bin, fails_with, temp_dir};
+use std::path::Path;
+
+/// What a path is, without following a link.
+fn kind(path: &Path) -> &'static str {
+    let t = std::fs::symlink_metadata(path).unwrap().file_type();
+    if t.is_symlink() {
+        "link"
+    } else if t.is_dir() {
+        "folder"
+    } else if t.is_file() {
+        "file"
+    } else {
+        "special"
+    }
+}
+
+/// `sky --out`, `tabulate --out` and `render --out` pointed at a FIFO, a symbolic link or a
+/// folder: refused by name, the FIFO still a FIFO, the link still a link and its target's bytes
+/// unchanged (a rename once replaced the system's /dev/full with a regular file and reported
+/// success).
+#[test]
+fn writers_never_replace_what_is_not_a_regular_file() {
+    let dir = temp_dir("not-regular");
+    let fifo = dir.join("fifo");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let target = dir.join("target.exr");
+    std::fs::write(&target, b"the link's target").unwrap();
+    let link = dir.join("link.exr");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let folder = dir.join("folder.exr");
+    std::fs::create_dir(&folder).unwrap();
+    for (path, needle, was) in [
+        (
+            &fifo,
+            "is not a regular file (a device, FIFO or socket)",
+            "special",
+        ),
+        (&link, "is a symbolic link", "link"),
+        (&folder, "is a folder", "folder"),
+    ] {
+        let mut c = bin();
+        c.args(["sky", "--width", "16", "--out"]).arg(path);
+        fails_with(c, needle);
+        assert_eq!(kind(path), was, "{}", path.display());
+    }
+    let mut c = bin();
+    c.args(["tabulate", "--paths", "1000", "--out"]).arg(&link);
+    fails_with(c, "is a symbolic link");
+    assert_eq!(kind(&link), "link");
+    assert_eq!(std::fs::read(&target).unwrap(), b"the link's target");
+
+    // One of a render's files a link: refused before any work, nothing of the set written.
+    let out = dir.join("out");
+    std::fs::create_dir(&out).unwrap();
+    std::os::unix::fs::symlink(&target, out.join("render.exr")).unwrap();
+    fails_with(
+        common::render_cmd(&out, 16),
+        "render.exr' exists and is a symbolic link",
+    );
+    assert_eq!(kind(&out.join("render.exr")), "link");
+    assert!(!out.join("render.png").exists() && !out.join("scene.toml").exists());
+    assert_eq!(std::fs::read(&target).unwrap(), b"the link's target");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Values that made a meaningless result are refused by name: an error picture's full scale
+/// of no error, an object moved so far that f32 coordinates lose its detail (a bunny at 1e8 mm
+/// was cut into 436 000 slivers of its rounding), an empty viewer script (the window stayed
+/// open forever).
+#[test]
+fn meaningless_settings_are_refused_by_name() {
+    let dir = temp_dir("meaningless");
+    let image = dir.join("a.exr");
+    translucent::output::write_exr(&image, 2, 2, &[0.5; 16]).unwrap();
+    for scale in ["0", "-1", "nan"] {
+        let mut c = bin();
+        c.arg("compare")
+            .arg(&image)
+            .arg(&image)
+            .arg(format!("--full-scale={scale}"))
+            .arg("--out")
+            .arg(dir.join("cmp"));
+        fails_with(c, "must be a finite positive relative error");
+    }
+    for translate in ["[1e8, 0.0, 0.0]", "[0.0, 0.0, 1e5]"] {
+        let scene = dir.join("far.toml");
+        std::fs::write(&scene, format!("[transform]\ntranslate = {translate}\n")).unwrap();
+        let mut c = bin();
+        c.args(["render", "--no-cache", "--out"])
+            .arg(dir.join("far"))
+            .arg(&scene);
+        fails_with(c, "f32 coordinates lose the object's detail");
+    }
+    let mut c = bin();
+    c.args(["view", "--script", ""]);
+    fails_with(c, "--script has no commands");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A setting the chosen model does not use is said, not dropped silently.
+#[test]
+fn walks_given_to_a_model_without_walks_are_said() {
+    let dir = temp_dir("unused-walks");
+    let o = bin()
+        .args([
+            "precompute",
+            "--no-cache",
+            "--model",
+            "dipole",
+            "--walk-paths",
+            "64",
+        ])
+        .args(["--width", "32", "--height", "32"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("64 walks per node and channel given, not used: model dipole"),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
