@@ -78,8 +78,8 @@ pub fn copy_sizes(max_bytes: u64) -> Vec<u64> {
 
 /// Times device copies of every size of [`copy_sizes`] (two untimed, then `repeats` timed,
 /// median): the device's own bandwidth, from buffers that fit its caches to a buffer that
-/// leaves them. The order *begin timestamp -> barrier -> copy -> end timestamp* (see
-/// LAVAPIPE.md: lavapipe latched a begin timestamp written right before the work after it).
+/// leaves them. The order *begin timestamp -> barrier -> copy -> end timestamp*: lavapipe
+/// latched a begin timestamp written right before the work after it.
 pub fn measure_device_copy(
     gpu: &std::sync::Arc<crate::gpu::Gpu>,
     max_bytes: u64,
@@ -312,6 +312,8 @@ pub struct FrameBench {
 /// Sizes of the benchmarked scene.
 #[derive(Debug, Clone, Serialize)]
 pub struct SceneSize {
+    /// The model rendered (`Model::name`): the default's decision where none was given.
+    pub model: String,
     /// Render mesh vertices.
     pub vertices: usize,
     /// Global response nodes.
@@ -398,6 +400,7 @@ impl BenchReport {
             memory,
             global_variant: String::new(),
             scene: SceneSize {
+                model: scene.material.model.name().to_string(),
                 vertices: scene.mesh.positions.len(),
                 nodes: pre.nodes.positions.len(),
                 texels: pre.atlas.texels.len(),

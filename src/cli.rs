@@ -172,11 +172,6 @@ pub struct ViewArgs {
     /// stops, not at every value it passes.
     #[arg(long, default_value_t = 200)]
     pub settle_ms: u64,
-    /// Frame budget in ms of the default model's single-scattering pass: where
-    /// `halfspace-single`'s frame is over it, `halfspace` is used (default: 1.3x the frame
-    /// without the pass, measured; `preprocess::model`). A given model is kept.
-    #[arg(long, value_name = "MS")]
-    pub frame_budget_ms: Option<f64>,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -448,13 +443,6 @@ pub struct RenderArgs {
     /// Write every frame as frame_NNNN.png.
     #[arg(long)]
     pub save_frames: bool,
-    /// Frame budget in ms of the default model's single-scattering pass: where
-    /// `halfspace-single`'s frame is over it, `halfspace` is used; where it is within and the
-    /// mesh is closed and lit by lamps, `volume` is prepared and used if its frame is within
-    /// too (default: 1.3x the frame without the pass, measured; `preprocess::model`). A given
-    /// model is kept.
-    #[arg(long, value_name = "MS")]
-    pub frame_budget_ms: Option<f64>,
     /// Preprocessing controls.
     #[command(flatten)]
     pub pre: PreprocessArgs,
@@ -463,16 +451,6 @@ pub struct RenderArgs {
 /// Most frames a command renders or warms up with: a hundred thousand frames are hours on a
 /// CPU device; a count beyond that is a typo, refused before anything runs or is allocated.
 pub const MAX_FRAMES: usize = 100_000;
-
-/// Refuses a frame budget that is no time.
-fn frame_budget(ms: Option<f64>) -> Result<()> {
-    match ms {
-        Some(b) if !(b.is_finite() && b > 0.0) => {
-            bail!("--frame-budget-ms {b} must be a finite positive time")
-        }
-        _ => Ok(()),
-    }
-}
 
 /// Refuses a frame count outside `min..=MAX_FRAMES`, naming the flag.
 fn frame_count(flag: &str, n: usize, min: usize) -> Result<()> {
@@ -524,7 +502,6 @@ fn image_warnings(radiance: &[f32]) -> Vec<String> {
 
 fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     frame_count("--frames", args.frames, 1)?;
-    frame_budget(args.frame_budget_ms)?;
     let scene = args.input.load()?;
     println!(
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
@@ -541,34 +518,19 @@ fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     let mut set = output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)?;
     let mut scene = scene;
     let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
-    let (scene, pre, probe) = fit_frame_budget(
-        &gpu,
-        scene,
-        pre,
-        &args.pre,
-        args.frame_budget_ms,
-        args.mode,
-        true,
-    )?;
-    // The scene as rendered: a rule of the default model may have chosen another model, which
-    // the saved scene names.
+    // The scene as rendered: the default model, which the saved scene names.
     let resolved = scene.resolved.to_toml();
     let scene_warnings = scene.warnings.clone();
-    let mut renderer = match probe {
-        Some(r) => r,
-        None => {
-            let mode = args
-                .mode
-                .unwrap_or_else(|| Blend::for_model(scene.material.model));
-            Renderer::cached(
-                &gpu,
-                scene,
-                &pre,
-                image_options(mode),
-                args.pre.cache_dir().as_deref(),
-            )?
-        }
-    };
+    let mode = args
+        .mode
+        .unwrap_or_else(|| Blend::for_model(scene.material.model));
+    let mut renderer = Renderer::cached(
+        &gpu,
+        scene,
+        &pre,
+        image_options(mode),
+        args.pre.cache_dir().as_deref(),
+    )?;
     let mut timings = Vec::with_capacity(args.frames);
     for f in 0..args.frames {
         let angle = if args.orbit_light {
@@ -690,7 +652,7 @@ fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
         frame_count("--reweigh", times, 1)?;
     }
     let mut scene = args.input.load()?;
-    preprocess::model::apply_target_error(&mut scene, args.pre.target_error)?;
+    preprocess::model::apply_default(&mut scene, args.pre.target_error)?;
     if args.reweigh.is_some() && !crate::passes::reweigh::Reweigher::supports(&scene.material) {
         bail!(
             "--reweigh: model '{}' fills F by random walks, which cannot be re-weighted",
@@ -1237,7 +1199,9 @@ fn truth(args: &TruthArgs) -> Result<()> {
 fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     use crate::reference::{Reference, ReferenceSettings};
     frame_count("--frames", args.frames, 1)?;
-    let scene = args.input.load()?;
+    let mut scene = args.input.load()?;
+    // The automatic point is the default model's, as `render` would render it.
+    preprocess::model::apply_default(&mut scene, args.target_error)?;
     // Every model is compared with its exact model where the reference integrates it, and
     // with the truth alone where it does not (the walks; the light across the air on an
     // object that is not convex), which needs the truth.
@@ -1526,16 +1490,15 @@ fn open_and_prepare(
     Ok((gpu, p))
 }
 
-/// The default model's rule of the target error applied to `scene`
-/// (`preprocess::model::apply_target_error`), then its settings chosen and printed (when
-/// `verbose`), and its preprocessing made or loaded.
+/// The default model applied to `scene` (`preprocess::model::apply_default`), then its
+/// settings chosen and printed (when `verbose`), and its preprocessing made or loaded.
 fn prepare_verbose(
     gpu: &Gpu,
     scene: &mut Scene,
     pre: &PreprocessArgs,
     verbose: bool,
 ) -> Result<preprocess::Preprocessed> {
-    preprocess::model::apply_target_error(scene, pre.target_error)?;
+    preprocess::model::apply_default(scene, pre.target_error)?;
     let scene = &*scene;
     let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
     let estimate = preprocess::estimate(&scene.mesh, &scene.material, &choice.settings);
@@ -1563,7 +1526,7 @@ fn prepare_verbose(
     Ok(p)
 }
 
-/// The options of `render`'s renderer, and of the frame budget's probe, for blending `mode`:
+/// The options of `render`'s renderer for blending `mode`:
 /// the deterministic variant (texel buffers, derived lanes), not the measured one (the lanes
 /// change the order of the global sums, and the same command must write the same image every
 /// time), reading back only on request.
@@ -1575,84 +1538,7 @@ fn image_options(mode: Blend) -> Options {
     }
 }
 
-/// The frame budget's rule of the default model (`preprocess::model::FrameBudget`): where the
-/// default chose `halfspace-single`, a few frames of it are timed (blending `mode`, or the
-/// model's own; [`image_options`]); over the budget (`budget_ms`, or derived), `halfspace` is
-/// prepared instead. Within it and where `walks` (`render`, not the viewer, which moves the
-/// lamps), `volume` is prepared where the scene allows it (`model::volume_reason`) and timed
-/// against the same budget; over it, `halfspace-single` renders after all. Returns the scene
-/// and preprocessing to render, and the probe's renderer when they are its own (it fitted).
-fn fit_frame_budget(
-    gpu: &std::sync::Arc<Gpu>,
-    mut scene: Scene,
-    pre: preprocess::Preprocessed,
-    args: &PreprocessArgs,
-    budget_ms: Option<f64>,
-    mode: Option<Blend>,
-    walks: bool,
-) -> Result<(Scene, preprocess::Preprocessed, Option<Renderer>)> {
-    use preprocess::model;
-    if !model::needs_frame_probe(&scene) {
-        return Ok((scene, pre, None));
-    }
-    let cache = args.cache_dir();
-    // A few frames of `scene`'s model timed, with the renderer that rendered them.
-    let probe = |scene: &Scene,
-                 pre: &preprocess::Preprocessed,
-                 budget_ms: Option<f64>|
-     -> Result<(model::FrameBudget, Renderer)> {
-        let mode = mode.unwrap_or_else(|| Blend::for_model(scene.material.model));
-        let mut renderer = Renderer::cached(
-            gpu,
-            scene.clone(),
-            pre,
-            image_options(mode),
-            cache.as_deref(),
-        )?;
-        let lights = renderer.orbit_lights(0.0);
-        let mut frames = Vec::with_capacity(model::PROBE_FRAMES);
-        for f in 0..model::PROBE_WARMUP + model::PROBE_FRAMES {
-            let t = renderer.frame(&lights)?;
-            if f >= model::PROBE_WARMUP {
-                frames.push(t);
-            }
-        }
-        let budget = model::FrameBudget::measure(&renderer.pass_names(), &frames, budget_ms);
-        Ok((budget, renderer))
-    };
-    let (budget, renderer) = probe(&scene, &pre, budget_ms)?;
-    println!("# {}", budget.describe());
-    let mut renderer = Some(renderer);
-    let choice = model::choose_by_budget(&budget, |budget_ms| -> Result<_> {
-        let Some(why) = walks.then(|| model::volume_reason(&scene)).flatten() else {
-            return Ok(None);
-        };
-        // One renderer at a time on the device.
-        renderer = None;
-        let mut walked = scene.clone();
-        model::use_model(&mut walked, crate::physics::Model::Volume, why)?;
-        let walked_pre = prepare_verbose(gpu, &mut walked, args, true)?;
-        // The same budget, now given: the frame without the chain was measured above.
-        let (volume, walked_renderer) = probe(&walked, &walked_pre, Some(budget_ms))?;
-        println!("# {}", volume.describe_volume());
-        Ok(Some((volume, (walked, walked_pre, walked_renderer))))
-    })?;
-    match choice {
-        model::BudgetChoice::Volume((walked, walked_pre, walked_renderer)) => {
-            Ok((walked, walked_pre, Some(walked_renderer)))
-        }
-        model::BudgetChoice::HalfspaceSingle => Ok((scene, pre, renderer)),
-        model::BudgetChoice::Halfspace => {
-            drop(renderer);
-            model::use_halfspace(&mut scene, budget.reason())?;
-            let pre = prepare_verbose(gpu, &mut scene, args, true)?;
-            Ok((scene, pre, None))
-        }
-    }
-}
-
 fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
-    frame_budget(args.frame_budget_ms)?;
     // The script is checked before anything slow happens.
     let script = match &args.script {
         None => Vec::new(),
@@ -1685,18 +1571,6 @@ fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     let event_loop = crate::viewer::connect()?;
     let mut scene = scene;
     let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
-    // The frame budget is measured off screen, on a device of the same choice as the
-    // window's, released before the window opens.
-    let (scene, pre, probe) = fit_frame_budget(
-        &gpu,
-        scene,
-        pre,
-        &args.pre,
-        args.frame_budget_ms,
-        args.mode,
-        false,
-    )?;
-    drop(probe);
     check_validation(&gpu)?;
     drop(gpu);
     let mode = args

@@ -37,9 +37,8 @@ pub enum Model {
 impl Model {
     /// The most accurate model for a medium of relative index `eta` that needs nothing of the
     /// scene's geometry or lights: the tabulated profile where it applies (eta = 1), the dipole
-    /// elsewhere. The commands may then leave its single-scattering pass out (the target error
-    /// and the frame budget), or `render` go on to the walks where their frame fits
-    /// (`preprocess::model`).
+    /// elsewhere: the material's model before a command applies the default's decision, which
+    /// also weighs the mesh, the lights and the target error (`preprocess::model::decide`).
     pub fn for_eta(eta: f64) -> Model {
         if eta == 1.0 {
             Model::HalfspaceSingle

@@ -1,51 +1,31 @@
-//! The default model: the most accurate one that the scene needs and the frame budget allows.
+//! The default model: one function of the scene and the target error ([`decide`]), the same
+//! for `render`, `bench`, `chart` and `view`, said with its reason. No timing enters it, so the
+//! same command renders the same image on an idle machine and on a loaded one. A model given
+//! in the scene file (`[material] model`) or on the command line (`--model`) is used as given.
+//! Otherwise, in this order:
 //!
-//! A model given in the scene file (`[material] model`) or on the command line (`--model`) is
-//! used as given. Otherwise the material's default holds (`Model::for_eta`: `halfspace-single`
-//! at eta = 1, the dipole elsewhere; `halfspace` under an environment), and at eta = 1 two rules
-//! may take the single-scattering pass out again, leaving `halfspace`, whose profile carries
-//! every order (single scattering included, as light that leaves diffusely):
+//! - **eta != 1: the dipole**, the one model of a refractive boundary.
+//! - **An environment light: `halfspace`**, whose profile carries every order: the per-frame
+//!   single scattering integrates delta lights along the view rays and would see the sky's sun
+//!   alone.
+//! - **Single scattering below the target error: `halfspace`** ([`without_single_pass`]):
+//!   single scattering's share of the light a half-space gives back, per channel, under light
+//!   from every direction of the hemisphere weighted by its cosine (the incidences a convex
+//!   object under a directional light shows, by lit area and irradiance), in closed form from
+//!   Chandrasekhar's H function (`physics::incidence`). For isotropic scattering it is
+//!   (2/3) (1 - ln 2) = 20.5 % at albedo 1 and more at lower albedos, so the rule takes the pass
+//!   out only under a coarse target.
+//! - **A closed mesh lit by lamps: `volume`** ([`volume_reason`]): F from random walks inside
+//!   the mesh entering along the lamps' light, the composite's oblique exit lobe and the walks'
+//!   drift; the most accurate model against the volumetric truth (README, accuracy).
+//! - **Otherwise `halfspace-single`**: the half-space profile of orders >= 2 and per-frame
+//!   single scattering (an open mesh has no inside to walk in).
 //!
-//! - **It carries less than the target error** ([`without_single_pass`]): single scattering's
-//!   share of the light a half-space gives back, per channel, under light from every direction
-//!   of the hemisphere weighted by its cosine (the incidences a convex object under a
-//!   directional light shows, by lit area and irradiance), in closed form from Chandrasekhar's
-//!   H function (`physics::incidence`). For isotropic scattering it is (2/3) (1 - ln 2) =
-//!   20.5 % at albedo 1 (where all light comes back) and more at lower albedos, so the rule
-//!   takes the pass out only under a coarse target.
-//! - **It does not fit the frame budget** ([`FrameBudget`]): the renderer times a few frames
-//!   with the pass ([`PROBE_WARMUP`], [`PROBE_FRAMES`]); where the frame's GPU median is above
-//!   the budget, `halfspace` is used. The budget is given in ms (`--frame-budget-ms`) or derived:
-//!   [`FRAME_BUDGET_RATIO`] times the frame without the single-scattering chain (`entry`,
-//!   `thickness`, `single`), the bound for the new model's frame against the dipole's.
-//!   On lavapipe the chain costs 3 to 9 times the rest of the frame (README, the models'
-//!   table), so the rule takes it out there; no GPU was lent to measure where it fits.
-//!
-//! Where `halfspace-single`'s frame fits the budget, `render` goes one model further: `volume`
-//! ([`volume_reason`]), when the mesh is closed and lamps light it (the walks enter along their
-//! light) and no environment does. With its walks entering along the lamps, the composite's
-//! oblique exit lobe and the walks' drift of the lobe along the surface it is the most
-//! accurate model on all four of the truth scenes and on 11 of the 12 stability cases
-//! it can run (README, "Models beyond the dipole" and "Stability"). Its frame is `halfspace-single`'s and
-//! the composite's lookups of the lamps' shadow maps, so it is timed again the same way and
-//! kept only within the same budget; otherwise `halfspace-single` renders. `view` stops at
-//! `halfspace-single`: the walks' F answers the lamps where the scene places them, and the
-//! viewer moves them (new walks take a minute on the bunny). On lavapipe the budget takes the
-//! single-scattering pass out, and `volume` with it, from every default render.
+//! A user who wants a faster frame names a model (`--model halfspace`, `--model dipole`).
 
-use crate::passes::PassName;
 use crate::physics::incidence::{cosine_weighted_mean, HFunction};
 use crate::physics::{Material, Model};
 use crate::scene::Scene;
-
-/// The derived frame budget: this many times the frame without the single-scattering chain.
-pub const FRAME_BUDGET_RATIO: f64 = 1.3;
-
-/// Frames rendered and discarded before the budget's timed frames (pipelines, caches, clocks).
-pub const PROBE_WARMUP: usize = 2;
-
-/// Frames timed for the budget; their medians decide.
-pub const PROBE_FRAMES: usize = 5;
 
 /// Per channel, the fraction of the light a half-space of this material gives back that is
 /// single scattering, under light from the whole hemisphere weighted by its cosine: the
@@ -91,31 +71,53 @@ pub fn is_default(scene: &Scene) -> bool {
     scene.resolved.material.model.is_none()
 }
 
-/// Whether the frame budget's rule applies: the default chose a model with the
-/// single-scattering pass.
-pub fn needs_frame_probe(scene: &Scene) -> bool {
-    is_default(scene) && scene.material.model.profile_with_single_pass()
+/// The default model of `scene` at `target_error` and why, or None where the model is given
+/// (see the module documentation): the one place the default is decided.
+pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
+    if !is_default(scene) {
+        return None;
+    }
+    let m = &scene.material;
+    if m.eta != 1.0 {
+        return Some((
+            Model::Dipole,
+            "the classical dipole (the half-space models need eta = 1)".to_string(),
+        ));
+    }
+    if scene.environment.is_some() {
+        return Some((
+            Model::Halfspace,
+            "exact half-space profile of every order (eta = 1; under an environment the per-frame single scattering would see its sun alone)".to_string(),
+        ));
+    }
+    let below = m
+        .with_model(Model::HalfspaceSingle)
+        .ok()
+        .and_then(|single| without_single_pass(&single, target_error));
+    if let Some(why) = below {
+        return Some((Model::Halfspace, why));
+    }
+    if let Some(why) = volume_reason(scene) {
+        return Some((Model::Volume, why));
+    }
+    Some((
+        Model::HalfspaceSingle,
+        "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1; the walks of volume need a closed mesh lit by lamps)".to_string(),
+    ))
 }
 
-/// The target error's rule ([`without_single_pass`]) applied to a scene whose model is the
-/// default's; before the preprocessing, which depends on the model.
-pub fn apply_target_error(scene: &mut Scene, target_error: f64) -> anyhow::Result<()> {
-    if !is_default(scene) {
-        return Ok(());
-    }
-    match without_single_pass(&scene.material, target_error) {
-        Some(why) => use_halfspace(scene, why),
+/// Applies [`decide`] to `scene`: its material takes the default model, recorded in its
+/// resolved description with the reason, so that a saved scene renders the same model and a
+/// second application changes nothing.
+pub fn apply_default(scene: &mut Scene, target_error: f64) -> anyhow::Result<()> {
+    match decide(scene, target_error) {
+        Some((model, why)) => use_model(scene, model, why),
         None => Ok(()),
     }
 }
 
-/// Makes `scene` use `halfspace` because of `why`, recorded in its resolved description (a
-/// saved scene then renders the same model wherever it runs).
-pub fn use_halfspace(scene: &mut Scene, why: String) -> anyhow::Result<()> {
-    use_model(scene, Model::Halfspace, why)
-}
-
-/// Makes `scene` use `model` because of `why`, recorded as [`use_halfspace`] does.
+/// Makes `scene` use `model` because of `why`, recorded in its resolved description (a saved
+/// scene then renders the same model wherever it runs).
 pub fn use_model(scene: &mut Scene, model: Model, why: String) -> anyhow::Result<()> {
     scene.material = scene.material.with_model(model)?;
     scene.resolved.material.model = Some(model);
@@ -123,206 +125,31 @@ pub fn use_model(scene: &mut Scene, model: Model, why: String) -> anyhow::Result
     Ok(())
 }
 
-/// Why the default's `halfspace-single` gives way to `volume` where its frame fits the budget:
-/// the mesh is closed (the walks need an inside), lamps light it (the walks enter along their
-/// light) and no environment does (its sky would enter everywhere, and the oblique exit lobe
-/// does not weigh it). None where one of these fails or the model is not the default's
-/// `halfspace-single`.
+/// Why the default is `volume`: the mesh is closed (the walks need an inside), lamps light it
+/// (the walks enter along their light) and no environment does (its sky would enter
+/// everywhere, and the oblique exit lobe does not weigh it). None where one of these fails,
+/// eta is not 1 or the model is given.
 pub fn volume_reason(scene: &Scene) -> Option<String> {
     let lamps = super::walk::entry_lights(&scene.lights)
         .iter()
         .flatten()
         .count();
     (is_default(scene)
-        && scene.material.model == Model::HalfspaceSingle
+        && scene.material.eta == 1.0
         && scene.environment.is_none()
         && lamps > 0
         && scene.mesh.is_closed())
     .then(|| {
         format!(
-            "F from random walks inside the mesh along the light of its {lamps} lamp{} (eta = 1, a closed mesh): the most accurate model whose frame fits the budget (--model halfspace-single keeps the half-space's F)",
+            "F from random walks inside the mesh along the light of its {lamps} lamp{} (eta = 1, a closed mesh): the most accurate model (--model halfspace-single keeps the half-space's F)",
             if lamps == 1 { "" } else { "s" }
         )
-    })
-}
-
-/// The budget of a frame with the single-scattering chain, and what a probe measured.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FrameBudget {
-    /// The frame's GPU median with the chain, ms.
-    pub frame_ms: f64,
-    /// The chain's part of it (`entry`, `thickness`, `single`: the sum of their medians), ms.
-    pub chain_ms: f64,
-    /// The budget, ms: given, or [`FRAME_BUDGET_RATIO`] times the frame without the chain.
-    pub budget_ms: f64,
-    /// Whether the budget was given (else derived).
-    pub given: bool,
-}
-
-impl FrameBudget {
-    /// The budget for a probe's medians: `given` ms, or derived from the frame without the
-    /// chain.
-    pub fn new(frame_ms: f64, chain_ms: f64, given: Option<f64>) -> FrameBudget {
-        let rest = (frame_ms - chain_ms).max(0.0);
-        FrameBudget {
-            frame_ms,
-            chain_ms,
-            budget_ms: given.unwrap_or(FRAME_BUDGET_RATIO * rest),
-            given: given.is_some(),
-        }
-    }
-
-    /// The budget from the timed frames of a renderer with the chain: per-pass medians over
-    /// `frames`, passes named by `pass_names` (those that did not run are NaN and skipped).
-    pub fn measure(
-        pass_names: &[String],
-        frames: &[crate::graph::timing::FrameTiming],
-        given: Option<f64>,
-    ) -> FrameBudget {
-        let median = |v: Vec<f64>| crate::graph::timing::Stats::of(&v).median_ms;
-        let chain = [PassName::Entry, PassName::Thickness, PassName::Single];
-        let chain_ms = pass_names
-            .iter()
-            .enumerate()
-            .filter(|(_, n)| chain.iter().any(|c| c.as_str() == n.as_str()))
-            .map(|(i, _)| median(frames.iter().map(|f| f.pass_ms[i]).collect()))
-            .sum();
-        let frame_ms = median(frames.iter().map(|f| f.gpu_ms).collect());
-        FrameBudget::new(frame_ms, chain_ms, given)
-    }
-
-    /// Whether the frame with the chain fits.
-    pub fn fits(&self) -> bool {
-        self.frame_ms <= self.budget_ms
-    }
-
-    /// Why the model is `halfspace` when the frame does not fit: the model's line of the
-    /// derived settings.
-    pub fn reason(&self) -> String {
-        format!(
-            "exact half-space profile of every order (eta = 1): the single-scattering pass does not fit the frame budget ({:.2} ms with it, budget {:.2} ms)",
-            self.frame_ms, self.budget_ms
-        )
-    }
-
-    /// The decision on `volume`'s frame (timed as `halfspace-single`'s, against the same
-    /// budget), said in one line.
-    pub fn describe_volume(&self) -> String {
-        if self.fits() {
-            format!(
-                "frame budget: volume's frame {:.2} ms is within the budget {:.2} ms",
-                self.frame_ms, self.budget_ms
-            )
-        } else {
-            format!(
-                "frame budget: volume's frame {:.2} ms is over the budget {:.2} ms: model halfspace-single instead (--model volume keeps the walks)",
-                self.frame_ms, self.budget_ms
-            )
-        }
-    }
-
-    /// The decision, said in one line.
-    pub fn describe(&self) -> String {
-        let budget = if self.given {
-            format!("the budget {:.2} ms (given)", self.budget_ms)
-        } else {
-            format!(
-                "the budget {:.2} ms ({FRAME_BUDGET_RATIO}x the frame without it, {:.2} ms)",
-                self.budget_ms,
-                self.frame_ms - self.chain_ms
-            )
-        };
-        if self.fits() {
-            format!(
-                "frame budget: halfspace-single's frame {:.2} ms (single scattering {:.2} ms of it) is within {budget}",
-                self.frame_ms, self.chain_ms
-            )
-        } else {
-            format!(
-                "frame budget: halfspace-single's frame {:.2} ms (single scattering {:.2} ms of it) is over {budget}: model halfspace instead (--model halfspace-single keeps the pass)",
-                self.frame_ms, self.chain_ms
-            )
-        }
-    }
-}
-
-/// What `render`'s default renders after the frame probes ([`choose_by_budget`]).
-#[derive(Debug, Clone, PartialEq)]
-pub enum BudgetChoice<T> {
-    /// `halfspace-single`'s frame is over the budget: `halfspace`.
-    Halfspace,
-    /// `halfspace-single`: its frame is within the budget, and the walks do not apply or
-    /// their frame is over it.
-    HalfspaceSingle,
-    /// `volume`: its frame is within the same budget (with what its probe made).
-    Volume(T),
-}
-
-/// The default's decision from `halfspace-single`'s probe `single` and, only where that
-/// fits, `volume`'s: `probe_volume` gets the budget and returns `volume`'s probe with what it
-/// made (the walked scene, its renderer), or `None` where the walks do not apply. It is not
-/// called where `halfspace-single` is over the budget.
-pub fn choose_by_budget<T, E>(
-    single: &FrameBudget,
-    probe_volume: impl FnOnce(f64) -> Result<Option<(FrameBudget, T)>, E>,
-) -> Result<BudgetChoice<T>, E> {
-    if !single.fits() {
-        return Ok(BudgetChoice::Halfspace);
-    }
-    Ok(match probe_volume(single.budget_ms)? {
-        Some((volume, made)) if volume.fits() => BudgetChoice::Volume(made),
-        _ => BudgetChoice::HalfspaceSingle,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Each branch of the default's decision, from probes made up: `volume` where both frames
-    /// fit the one budget, `halfspace-single` where the walks' frame is over it (the branch no
-    /// device run can reach deterministically) or the walks do not apply, `halfspace` without
-    /// probing the walks where `halfspace-single` is over it.
-    #[test]
-    fn the_budget_chooses_the_walks_only_where_both_frames_fit() {
-        let budget = 30.0;
-        let single = FrameBudget::new(25.0, 5.0, Some(budget));
-        let probe = |frame_ms: f64| {
-            move |given: f64| -> Result<Option<(FrameBudget, &str)>, ()> {
-                assert_eq!(given, budget, "the walks are timed against the same budget");
-                Ok(Some((
-                    FrameBudget::new(frame_ms, 5.0, Some(given)),
-                    "walked",
-                )))
-            }
-        };
-        assert_eq!(
-            choose_by_budget(&single, probe(29.0)),
-            Ok(BudgetChoice::Volume("walked"))
-        );
-        assert_eq!(
-            choose_by_budget(&single, probe(31.0)),
-            Ok(BudgetChoice::HalfspaceSingle)
-        );
-        assert_eq!(
-            choose_by_budget(&single, |_| Ok::<Option<(FrameBudget, ())>, ()>(None)),
-            Ok(BudgetChoice::HalfspaceSingle)
-        );
-        let over = FrameBudget::new(31.0, 5.0, Some(budget));
-        assert_eq!(
-            choose_by_budget(&over, |_| -> Result<Option<(FrameBudget, ())>, ()> {
-                panic!("the walks are probed only where halfspace-single fits")
-            }),
-            Ok(BudgetChoice::Halfspace)
-        );
-        // A probe's error is the decision's.
-        assert_eq!(
-            choose_by_budget(&single, |_| Err::<Option<(FrameBudget, ())>, _>(
-                "no device"
-            )),
-            Err("no device")
-        );
-    }
 
     /// At normal incidence single scattering is (w / 2) (1 - ln 2) of a reflectance
     /// 1 - H(1) sqrt(1 - w); at grazing incidence w / 2 of 1 - sqrt(1 - w) (H(0) = 1). The
@@ -409,44 +236,44 @@ mod tests {
         let mut open = scene(text(sphere, lamp, ""));
         open.mesh.indices.truncate(open.mesh.indices.len() - 3);
         assert!(!open.mesh.is_closed() && volume_reason(&open).is_none());
-        // The budget's second decision, said.
-        let b = FrameBudget::new(30.0, 0.0, Some(20.0));
-        assert!(b
-            .describe_volume()
-            .contains("model halfspace-single instead"));
     }
 
+    /// Every branch of the default, from the scene alone: the same scene gives the same model
+    /// whatever the machine does; applied once, it is recorded and a second application keeps
+    /// it.
     #[test]
-    fn the_budget_is_derived_from_the_frame_without_the_chain() {
-        // 80 ms with a 60 ms chain: 1.3 x 20 = 26 ms, over.
-        let b = FrameBudget::new(80.0, 60.0, None);
-        assert!((b.budget_ms - 26.0).abs() < 1e-9 && !b.fits() && !b.given);
-        assert!(b.describe().contains("model halfspace instead"));
-        // 1.2 ms with a 0.2 ms chain: 1.3 ms, within.
-        let b = FrameBudget::new(1.2, 0.2, None);
-        assert!(b.fits(), "{b:?}");
-        assert!(b.describe().contains("is within"));
-        // A given budget decides alone.
-        assert!(FrameBudget::new(80.0, 60.0, Some(100.0)).fits());
-        assert!(!FrameBudget::new(1.2, 0.2, Some(1.0)).fits());
-    }
-
-    #[test]
-    fn the_probe_sums_the_chain_medians() {
-        use crate::graph::timing::FrameTiming;
-        let names: Vec<String> = ["shadow", "entry", "thickness", "single", "composite"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
-        let frame = |k: f64| FrameTiming {
-            pass_ms: vec![1.0, 2.0 * k, 3.0, 10.0 * k, f64::NAN],
-            pass_start_ms: vec![0.0; 5],
-            gpu_ms: 20.0 * k,
-            wall_ms: 0.0,
+    fn the_default_is_a_function_of_the_scene() {
+        let scene = |extra: &str| {
+            Scene::from_desc(
+                crate::scene::desc::SceneDesc::parse(&format!(
+                    "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n{extra}"
+                ))
+                .unwrap(),
+                std::path::Path::new(""),
+                &crate::scene::Overrides::default(),
+            )
+            .unwrap()
         };
-        let frames = [frame(1.0), frame(3.0), frame(2.0)];
-        let b = FrameBudget::measure(&names, &frames, None);
-        assert_eq!(b.frame_ms, 40.0);
-        assert_eq!(b.chain_ms, 4.0 + 3.0 + 20.0);
+        let skim = "[material]\npreset = \"skimmilk\"\n";
+        let model = |s: &Scene, target: f64| decide(s, target).map(|(m, _)| m);
+        assert_eq!(model(&scene(skim), 0.02), Some(Model::Dipole));
+        let matched = format!("{skim}eta = 1.0\n");
+        assert_eq!(model(&scene(&matched), 0.02), Some(Model::Volume));
+        // Single scattering's share below a coarse target: in the profile.
+        assert_eq!(model(&scene(&matched), 0.5), Some(Model::Halfspace));
+        let sky = format!("[[lights]]\nkind = \"environment\"\n{matched}");
+        assert_eq!(model(&scene(&sky), 0.02), Some(Model::Halfspace));
+        let mut open = scene(&matched);
+        open.mesh.indices.truncate(open.mesh.indices.len() - 3);
+        assert_eq!(model(&open, 0.02), Some(Model::HalfspaceSingle));
+        let given = format!("{matched}model = \"dipole\"\n");
+        assert_eq!(model(&scene(&given), 0.02), None);
+        let mut s = scene(&matched);
+        apply_default(&mut s, 0.02).unwrap();
+        assert_eq!(s.material.model, Model::Volume);
+        assert_eq!(s.resolved.material.model, Some(Model::Volume));
+        assert!(s.model_reason.as_deref().unwrap().contains("random walks"));
+        apply_default(&mut s, 0.5).unwrap();
+        assert_eq!(s.material.model, Model::Volume, "applied once, kept");
     }
 }

@@ -161,9 +161,8 @@ pub struct Scene {
     pub warnings: Vec<String>,
     /// What was adapted that needs no action (long triangles split): printed with the scene.
     pub notes: Vec<String>,
-    /// Why the material's model is what it is, where a rule of the default model that needs
-    /// more than the scene (the target error, the frame budget: `preprocess::model`) chose it;
-    /// printed with the derived settings.
+    /// Why the material's model is what it is, where the default model chose it
+    /// (`preprocess::model::apply_default`); printed with the derived settings.
     pub model_reason: Option<String>,
 }
 

@@ -787,11 +787,7 @@ impl Running {
     fn request_preset(&mut self, name: String, app: &AppSettings) -> Result<()> {
         // Check the name now: a typo is an error, not a silent no-op.
         let material = Material::preset(&name).with_context(|| format!("material '{name}'"))?;
-        let material = match self.scene.environment.is_some() && material.eta == 1.0 {
-            // As the scene file's default under an environment (`Scene::from_desc`).
-            true => material.with_model(crate::physics::Model::Halfspace)?,
-            false => material,
-        };
+        let material = self.default_model_for(material, app.target_error)?;
         // A preset gets the settings derived for it (and so its own atlas), as a scene
         // file naming it would; a cached one loads at once.
         let w = Wanted {
@@ -801,6 +797,21 @@ impl Running {
         };
         self.request(w, app);
         Ok(())
+    }
+
+    /// `material` under the model `render` would give the shown scene with it
+    /// (`preprocess::model::decide`) where the scene's model was the default's; its own
+    /// where the scene or the command line named one.
+    fn default_model_for(&self, material: Material, target_error: f64) -> Result<Material> {
+        if self.scene.model_reason.is_none() {
+            return Ok(material);
+        }
+        let mut scene = self.scene_for(material);
+        scene.resolved.material.model = None;
+        Ok(match preprocess::model::decide(&scene, target_error) {
+            Some((model, _)) => material.with_model(model)?,
+            None => material,
+        })
     }
 
     /// The settings `w` is (or will be) prepared with, pinned: what a change of its material's
