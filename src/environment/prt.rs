@@ -90,6 +90,9 @@ pub struct Transfer {
 /// Seconds per ray and thread of [`transfer`], calibrated on the bunny on 2 cores.
 const SECONDS_PER_RAY: f64 = 5.5e-7;
 
+/// Texels the pilot of the transfer's time samples.
+const PILOT_TEXELS: usize = 256;
+
 /// Estimated seconds of [`transfer`] over `texels` texels on this machine's threads: its work,
 /// `texels x settings.rays` shadow rays, at the calibrated cost per ray.
 pub fn estimate_seconds(texels: u64, settings: PrtSettings) -> f64 {
@@ -122,38 +125,55 @@ pub fn transfer(mesh: &Mesh, atlas: &Atlas, eta: f64, settings: PrtSettings) -> 
     let side = (settings.rays as f64).sqrt().round() as u32;
     let n_rays = side * side;
     let mut coefficients = vec![0f32; atlas.texels.len() * k];
+    let texel = |t: usize, out: &mut [f32]| {
+        let (x, n) = texel_point(atlas, t);
+        let (tu, tv) = frame(n);
+        let mut rng = Rng::new(&[0x707274, t as u64]);
+        let mut acc = vec![0.0f64; k];
+        let mut y = vec![0.0f64; k];
+        for i in 0..side {
+            for j in 0..side {
+                let u1 = (i as f64 + rng.uniform()) / side as f64;
+                let u2 = (j as f64 + rng.uniform()) / side as f64;
+                // Cosine-distributed: sin^2(theta) uniform.
+                let (sin_t, phi) = (u1.sqrt(), 2.0 * PI * u2);
+                let cos_t = (1.0 - u1).max(0.0).sqrt();
+                let w = tu * (sin_t * phi.cos()) + tv * (sin_t * phi.sin()) + n * cos_t;
+                if bvh.occluded(x, w, f64::INFINITY) {
+                    continue;
+                }
+                let f = fresnel_transmittance(eta, cos_t);
+                sh::eval(settings.order, w, &mut y);
+                for (a, yk) in acc.iter_mut().zip(&y) {
+                    *a += f * yk;
+                }
+            }
+        }
+        let scale = PI / n_rays as f64;
+        for (o, a) in out.iter_mut().zip(&acc) {
+            *o = (a * scale) as f32;
+        }
+    };
+    // The time of the transfer, from a pilot on this machine as it runs now: a strided
+    // sample of the texels, timed and scaled up (their results are the same computed again).
+    let texels = atlas.texels.len();
+    let step = (texels / PILOT_TEXELS).max(1);
+    let clock = std::time::Instant::now();
+    let sampled = (0..texels)
+        .step_by(step)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|t| texel(t, &mut vec![0f32; k]))
+        .count();
+    let pilot = clock.elapsed().as_secs_f64();
+    tracing::info!(
+        "environment transfer: about {:.1} s on this machine now ({texels} texels x {n_rays} rays; a pilot of {sampled} texels took {pilot:.2} s)",
+        pilot * texels as f64 / sampled.max(1) as f64
+    );
     coefficients
         .par_chunks_mut(k)
         .enumerate()
-        .for_each(|(t, out)| {
-            let (x, n) = texel_point(atlas, t);
-            let (tu, tv) = frame(n);
-            let mut rng = Rng::new(&[0x707274, t as u64]);
-            let mut acc = vec![0.0f64; k];
-            let mut y = vec![0.0f64; k];
-            for i in 0..side {
-                for j in 0..side {
-                    let u1 = (i as f64 + rng.uniform()) / side as f64;
-                    let u2 = (j as f64 + rng.uniform()) / side as f64;
-                    // Cosine-distributed: sin^2(theta) uniform.
-                    let (sin_t, phi) = (u1.sqrt(), 2.0 * PI * u2);
-                    let cos_t = (1.0 - u1).max(0.0).sqrt();
-                    let w = tu * (sin_t * phi.cos()) + tv * (sin_t * phi.sin()) + n * cos_t;
-                    if bvh.occluded(x, w, f64::INFINITY) {
-                        continue;
-                    }
-                    let f = fresnel_transmittance(eta, cos_t);
-                    sh::eval(settings.order, w, &mut y);
-                    for (a, yk) in acc.iter_mut().zip(&y) {
-                        *a += f * yk;
-                    }
-                }
-            }
-            let scale = PI / n_rays as f64;
-            for (o, a) in out.iter_mut().zip(&acc) {
-                *o = (a * scale) as f32;
-            }
-        });
+        .for_each(|(t, out)| texel(t, out));
     Transfer {
         settings,
         coefficients,

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"TRLCACHE";
 /// Bump whenever the preprocessing's results change for the same inputs.
-pub const FORMAT_VERSION: u32 = 12;
+pub const FORMAT_VERSION: u32 = 13;
 
 /// FNV-1a, 64 bit: stable across runs, platforms and compiler versions.
 #[derive(Debug, Clone, Copy)]

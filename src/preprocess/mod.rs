@@ -457,7 +457,7 @@ impl Preprocessed {
         }
         if let Some(w) = &o.walks {
             lines.push(format!(
-                "walks: {} per node and channel, {} in all, {:.1} collisions each, {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light",
+                "walks: {} per node and channel, {} in all, {:.1} collisions each, {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light; {:.1} s (a pilot estimated {:.1} s)",
                 w.paths_per_node,
                 w.paths,
                 w.events as f64 / w.paths.max(1) as f64,
@@ -465,7 +465,9 @@ impl Preprocessed {
                 w.truncated,
                 w.left[0],
                 w.left[1],
-                w.left[2]
+                w.left[2],
+                w.seconds,
+                w.estimated_seconds
             ));
             let n = o.exit_slopes.len().max(1) as f64;
             let mean: [f64; 3] =

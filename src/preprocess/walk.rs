@@ -91,6 +91,10 @@ pub struct WalkReport {
     /// Fraction of the entering flux that left after `min_order` or more events, per channel
     /// (over every node, weighted by area).
     pub left: [f64; 3],
+    /// Seconds the walks were estimated to take before they started, from a timed pilot.
+    pub estimated_seconds: f64,
+    /// Seconds they took.
+    pub seconds: f64,
 }
 
 /// Where paths of one node start: the render triangles its basis function covers, with the
@@ -288,6 +292,13 @@ type Column = (Vec<(u32, Deposit)>, [u64; 4], [f64; 3], [f64; 3]);
 /// columns of one block are all that is held besides F).
 const SOURCE_BLOCK: usize = 128;
 
+/// Sources the pilot of the walks' time samples (strided over the node order).
+const PILOT_SOURCES: usize = 32;
+
+/// Fewest walks per channel the pilot gives each of its sources (an eighth of the run's
+/// otherwise).
+const PILOT_MIN_PATHS: u32 = 8;
+
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
 /// walks did, `paths` paths per node and channel, counting exits after `min_order` or more
 /// scattering events.
@@ -308,7 +319,7 @@ pub fn walk_response(
     let done = std::sync::atomic::AtomicU64::new(0);
     // Per source p: its column (receiver, deposit) and the counters.
     let walk_source = |(acc, seen, touched): &mut (Vec<Deposit>, Vec<bool>, Vec<u32>),
-                       p: usize|
+                       (p, paths): (usize, u32)|
      -> Column {
         let mut counters = [0u64; 4]; // paths, events, truncated, re-entries
         let mut left = [0.0; 3];
@@ -449,8 +460,38 @@ pub fn walk_response(
             lobe,
         )
     };
+    let scratch = || {
+        (
+            vec![[0.0f64; DEPOSIT]; n],
+            vec![false; n],
+            Vec::<u32>::new(),
+        )
+    };
+    // The time of the walks, from a pilot on this machine as it runs now: a strided sample of
+    // the sources with an eighth of their walks, timed and scaled up. Its columns are dropped.
+    let pilot_step = (n / PILOT_SOURCES).max(1);
+    let pilot_paths = (paths / 8).max(PILOT_MIN_PATHS).min(paths);
+    let clock = std::time::Instant::now();
+    let pilot: Vec<Column> = (0..n)
+        .step_by(pilot_step)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map_init(scratch, |s, p| walk_source(s, (p, pilot_paths)))
+        .collect();
+    let pilot_seconds = clock.elapsed().as_secs_f64();
+    let estimated_seconds = pilot_seconds * n as f64 / pilot.len().max(1) as f64 * paths as f64
+        / pilot_paths.max(1) as f64;
+    drop(pilot);
+    done.store(0, std::sync::atomic::Ordering::Relaxed);
+    tracing::info!(
+        "walks: about {estimated_seconds:.1} s on this machine now ({} paths per node and channel on {n} nodes; a pilot of {} nodes with {pilot_paths} took {pilot_seconds:.2} s)",
+        paths,
+        n.div_ceil(pilot_step)
+    );
+    let clock = std::time::Instant::now();
     let mut report = WalkReport {
         paths_per_node: paths,
+        estimated_seconds,
         ..WalkReport::default()
     };
     let mut rows: Vec<Vec<(u32, Rgb)>> = vec![Vec::new(); n];
@@ -461,16 +502,7 @@ pub fn walk_response(
     for start in (0..n).step_by(SOURCE_BLOCK) {
         let block: Vec<Column> = (start..(start + SOURCE_BLOCK).min(n))
             .into_par_iter()
-            .map_init(
-                || {
-                    (
-                        vec![[0.0f64; DEPOSIT]; n],
-                        vec![false; n],
-                        Vec::<u32>::new(),
-                    )
-                },
-                walk_source,
-            )
+            .map_init(scratch, |s, p| walk_source(s, (p, paths)))
             .collect();
         for (i, (column, counters, left, lobe)) in block.into_iter().enumerate() {
             let p = start + i;
@@ -494,6 +526,7 @@ pub fn walk_response(
         }
     }
     progress("walks", n as u64, n as u64);
+    report.seconds = clock.elapsed().as_secs_f64();
     report.left = report.left.map(|l| l / entered.max(1e-300));
     let slopes: Vec<[f32; 3]> = exits
         .iter()
