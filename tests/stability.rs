@@ -1,4 +1,6 @@
-//! Stability where the method is known to be weak (METHOD.md section 3): each case renders
+//! Stability where the method is known to be weak (thin parts, concave corners, extreme
+//! albedos, texels far from the profile's scale, small objects, coarse and degenerate meshes,
+//! seams under a moving light): each case renders
 //! with optimized, simple and global-only blending on lavapipe (validation on) and compares
 //! with the brute-force reference. Every case must give a finite image; the optimized render's
 //! relative RMS must stay under the bound given. The bounds are ceilings set about 30 % above

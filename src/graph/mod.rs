@@ -379,7 +379,7 @@ pub struct FrameGraph {
 
 /// Issues `barriers` as one `vkCmdPipelineBarrier2`. With no barriers it still issues an
 /// execution dependency: lavapipe latches a begin timestamp after the following work unless a
-/// barrier separates them (see `shared/LAVAPIPE.md`), which would make the pass read as ~0 ms.
+/// barrier separates them, which would make the pass read as ~0 ms.
 pub fn record_barriers(
     gpu: &Gpu,
     cmd: vk::CommandBuffer,

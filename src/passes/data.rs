@@ -1,7 +1,7 @@
 //! The preprocessing's results in device memory, in the layouts the passes read.
 //!
 //! Bulk data is read through texel buffers, not storage buffers: on lavapipe storage-buffer
-//! loads ran 40-70x slower than texel-buffer fetches of the same bytes (`shared/LAVAPIPE.md`).
+//! loads ran 40-70x slower than texel-buffer fetches of the same bytes.
 //! - atlas mesh: one vertex per (mesh vertex, chart) with position, normal, texture coordinate,
 //!   atlas coordinate (texels) and up to three (node, weight) pairs of its prolongation;
 //! - covered texels: `x | y << 16` (R32_UINT), and a chart-id image (R32_UINT, chart + 1);

@@ -232,7 +232,7 @@ mod tests {
                 }
             }
         }
-        // The scale note of METHOD.md: skim milk red gets 40 % of R_total from within 3 mm and
+        // The dipole's radial spread: skim milk red gets 40 % of R_total from within 3 mm and
         // 22 % from beyond 10 mm.
         let d = Material::preset("skimmilk").unwrap().dipoles()[0];
         let total = d.total_reflectance();
