@@ -1,6 +1,8 @@
-//! Property-based fuzzing of the input parsers (proptest): OBJ meshes and scene files, from
-//! random bytes and from mutations of the seed corpus in `tests/fuzz-seeds/`. Every input must
-//! give a mesh or scene that passes validation, or an error; never a panic. The number of
+//! Property-based fuzzing of the input parsers (proptest): OBJ meshes, scene files, environment
+//! maps (OpenEXR and Radiance HDR) and viewer scripts, from random bytes and from mutations of
+//! seeds (`tests/fuzz-seeds/`, and maps and scripts made here). Every input must give a mesh,
+//! scene, map or script that passes validation, or an error; never a panic, and never an
+//! allocation beyond what a map's stated limit allows. The number of
 //! cases per property is bounded (PROPTEST_CASES overrides), so CI spends a few seconds here.
 
 use proptest::prelude::*;
@@ -131,8 +133,101 @@ fn check_scene(bytes: &[u8]) {
     }
 }
 
+/// Seeds of the environment-map decoders: a small OpenEXR written by the project and a small
+/// Radiance HDR (run-length-free scanlines of RGBE pixels).
+fn map_seeds() -> &'static [Vec<u8>] {
+    static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
+    SEEDS.get_or_init(make_map_seeds)
+}
+
+fn make_map_seeds() -> Vec<Vec<u8>> {
+    let dir = std::env::temp_dir().join(format!("translucent-fuzz-map-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("seed.exr");
+    let px: Vec<f32> = (0..16 * 8 * 4).map(|i| (i % 7) as f32 * 0.25).collect();
+    translucent::output::write_exr(&path, 16, 8, &px).unwrap();
+    let exr = std::fs::read(&path).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 8\n".to_vec();
+    for i in 0..32u8 {
+        hdr.extend_from_slice(&[100 + i, 90, 80, 128]);
+    }
+    vec![exr, hdr]
+}
+
+/// A map that decodes must come out as its header said and within the stated limit, and then
+/// be accepted as an environment or refused with a message.
+fn check_map(bytes: &[u8]) {
+    if let Ok((w, h, px)) = translucent::environment::decode(bytes) {
+        let most = translucent::environment::MAX_INPUT_WIDTH as usize;
+        assert!(w as usize <= most && h as usize <= most, "{w} x {h}");
+        assert_eq!(px.len(), w as usize * h as usize);
+        if let Ok(env) = translucent::environment::Environment::new("fuzz", w, h, px) {
+            assert!(env.width > 0 && env.height > 0);
+        }
+    }
+}
+
+const SCRIPT_SEED: &str = "frames 3; light 40 -10 # a comment\norbit 30 0; zoom 1.5; pan 10 -4\n\
+     material ketchup; wait; mode simple; screenshot lit; screenshot; ui; reset;\n\
+     resize 640 480; sigma-s 1 2 3; sigma-a 0.1 0.2 0.3; eta 1.0; model dipole\n\
+     settings texel=0.5 kernel=auto; light-direction 1 0 -1 0; light-colour 0 1 0.5 0.25\n\
+     light-intensity 0 2; light-kind 0 spot; add-light point; remove-light 1;\n\
+     save-scene s; environment 90; envmap; quit";
+
+/// A script that parses holds only steps the viewer can take: sizes within the window limit,
+/// names inside the output folder, finite numbers.
+fn check_script(bytes: &[u8]) {
+    use translucent::viewer::script::{parse, Action, Step};
+    if let Ok(steps) = parse(&String::from_utf8_lossy(bytes)) {
+        for step in steps {
+            match step {
+                Step::Frames(n) => assert!(n >= 1),
+                Step::Act(Action::Resize(w, h)) => {
+                    assert!((1..=16384).contains(&w) && (1..=16384).contains(&h))
+                }
+                Step::Act(Action::Screenshot(Some(n)) | Action::SaveScene(Some(n))) => {
+                    translucent::output::plain_name(&n).unwrap();
+                }
+                Step::Act(Action::Zoom(f)) => assert!(f.is_finite() && f > 0.0),
+                Step::Act(Action::Orbit(a, b) | Action::Light(a, b) | Action::Pan(a, b)) => {
+                    assert!(a.is_finite() && b.is_finite())
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+
+    #[test]
+    fn map_decoders_survive_mutated_seeds(seed in 0usize..2, edits in prop::collection::vec(edit(), 1..12)) {
+        let seeds = map_seeds();
+        check_map(&mutate(&seeds[seed % seeds.len()], &edits));
+    }
+
+    #[test]
+    fn map_decoders_survive_random_bytes(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
+        // Random bytes behind either format's magic, so that the decoders see them.
+        let mut exr = vec![0x76, 0x2f, 0x31, 0x01];
+        exr.extend_from_slice(&bytes);
+        check_map(&exr);
+        let mut hdr = b"#?".to_vec();
+        hdr.extend_from_slice(&bytes);
+        check_map(&hdr);
+    }
+
+    #[test]
+    fn script_parser_survives_mutated_seeds(edits in prop::collection::vec(edit(), 1..12)) {
+        check_script(&mutate(SCRIPT_SEED.as_bytes(), &edits));
+    }
+
+    #[test]
+    fn script_parser_survives_random_bytes(bytes in prop::collection::vec(any::<u8>(), 0..300)) {
+        check_script(&bytes);
+    }
 
     #[test]
     fn obj_parser_survives_mutated_seeds(seed in 0usize..16, edits in prop::collection::vec(edit(), 1..12)) {

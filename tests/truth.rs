@@ -373,38 +373,39 @@ fn open_meshes_are_refused() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A time budget stops the tracing once another round as long as the last would overrun it,
-/// after at least one sample per half. Checked by the work done under a clock the test
-/// controls (each reading a tenth of a second later), not by the wall time of a shared machine.
+/// A time budget stops the tracing once another round as long as the last would overrun it;
+/// a budget below half of what one sample per pixel and half takes is refused, from a pilot
+/// on a sample of the pixels. Checked by the work done under a clock the test controls (each
+/// reading a tenth of a second later), not by the wall time of a shared machine.
 #[test]
 fn time_budget() {
-    let scene = ketchup_slab();
+    let mut scene = ketchup_slab();
     let cap = 2_000_000;
     let s = |budget: f64| TruthSettings {
         spp: cap,
         time_s: Some(budget),
         ..Default::default()
     };
+    // Few enough pixels that the pilot samples them all: it estimates a round as its own 0.1 s.
+    scene.width = 6;
+    scene.height = 6;
     let ticks = std::sync::atomic::AtomicU32::new(0);
     let clock = || 0.1 * ticks.fetch_add(1, std::sync::atomic::Ordering::Relaxed) as f64;
-    // The rounds end at 0.1, 0.2, 0.3, ... s (the first reading, 0, is the start); a budget
-    // of 0.35 s allows the rounds ending at 0.1 and 0.2 and the one ending at 0.3, after which
-    // another would end past the budget.
-    let t = truth::compute_with_clock(&scene, &s(0.35), &|_| {}, &clock).unwrap();
-    assert_eq!(t.spp, 6, "3 rounds of one sample per half");
-    // A budget shorter than the first round still gives one sample per half.
+    // Readings: 0 and 0.1 around the pilot, 0.2 at the start of the rounds, then one at the
+    // end of each round: 0.3, 0.4, ... The round ending at 1.0 is the last (another would end
+    // past 1.05): eight rounds.
+    let t = truth::compute_with_clock(&scene, &s(1.05), &|_| {}, &clock).unwrap();
+    assert!(t.pixels > 0 && t.pixels <= truth::PILOT_PIXELS, "{}", t.pixels);
+    assert_eq!(t.spp, 16, "8 rounds of one sample per half");
+    // A pilot of 0.1 s: more than twice 0.01 s.
     ticks.store(0, std::sync::atomic::Ordering::Relaxed);
-    let t = truth::compute_with_clock(&scene, &s(0.01), &|_| {}, &clock).unwrap();
-    assert_eq!(t.spp, 2);
+    let e = truth::compute_with_clock(&scene, &s(0.01), &|_| {}, &clock).unwrap_err();
+    assert!(e.to_string().contains("more than twice the --time"), "{e}");
     // With the real clock the budget ends the run long before the cap: a hang watchdog only,
-    // its bound 60 s for a 0.3 s budget.
-    let t = truth::compute(&scene, &s(0.3), &quiet).unwrap();
-    assert!(
-        t.spp >= 2 && t.spp.is_multiple_of(2) && t.spp < cap,
-        "{}",
-        t.spp
-    );
-    assert!(t.seconds < 60.0, "{} s for a 0.3 s budget", t.seconds);
+    // its bound 60 s for a 2 s budget.
+    let t = truth::compute(&ketchup_slab(), &s(2.0), &quiet).unwrap();
+    assert!(t.spp >= 2 && t.spp.is_multiple_of(2) && t.spp < cap, "{}", t.spp);
+    assert!(t.seconds < 60.0, "{} s for a 2 s budget", t.seconds);
 }
 
 /// The chart's cached truth: traced once, then loaded; a corrupt file is traced again.

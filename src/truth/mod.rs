@@ -115,6 +115,12 @@ pub enum TruthError {
          (remove `texture` from [mesh] to compare the medium alone)"
     )]
     Texture,
+    /// A time budget shorter than the least a truth takes.
+    #[error(
+        "one sample per pixel and half takes about {0:.1} s here, more than twice the --time \
+         budget of {1} s: give --time {0:.0} or more, or fewer pixels"
+    )]
+    BudgetTooShort(f64, f64),
     /// A surface with a border.
     #[error(
         "truth traces a medium bounded by a closed surface; this mesh has a border (an edge \
@@ -559,45 +565,81 @@ pub fn compute_with_clock(
     // Sums of each half per covered pixel and channel.
     let mut sums = vec![[[0.0f64; 3]; 2]; covered.len()];
     let (mut events, mut paths, mut truncated) = (0u64, 0u64, 0u64);
-    let mut done = 0u32;
-    let mut round_start = clock();
-    while done < per_half {
-        let k = done as u64;
-        let (e, p, t) = sums
-            .par_iter_mut()
-            .zip(&covered)
-            .map_init(Scratch::default, |scratch, (sum, &i)| {
+    if let Some(budget) = settings.time_s {
+        // One sample per pixel and half is the least a truth can be: timed on a strided sample
+        // of the pixels (seeded apart from the image's samples, and dropped), and refused where
+        // it would take more than twice the budget.
+        let step = (covered.len() / PILOT_PIXELS).max(1);
+        let start = clock();
+        let sampled = covered
+            .iter()
+            .step_by(step)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map_init(Scratch::default, |scratch, &i| {
                 let (o, d) = camera_ray(scene, i % w, i / w);
-                let (mut e, mut p, mut t) = (0u64, 0u64, 0u64);
-                for (half, s) in sum.iter_mut().enumerate() {
-                    let mut rng = Rng::new(&[settings.seed, i as u64, half as u64, k]);
-                    for (c, v) in s.iter_mut().enumerate() {
-                        let r = tracer.radiance(o, d, c, &mut rng, scratch);
-                        *v += r.radiance;
-                        e += r.events;
-                        p += 1;
-                        t += r.truncated as u64;
+                let mut rng = Rng::new(&[settings.seed, i as u64, PILOT_STREAM]);
+                for _ in 0..2 {
+                    for c in 0..3 {
+                        tracer.radiance(o, d, c, &mut rng, scratch);
                     }
                 }
-                (e, p, t)
             })
-            .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
-        events += e;
-        paths += p;
-        truncated += t;
+            .count();
+        let round = (clock() - start) * covered.len() as f64 / sampled.max(1) as f64;
+        if round > 2.0 * budget {
+            return Err(TruthError::BudgetTooShort(round, budget));
+        }
+    }
+    let mut done = 0u32;
+    let mut round_start = clock();
+    // A round runs in chunks of pixels (each pixel's samples are seeded by the pixel, so the
+    // chunks change nothing of the image): progress within long rounds.
+    let chunk = covered.len().div_ceil(ROUND_CHUNKS).max(1);
+    let chunks = covered.len().div_ceil(chunk);
+    while done < per_half {
+        let k = done as u64;
+        for (j, (sums, covered)) in sums
+            .chunks_mut(chunk)
+            .zip(covered.chunks(chunk))
+            .enumerate()
+        {
+            let (e, p, t) = sums
+                .par_iter_mut()
+                .zip(covered)
+                .map_init(Scratch::default, |scratch, (sum, &i)| {
+                    let (o, d) = camera_ray(scene, i % w, i / w);
+                    let (mut e, mut p, mut t) = (0u64, 0u64, 0u64);
+                    for (half, s) in sum.iter_mut().enumerate() {
+                        let mut rng = Rng::new(&[settings.seed, i as u64, half as u64, k]);
+                        for (c, v) in s.iter_mut().enumerate() {
+                            let r = tracer.radiance(o, d, c, &mut rng, scratch);
+                            *v += r.radiance;
+                            e += r.events;
+                            p += 1;
+                            t += r.truncated as u64;
+                        }
+                    }
+                    (e, p, t)
+                })
+                .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+            events += e;
+            paths += p;
+            truncated += t;
+            if settings.time_s.is_none() {
+                progress((done as f64 + (j + 1) as f64 / chunks as f64) / per_half as f64);
+            }
+        }
         done += 1;
         let elapsed = clock();
         let round = elapsed - round_start;
         round_start = elapsed;
-        match settings.time_s {
-            Some(budget) => {
-                progress((elapsed / budget).min(1.0));
-                // Stop when another round as long as this one would overrun the budget.
-                if elapsed + round > budget {
-                    break;
-                }
+        if let Some(budget) = settings.time_s {
+            progress((elapsed / budget).min(1.0));
+            // Stop when another round as long as this one would overrun the budget.
+            if elapsed + round > budget {
+                break;
             }
-            None => progress(done as f64 / per_half as f64),
         }
     }
     let n = done as f64;
@@ -626,6 +668,16 @@ pub fn compute_with_clock(
         pixels: covered.len(),
     })
 }
+
+/// Chunks of pixels a round of the truth runs in (progress within a round).
+const ROUND_CHUNKS: usize = 16;
+
+/// Pixels the pilot of a time budget samples.
+pub const PILOT_PIXELS: usize = 64;
+
+/// The random stream of the pilot's samples, apart from the image's (whose last seed word is
+/// the round, far below this).
+const PILOT_STREAM: u64 = u64::MAX;
 
 /// Bump whenever the truth's results change for the same inputs.
 pub const FORMAT_VERSION: u32 = 2;
