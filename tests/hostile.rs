@@ -132,3 +132,38 @@ fn walks_given_to_a_model_without_walks_are_said() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Settings whose preprocessing no device takes are refused from the estimate before anything
+/// is allocated, by every command that preprocesses (`render` did; `precompute` and
+/// `borders` allocated 3 GB for 30-104 s and aborted). The watchdog is far beyond the
+/// fraction of a second the refusal takes.
+#[test]
+fn impossible_settings_are_refused_before_allocation() {
+    let dir = temp_dir("impossible");
+    for (command, settings, needle) in [
+        (
+            "precompute",
+            &["--texel-mm", "0.001"][..],
+            "above the 268435456 of a 16384 x 16384 image",
+        ),
+        (
+            "borders",
+            &["--texel-mm", "0.001"][..],
+            "above the 268435456 of a 16384 x 16384 image",
+        ),
+        // An atlas within the image, kernels of 961 taps on its 60 M texels: hundreds of GiB.
+        (
+            "precompute",
+            &["--texel-mm", "0.0095", "--kernel", "31"][..],
+            "of per-frame data, above half of this machine's",
+        ),
+    ] {
+        let mut c = bin();
+        c.args([command, "--no-cache"]).args(settings);
+        if command == "borders" {
+            c.arg("--out").arg(dir.join("borders"));
+        }
+        common::fails_within(c, needle, std::time::Duration::from_secs(60));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

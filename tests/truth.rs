@@ -395,7 +395,11 @@ fn time_budget() {
     // end of each round: 0.3, 0.4, ... The round ending at 1.0 is the last (another would end
     // past 1.05): eight rounds.
     let t = truth::compute_with_clock(&scene, &s(1.05), &|_| {}, &clock).unwrap();
-    assert!(t.pixels > 0 && t.pixels <= truth::PILOT_PIXELS, "{}", t.pixels);
+    assert!(
+        t.pixels > 0 && t.pixels <= truth::PILOT_PIXELS,
+        "{}",
+        t.pixels
+    );
     assert_eq!(t.spp, 16, "8 rounds of one sample per half");
     // A pilot of 0.1 s: more than twice 0.01 s.
     ticks.store(0, std::sync::atomic::Ordering::Relaxed);
@@ -404,7 +408,11 @@ fn time_budget() {
     // With the real clock the budget ends the run long before the cap: a hang watchdog only,
     // its bound 60 s for a 2 s budget.
     let t = truth::compute(&ketchup_slab(), &s(2.0), &quiet).unwrap();
-    assert!(t.spp >= 2 && t.spp.is_multiple_of(2) && t.spp < cap, "{}", t.spp);
+    assert!(
+        t.spp >= 2 && t.spp.is_multiple_of(2) && t.spp < cap,
+        "{}",
+        t.spp
+    );
     assert!(t.seconds < 60.0, "{} s for a 2 s budget", t.seconds);
 }
 

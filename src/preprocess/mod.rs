@@ -249,6 +249,22 @@ impl Work {
     }
 }
 
+/// Most atlas texels (with gutters) a preprocessing builds: a 16384 x 16384 image, the largest
+/// 2D image of common devices.
+pub const MAX_ATLAS_TEXELS: u64 = 16384 * 16384;
+
+/// The machine's memory, bytes (`MemTotal` of /proc/meminfo; 16 GiB where it cannot be read).
+pub fn host_memory_bytes() -> u64 {
+    std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|text| {
+            let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+            let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+            Some(kib * 1024)
+        })
+        .unwrap_or(16 << 30)
+}
+
 /// Estimates a preprocessing run (see [`Estimate`]).
 pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
     let area = mesh.surface_area();
@@ -332,6 +348,29 @@ impl Estimate {
         )
     }
 
+    /// Refuses, before any work or allocation, what no device takes and the host would
+    /// spend minutes and gigabytes on: an atlas beyond [`MAX_ATLAS_TEXELS`] (the largest image
+    /// of 16384 x 16384 texels), or per-frame data beyond half of the machine's memory (the
+    /// host builds it all before the upload). Independent of the device ([`Estimate::check`]
+    /// adds its own limits where one is open).
+    pub fn check_host(&self) -> anyhow::Result<()> {
+        let atlas = 4 * self.texels;
+        if atlas > MAX_ATLAS_TEXELS {
+            anyhow::bail!(
+                "the atlas would need about {atlas} texels, above the {MAX_ATLAS_TEXELS} of a 16384 x 16384 image; use a larger --texel-mm (or [settings] texel_mm)"
+            );
+        }
+        let most = host_memory_bytes() / 2;
+        if self.device_bytes_min > most {
+            anyhow::bail!(
+                "the scene needs at least {} MiB of per-frame data, above half of this machine's {} MiB of memory, in which it is built; use a larger --texel-mm (or [settings] texel_mm) or a smaller --kernel",
+                self.device_bytes_min >> 20,
+                (2 * most) >> 20
+            );
+        }
+        Ok(())
+    }
+
     /// Refuses, before any work, what cannot fit the device even after pruning.
     pub fn check(&self, info: &crate::gpu::DeviceInfo) -> anyhow::Result<()> {
         if self.kernel_elements > info.max_texel_buffer_elements {
@@ -377,6 +416,8 @@ pub fn prepare(
     cache_dir: Option<&std::path::Path>,
     progress: Progress<'_>,
 ) -> anyhow::Result<(Preprocessed, CacheOutcome)> {
+    // Before anything is allocated, in every command and in the viewer.
+    estimate(&scene.mesh, &scene.material, &choice.settings).check_host()?;
     let Some(dir) = cache_dir else {
         return Ok((
             Preprocessed::build(&scene.mesh, &scene.material, choice, progress),
