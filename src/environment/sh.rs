@@ -93,7 +93,7 @@ pub(crate) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
 }
 
 /// The matrix that turns coefficients of order `order` by `q`: if f has coefficients c,
-/// f(q^-1 w) has coefficients M c, with M[k][j] = integral of Y_k(q w) Y_j(w) dw (row-major,
+/// f(q^-1 w) has coefficients M c, with `M[k][j]` = integral of Y_k(q w) Y_j(w) dw (row-major,
 /// `order^2` square; zero between different bands). Exact: the integrand is a polynomial of
 /// degree 2 (order - 1) at most on the sphere, which a product of Gauss-Legendre nodes in z and
 /// equally spaced ones in phi integrates exactly.

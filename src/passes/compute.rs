@@ -342,7 +342,7 @@ pub struct TunedGlobal {
     /// The fastest variant.
     pub best: GlobalVariant,
     /// Every candidate with the median of its timed dispatches, ms, and how many ran (fewer
-    /// than [`TUNE_ROUNDS`] where it was dropped as far slower).
+    /// than `TUNE_ROUNDS` where it was dropped as far slower).
     pub candidates: Vec<(GlobalVariant, f64, usize)>,
 }
 
@@ -361,8 +361,8 @@ impl TunedGlobal {
 /// Chooses the global pass's variant on this device by timing it on the uploaded matrix: texel
 /// and (where the matrix was uploaded for it) storage buffers, each with one lane per row and
 /// with the derived lanes ([`GlobalVariant::lanes_for`], or `lanes` when given). Candidates
-/// run interleaved, [`TUNE_ROUNDS`] timed dispatches each after a warm-up, summarised by their
-/// median; a candidate [`TUNE_DROP`] times slower than the best is dropped early.
+/// run interleaved, `TUNE_ROUNDS` timed dispatches each after a warm-up, summarised by their
+/// median; a candidate `TUNE_DROP` times slower than the best is dropped early.
 pub fn tune_global(
     gpu: &std::sync::Arc<crate::gpu::Gpu>,
     data: &super::data::SubsurfaceData,

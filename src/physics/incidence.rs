@@ -120,7 +120,7 @@ impl HFunction {
     /// The slope k of the linear lobe 1 + k (mu - 2/3) with the same mean exit cosine as
     /// [`HFunction::multiple_lobe`] at incidence cosine `mu0` (what the walks of `volume`,
     /// which measure one mean cosine per node, see of it on a half-space):
-    /// 18 (<mu> - 2/3), <mu> = int mu lobe(mu) 2 mu dmu.
+    /// 18 (`<mu>` - 2/3), `<mu>` = int mu lobe(mu) 2 mu dmu.
     pub fn multiple_lobe_slope(&self, mu0: f64) -> f64 {
         // On the H function's own Gauss-Legendre nodes.
         let mean: f64 = self
@@ -142,7 +142,7 @@ impl HFunction {
     /// cosine (uniform incident radiance): the radiance leaving at cosine `mu` relative to a
     /// Lambertian exit of the same flux. By reciprocity the radiance leaving at mu under
     /// uniform incident radiance L is L times the reflectance of light entering at mu, so the
-    /// lobe is R(mu) / <R>, <R> the cosine-weighted mean ([`DiffuseLobe`] keeps <R>).
+    /// lobe is R(mu) / `<R>`, `<R>` the cosine-weighted mean ([`DiffuseLobe`] keeps `<R>`).
     pub fn diffuse_lobe(&self) -> DiffuseLobe<'_> {
         DiffuseLobe {
             h: self,

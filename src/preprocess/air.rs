@@ -18,9 +18,9 @@
 //!   irradiance the object gives itself is E'_p = sum_q G_pq B_q, where G_pq is the mean over
 //!   cosine-distributed directions from points of p's support (density phi_p) of phi_q at
 //!   the point the direction meets the surface, times the exit lobe there
-//!   ([`transfer`]: E = pi x the cosine-weighted mean radiance, radiance = B lobe(mu) / pi).
+//!   (`transfer`: E = pi x the cosine-weighted mean radiance, radiance = B lobe(mu) / pi).
 //!   The response to it is folded into F once ([`interreflect`]): F' = F + k F G F + ...,
-//!   with [`scales`]' factor k from every order against F's orders. The per-frame passes
+//!   with `scales`' factor k from every order against F's orders. The per-frame passes
 //!   are unchanged.
 //!
 //! On a convex object no segment leaves the medium and no direction meets the object again:

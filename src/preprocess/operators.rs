@@ -323,7 +323,7 @@ impl Weights {
     }
 }
 
-/// How [`texel_mean`] integrates texel `s` as seen from `x`: the exact disc mean when `x` lies
+/// How `texel_mean` integrates texel `s` as seen from `x`: the exact disc mean when `x` lies
 /// within the texel, a 6x6 (within 1.5 texels) or 3x3 (within 2.5 texels) sub-sampling where
 /// R_d is too curved for one sample, the profile at the texel's position beyond. Part of an
 /// entry's geometry: the device's re-weighting ([`crate::passes::reweigh`]) takes the level
@@ -440,7 +440,7 @@ fn texel_nodes(atlas: &Atlas, nodes: &Nodes) -> Vec<Vec<(u32, f32)>> {
 pub const FIT_ENERGY_WEIGHT: f64 = 10.0;
 
 /// Limit on the active-set solver's steps, per variable and constraint of a solve (see
-/// [`solve_non_negative_response`]); a solve that reaches it falls back to the repair described
+/// `solve_non_negative_response`); a solve that reaches it falls back to the repair described
 /// there (none of the 2154 constrained solves of the re-weighting test's two preprocessings
 /// did, counted 2026-11-24).
 pub const FIT_STEPS_PER_UNKNOWN: usize = 8;

@@ -17,7 +17,7 @@
 //! - Pixels: a camera ray through each pixel centre finds the visible point; L = F_t(eta, w_o)
 //!   B / pi. Vertices: B at each mesh vertex.
 //!
-//! Its own error is measured by halving the spacing and theta ([`Reference::refined`]).
+//! Its own error is measured by halving the spacing and theta ([`ReferenceSettings::refined`]).
 
 pub mod borders;
 pub mod metrics;
