@@ -9,13 +9,13 @@
 //! Pareto front, the automatic setting marked).
 
 use crate::gpu::Gpu;
+use crate::metrics;
 use crate::preprocess::{
     self,
     operators::Blend,
     settings::{Choice, SettingsOverrides},
     Preprocessed,
 };
-use crate::reference::metrics;
 use crate::renderer::{Options, Renderer};
 use crate::scene::Scene;
 use anyhow::Result;

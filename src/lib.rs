@@ -19,6 +19,8 @@ pub mod gpu;
 pub mod graph;
 pub mod input;
 pub mod layout;
+pub mod metrics;
+pub mod numeric;
 pub mod output;
 pub mod passes;
 pub mod physics;

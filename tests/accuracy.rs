@@ -6,8 +6,9 @@
 
 mod common;
 
+use translucent::metrics;
 use translucent::preprocess::{self, operators::Blend, settings::SettingsOverrides};
-use translucent::reference::{borders, metrics, Reference, ReferenceSettings};
+use translucent::reference::{borders, Reference, ReferenceSettings};
 use translucent::renderer::Options;
 use translucent::scene::{Overrides, Scene};
 

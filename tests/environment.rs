@@ -13,8 +13,9 @@ mod common;
 
 use std::path::Path;
 use translucent::environment::{accuracy::TexelReference, Environment};
+use translucent::metrics;
 use translucent::preprocess::{self, settings::SettingsOverrides};
-use translucent::reference::{metrics, Reference, ReferenceSettings};
+use translucent::reference::{Reference, ReferenceSettings};
 use translucent::renderer::{Options, Renderer};
 use translucent::scene::{desc::SceneDesc, Overrides, Scene};
 

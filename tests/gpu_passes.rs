@@ -930,7 +930,7 @@ fn material_edits_re_weighted_on_the_device_equal_a_fresh_preprocessing() {
         };
         let a = common::render(&edited, &reweighed, options(), 1);
         let b = common::render(&edited, &fresh, options(), 1);
-        let (err, _) = translucent::reference::metrics::compare(&a.radiance, &b.radiance, None);
+        let (err, _) = translucent::metrics::compare(&a.radiance, &b.radiance, None);
         let largest_pixel = err.channels.iter().fold(0.0_f64, |m, c| m.max(c.max));
         println!(
             "  image: relative RMS {:.1e} (worst channel), largest pixel difference {largest_pixel:.1e}",
@@ -1143,7 +1143,7 @@ fn top_middle_pixels(scene: &Scene) -> Vec<(u32, u32, usize, glam::DVec3)> {
     let mut out = Vec::new();
     for y in 0..scene.height {
         for x in 0..scene.width {
-            let (o, d) = translucent::reference::camera_ray(scene, x, y);
+            let (o, d) = translucent::scene::camera_ray(scene, x, y);
             let at = o + d * ((top - o.y) / d.y);
             if d.y < 0.0 && at.x.abs() <= 20.0 && at.z.abs() <= 20.0 {
                 out.push((x, y, (y * scene.width + x) as usize, d));

@@ -5,8 +5,8 @@
 
 mod common;
 
+use translucent::metrics;
 use translucent::preprocess::settings::SettingsOverrides;
-use translucent::reference::metrics;
 use translucent::renderer::{Options, Renderer};
 
 /// The single-scattering image of `scene` (64x64) against `truth_dir`, relative RMS after 4x4
@@ -78,7 +78,7 @@ fn the_references_single_scattering_matches_the_truth() {
     let mut image = vec![0.0f32; (4 * w * h) as usize];
     for y in 0..h {
         for x in 0..w {
-            let (o, d) = translucent::reference::camera_ray(&scene, x, y);
+            let (o, d) = translucent::scene::camera_ray(&scene, x, y);
             if !tracer.covers(o, d) {
                 continue;
             }
@@ -136,7 +136,7 @@ fn the_pass_measures_the_view_rays_length_inside() {
             if out.radiance[4 * i + 3] < 1.0 {
                 continue;
             }
-            let (o, d) = translucent::reference::camera_ray(&scene, x, y);
+            let (o, d) = translucent::scene::camera_ray(&scene, x, y);
             let to = center - o;
             let b2 = (to - d * to.dot(d)).length_squared();
             let got = c.single[i][3] as f64;

@@ -22,9 +22,10 @@
 mod common;
 
 use glam::{Mat4, Vec3};
+use translucent::metrics;
 use translucent::physics::{Material, Model};
 use translucent::preprocess::{operators::Blend, settings::SettingsOverrides};
-use translucent::reference::{metrics, Reference, ReferenceSettings};
+use translucent::reference::{Reference, ReferenceSettings};
 use translucent::renderer::Options;
 use translucent::scene::{mesh::Mesh, Scene};
 

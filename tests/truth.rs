@@ -5,7 +5,8 @@ mod common;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
-use translucent::truth::{self, rng::Rng, Tracer, TruthSettings};
+use translucent::numeric::rng::Rng;
+use translucent::truth::{self, Tracer, TruthSettings};
 
 fn quiet(_: f64) {}
 

@@ -8,10 +8,10 @@
 
 mod common;
 
+use translucent::metrics;
 use translucent::physics::Model;
 use translucent::preprocess::operators::Blend;
 use translucent::preprocess::settings::SettingsOverrides;
-use translucent::reference::metrics;
 use translucent::renderer::Options;
 
 fn case(name: &str, model: Model, bounds: [f64; 3]) {

@@ -156,7 +156,7 @@ fn assert_same_image(
     let (w, h, shot) = translucent::output::read_exr(shot).unwrap();
     let (rw, rh, reference) = translucent::output::read_exr(reference).unwrap();
     assert_eq!((w, h), (rw, rh), "{what}: image sizes");
-    let (err, _) = translucent::reference::metrics::compare(&shot, &reference, None);
+    let (err, _) = translucent::metrics::compare(&shot, &reference, None);
     assert!(err.pixels > 1000, "{what}: {} covered pixels", err.pixels);
     assert!(
         err.rel_rms < 1e-3,
@@ -446,11 +446,7 @@ fn the_environment_turns_and_switches_maps_in_the_viewer() {
             .unwrap()
             .2
     };
-    let rms = |a: &[f32], b: &[f32]| {
-        translucent::reference::metrics::compare(a, b, None)
-            .0
-            .rel_rms
-    };
+    let rms = |a: &[f32], b: &[f32]| translucent::metrics::compare(a, b, None).0.rel_rms;
     let (sky, turned, overcast, back) = (exr("sky"), exr("turned"), exr("overcast"), exr("back"));
     // Turning the map moved its sun; the other map lights differently; switching back gives
     // the turned sky again, to rounding.

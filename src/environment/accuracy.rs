@@ -12,9 +12,9 @@
 
 use super::prt::texel_point;
 use crate::geometry::bvh::Bvh;
+use crate::numeric::rng::Rng;
 use crate::preprocess::atlas::Atlas;
 use crate::scene::Scene;
-use crate::truth::rng::Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 

@@ -234,10 +234,10 @@ impl Environment {
         }
         let peak = |px: &[[f32; 3]]| px.iter().flatten().fold(0f32, |a, &c| a.max(c));
         let max = peak(&pixels) as f64;
-        if max > crate::scene::MAX_RADIANCE {
+        if max > crate::scene::light::MAX_RADIANCE {
             bail!(
                 "a pixel of radiance {max:e} exceeds {:e}: the passes' f32 sums would overflow",
-                crate::scene::MAX_RADIANCE
+                crate::scene::light::MAX_RADIANCE
             );
         }
         let (radiance, width, height) = if w > MAX_WORK_WIDTH {
@@ -246,7 +246,7 @@ impl Environment {
         } else {
             (pixels, w, h)
         };
-        let mut hash = crate::preprocess::cache::Fnv::default();
+        let mut hash = crate::numeric::hash::Fnv::default();
         hash.write(&width.to_le_bytes());
         hash.write(bytemuck::cast_slice(&radiance));
         let (sun, without_sun) = find_sun(&radiance, width, height);

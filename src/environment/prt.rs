@@ -15,10 +15,10 @@
 
 use super::sh;
 use crate::geometry::bvh::Bvh;
+use crate::numeric::rng::Rng;
 use crate::physics::dipole::fresnel_transmittance;
 use crate::preprocess::atlas::Atlas;
 use crate::scene::mesh::Mesh;
-use crate::truth::rng::Rng;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -184,7 +184,7 @@ pub fn transfer(mesh: &Mesh, atlas: &Atlas, eta: f64, settings: PrtSettings) -> 
 /// Cache key of the transfer over the atlas of the preprocessing keyed `preprocessing` (which
 /// covers the mesh, the material and so eta, and the settings the atlas follows from).
 pub fn key(preprocessing: u64, settings: PrtSettings) -> u64 {
-    let mut h = crate::preprocess::cache::Fnv::default();
+    let mut h = crate::numeric::hash::Fnv::default();
     h.write(b"environment transfer 1");
     h.write(&preprocessing.to_le_bytes());
     h.write(&settings.order.to_le_bytes());

@@ -65,33 +65,6 @@ pub fn eval(order: u32, w: DVec3, out: &mut [f64]) {
     }
 }
 
-/// Nodes and weights of n-point Gauss-Legendre quadrature on [-1, 1].
-pub(crate) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    (0..n)
-        .map(|i| {
-            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            let mut dp = 1.0;
-            for _ in 0..100 {
-                // P_n(x) and its derivative by the three-term recurrence.
-                let (mut p0, mut p1) = (1.0, x);
-                for k in 2..=n {
-                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                    p0 = p1;
-                    p1 = p2;
-                }
-                let p = if n == 0 { 1.0 } else { p1 };
-                dp = n as f64 * (x * p - p0) / (x * x - 1.0);
-                let step = p / dp;
-                x -= step;
-                if step.abs() < 1e-15 {
-                    break;
-                }
-            }
-            (x, 2.0 / ((1.0 - x * x) * dp * dp))
-        })
-        .collect()
-}
-
 /// The matrix that turns coefficients of order `order` by `q`: if f has coefficients c,
 /// f(q^-1 w) has coefficients M c, with `M[k][j]` = integral of Y_k(q w) Y_j(w) dw (row-major,
 /// `order^2` square; zero between different bands). Exact: the integrand is a polynomial of
@@ -103,7 +76,7 @@ pub fn rotation(order: u32, q: glam::DQuat) -> Vec<f64> {
     let n = order as usize + 1;
     let np = 2 * order as usize + 1;
     let (mut a, mut b) = (vec![0.0; k], vec![0.0; k]);
-    for (z, wz) in gauss_legendre(n) {
+    for (z, wz) in crate::numeric::quadrature::gauss_legendre(n) {
         let r = (1.0 - z * z).max(0.0).sqrt();
         for j in 0..np {
             let phi = 2.0 * std::f64::consts::PI * j as f64 / np as f64;

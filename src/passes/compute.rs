@@ -161,18 +161,7 @@ pub fn gather(graph: &mut RenderGraph, m: SparseInputs, map: ResourceId, out: Re
         });
 }
 
-/// How the global pass reads its bulk data (also the `--global-layout` values).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum GlobalLayout {
-    /// Uniform texel buffers (`samplerBuffer`): one 16-byte fetch per entry pair.
-    #[default]
-    Texel,
-    /// Storage buffers (`readonly buffer`).
-    Storage,
-    /// Measured on the device when the renderer is built ([`tune_global`]): texel or storage
-    /// buffers, one lane per row or the derived lanes, whichever runs fastest.
-    Auto,
-}
+pub use super::data::GlobalLayout;
 
 /// Fewest entry pairs a lane of the global pass should sum: below it the subgroup butterfly
 /// and idle lanes cost more than the parallel loads save.

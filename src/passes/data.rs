@@ -26,6 +26,20 @@ use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
 
+/// How the global pass reads its bulk data (also the `--global-layout` values).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum GlobalLayout {
+    /// Uniform texel buffers (`samplerBuffer`): one 16-byte fetch per entry pair.
+    #[default]
+    Texel,
+    /// Storage buffers (`readonly buffer`).
+    Storage,
+    /// Measured on the device when the renderer is built
+    /// ([`crate::passes::compute::tune_global`]): texel or storage buffers, one lane per row
+    /// or the derived lanes, whichever runs fastest.
+    Auto,
+}
+
 /// Most nodes the global matrix can index: its entries hold 16-bit node indices.
 pub const MAX_GLOBAL_NODES: u64 = 1 << 16;
 
@@ -668,7 +682,7 @@ impl SubsurfaceData {
         scene: &Scene,
         pre: &Preprocessed,
         mode: Blend,
-        global_layout: super::compute::GlobalLayout,
+        global_layout: GlobalLayout,
         transfer: Option<&crate::environment::prt::Transfer>,
     ) -> GpuResult<SubsurfaceData> {
         let atlas = &pre.atlas;
@@ -853,9 +867,9 @@ impl SubsurfaceData {
         // Storage usage only when asked or measured: it subjects the buffers to
         // maxStorageBufferRange.
         let global_storage = match global_layout {
-            super::compute::GlobalLayout::Texel => false,
-            super::compute::GlobalLayout::Storage => true,
-            super::compute::GlobalLayout::Auto => {
+            GlobalLayout::Texel => false,
+            GlobalLayout::Storage => true,
+            GlobalLayout::Auto => {
                 (entries.len() as u64 * 16).max(rows.len() as u64 * 4)
                     <= gpu.info.max_storage_buffer_range
             }
@@ -947,7 +961,7 @@ mod tests {
         });
         let texture = LinearTexture::new(&img);
         let pyramid = MaxPyramid::new(&texture);
-        let mut rng = crate::truth::rng::Rng::new(&[12345]);
+        let mut rng = crate::numeric::rng::Rng::new(&[12345]);
         let mut next = || rng.uniform();
         for _ in 0..20000 {
             // Small rectangles anywhere, many at the borders of the unit square.

@@ -31,9 +31,10 @@ pub struct HFunction {
     h: Vec<f64>,
 }
 
-/// Gauss-Legendre nodes and weights on (0, 1) (the [-1, 1] rule of `environment::sh`, mapped).
+/// Gauss-Legendre nodes and weights on (0, 1) (the [-1, 1] rule of `numeric::quadrature`,
+/// mapped).
 fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
-    crate::environment::sh::gauss_legendre(n)
+    crate::numeric::quadrature::gauss_legendre(n)
         .into_iter()
         .map(|(x, w)| (0.5 * (1.0 + x), 0.5 * w))
         .unzip()

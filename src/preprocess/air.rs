@@ -30,10 +30,10 @@
 use super::nodes::Nodes;
 use super::walk::{corner_weights, triangle, Surface};
 use crate::geometry::bvh::Bvh;
+use crate::numeric::rng::Rng;
 use crate::physics::incidence::HFunction;
 use crate::physics::{Material, Rgb};
 use crate::scene::mesh::Mesh;
-use crate::truth::rng::Rng;
 use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

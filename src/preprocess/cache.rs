@@ -7,6 +7,7 @@
 //! under the final name.
 
 use super::settings::Settings;
+use crate::numeric::hash::Fnv;
 use crate::physics::Material;
 use crate::scene::mesh::Mesh;
 use anyhow::{bail, Context, Result};
@@ -15,31 +16,6 @@ use std::path::{Path, PathBuf};
 const MAGIC: &[u8; 8] = b"TRLCACHE";
 /// Bump whenever the preprocessing's results change for the same inputs.
 pub const FORMAT_VERSION: u32 = 13;
-
-/// FNV-1a, 64 bit: stable across runs, platforms and compiler versions.
-#[derive(Debug, Clone, Copy)]
-pub struct Fnv(u64);
-
-impl Default for Fnv {
-    fn default() -> Fnv {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Fnv {
-    /// Mixes bytes in.
-    pub fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 ^= *b as u64;
-            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
-
-    /// The hash so far.
-    pub fn finish(&self) -> u64 {
-        self.0
-    }
-}
 
 /// Key of a preprocessing run: mesh geometry, material, settings and format version.
 pub fn key(mesh: &Mesh, material: &Material, settings: &Settings) -> u64 {

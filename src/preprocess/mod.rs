@@ -10,13 +10,17 @@ pub mod model;
 pub mod nodes;
 pub mod operators;
 pub mod settings;
+pub mod solver;
 pub mod walk;
 
 use crate::physics::Material;
 use crate::scene::{mesh::Mesh, Scene};
 use atlas::Atlas;
 use nodes::Nodes;
-use operators::{Operators, Progress};
+use operators::Operators;
+
+/// Progress callback: (stage name, done, total).
+pub type Progress<'a> = &'a (dyn Fn(&str, u64, u64) + Sync);
 use serde::{Deserialize, Serialize};
 use settings::{Choice, ObjectScale, Settings, SettingsOverrides};
 use std::time::Instant;

@@ -23,6 +23,7 @@
 //!   red to 1.40 %.
 
 use crate::physics::Material;
+use crate::scene::desc::SettingsDesc;
 use serde::{Deserialize, Serialize};
 
 /// The discretisation of one object in one material.
@@ -42,7 +43,7 @@ pub struct Settings {
     pub walk_paths: u32,
     /// The lamps the walks enter along (`model = "volume"`; none otherwise): F answers
     /// these lights, as the scene places them ([`crate::preprocess::walk`]).
-    pub walk_lights: [Option<crate::scene::Light>; crate::scene::MAX_LIGHTS],
+    pub walk_lights: [Option<crate::scene::light::Light>; crate::scene::light::MAX_LIGHTS],
 }
 
 impl Settings {
@@ -278,7 +279,7 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             prune_tolerance: prune,
             chart_angle_deg: 30.0,
             walk_paths,
-            walk_lights: [None; crate::scene::MAX_LIGHTS],
+            walk_lights: [None; crate::scene::light::MAX_LIGHTS],
         },
         reasons,
     }
@@ -311,6 +312,31 @@ pub fn walk_paths(material: &Material, target_error: f64) -> (u32, String) {
             100.0 * target_error
         ),
     )
+}
+
+// The scene file's `[settings]` and the overrides it gives.
+impl From<SettingsDesc> for SettingsOverrides {
+    fn from(d: SettingsDesc) -> Self {
+        Self {
+            texel_mm: d.texel_mm,
+            kernel_size: d.kernel,
+            node_spacing_mm: d.node_spacing_mm,
+            prune_tolerance: d.prune,
+            walk_paths: d.walk_paths,
+        }
+    }
+}
+
+impl From<SettingsOverrides> for SettingsDesc {
+    fn from(o: SettingsOverrides) -> Self {
+        Self {
+            texel_mm: o.texel_mm,
+            kernel: o.kernel_size,
+            node_spacing_mm: o.node_spacing_mm,
+            prune: o.prune_tolerance,
+            walk_paths: o.walk_paths,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -33,11 +33,11 @@
 //! does not depend on the number of threads.
 
 use crate::geometry::bvh::Bvh;
+use crate::numeric::rng::Rng;
 use crate::physics::{Material, Rgb};
 use crate::scene::desc::LightKind;
 use crate::scene::mesh::Mesh;
 use crate::scene::{Light, MAX_LIGHTS};
-use crate::truth::rng::Rng;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -309,7 +309,7 @@ pub fn walk_response(
     paths: u32,
     min_order: u32,
     lamps: &[Light],
-    progress: super::operators::Progress<'_>,
+    progress: super::Progress<'_>,
 ) -> (Walked, WalkReport) {
     let n = nodes.positions.len();
     let surface = Surface::new(mesh, nodes);

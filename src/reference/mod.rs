@@ -20,7 +20,6 @@
 //! Its own error is measured by halving the spacing and theta ([`ReferenceSettings::refined`]).
 
 pub mod borders;
-pub mod metrics;
 
 use crate::geometry::bvh::Bvh;
 use crate::physics::{fresnel_transmittance, profile::Profile};
@@ -102,7 +101,7 @@ pub fn environment_irradiance(
     (x, n, f): (DVec3, DVec3, DVec3),
     eps: f64,
     rays: u32,
-    rng: &mut crate::truth::rng::Rng,
+    rng: &mut crate::numeric::rng::Rng,
 ) -> [f64; 3] {
     let mut e = [0.0; 3];
     let Some((env, light)) = scene.environment_light() else {
@@ -146,7 +145,7 @@ pub fn irradiance(
     if scene.environment.is_some() {
         // A stream per point, whichever thread computes it.
         let mut rng =
-            crate::truth::rng::Rng::new(&[0x656e76, x.x.to_bits(), x.y.to_bits(), x.z.to_bits()]);
+            crate::numeric::rng::Rng::new(&[0x656e76, x.x.to_bits(), x.y.to_bits(), x.z.to_bits()]);
         e = environment_irradiance(scene, bvh, (x, n, f), eps, ENVIRONMENT_RAYS, &mut rng);
     }
     for l in &scene.lights {
@@ -390,19 +389,6 @@ impl Tree {
     }
 }
 
-/// A camera ray through the centre of pixel (x, y): origin and unit direction.
-pub fn camera_ray(scene: &Scene, x: u32, y: u32) -> (DVec3, DVec3) {
-    let cam = scene.camera;
-    let (w, h) = (scene.width as f64, scene.height as f64);
-    let f = (cam.target - cam.position).as_dvec3().normalize();
-    let s = f.cross(cam.up.as_dvec3()).normalize();
-    let u = s.cross(f);
-    let t = (0.5 * cam.fov_y as f64).tan();
-    let nx = (2.0 * (x as f64 + 0.5) / w - 1.0) * t * w / h;
-    let ny = (1.0 - 2.0 * (y as f64 + 0.5) / h) * t;
-    (cam.position.as_dvec3(), (f + s * nx + u * ny).normalize())
-}
-
 /// B at arbitrary surface points, from the same dense samples and hierarchical sum as
 /// [`Reference::compute`] (used to check the method texel by texel, independently of the
 /// rasterisation and the composite).
@@ -475,7 +461,7 @@ impl Reference {
                 let profiles = &profiles;
                 let single = &single;
                 (0..w).flat_map(move |x| {
-                    let (o, d) = camera_ray(scene, x, y);
+                    let (o, d) = crate::scene::camera_ray(scene, x, y);
                     match bvh.intersect(o, d, f64::INFINITY) {
                         None => [0.0f32; 4],
                         Some(hit) => {

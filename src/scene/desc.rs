@@ -246,30 +246,6 @@ impl SettingsDesc {
     }
 }
 
-impl From<SettingsDesc> for crate::preprocess::settings::SettingsOverrides {
-    fn from(d: SettingsDesc) -> Self {
-        Self {
-            texel_mm: d.texel_mm,
-            kernel_size: d.kernel,
-            node_spacing_mm: d.node_spacing_mm,
-            prune_tolerance: d.prune,
-            walk_paths: d.walk_paths,
-        }
-    }
-}
-
-impl From<crate::preprocess::settings::SettingsOverrides> for SettingsDesc {
-    fn from(o: crate::preprocess::settings::SettingsOverrides) -> Self {
-        Self {
-            texel_mm: o.texel_mm,
-            kernel: o.kernel_size,
-            node_spacing_mm: o.node_spacing_mm,
-            prune: o.prune_tolerance,
-            walk_paths: o.walk_paths,
-        }
-    }
-}
-
 /// A whole scene file.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
 #[serde(deny_unknown_fields)]

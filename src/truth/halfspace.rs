@@ -8,7 +8,7 @@
 //! absorption otherwise) and leaves when it crosses z = 0; its exit radius is recorded with
 //! the number of scattering events it had.
 
-use super::rng::Rng;
+use crate::numeric::rng::Rng;
 use rayon::prelude::*;
 
 /// Where the light of one set of scattering orders leaves.

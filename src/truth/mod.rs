@@ -38,14 +38,14 @@
 //! a path tracer samples with probability zero.
 
 pub mod halfspace;
-pub mod rng;
 
 use crate::geometry::bvh::{Bvh, Crossing};
-use crate::reference::{camera_ray, metrics};
+use crate::metrics;
+use crate::numeric::rng::Rng;
+use crate::scene::camera_ray;
 use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
-use rng::Rng;
 use serde::Serialize;
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -685,7 +685,7 @@ pub const FORMAT_VERSION: u32 = 2;
 /// Key of a truth computation: everything the image depends on (geometry, medium, lights,
 /// camera, size, samples, seed, phase, orders) and the format version.
 pub fn key(scene: &Scene, settings: &TruthSettings) -> u64 {
-    use crate::preprocess::cache::Fnv;
+    use crate::numeric::hash::Fnv;
     let mut h = Fnv::default();
     h.write(b"truth");
     h.write(&FORMAT_VERSION.to_le_bytes());

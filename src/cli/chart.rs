@@ -1,0 +1,280 @@
+//! `chart`: speed against accuracy over the settings and the models.
+
+use super::*;
+
+pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
+    use crate::reference::{Reference, ReferenceSettings};
+    frame_count("--frames", args.frames, 1)?;
+    let mut scene = args.input.load()?;
+    // The automatic point is the default model's, as `render` would render it.
+    preprocess::model::apply_default(&mut scene, args.target_error)?;
+    // Every model is compared with its exact model where the reference integrates it, and
+    // with the truth alone where it does not (the walks; the light across the air on an
+    // object that is not convex), which needs the truth.
+    let exact = Reference::supports(scene.material.model, &scene.mesh);
+    if let Err(e) = &exact {
+        anyhow::ensure!(
+            args.truth_spp > 0,
+            "{e}; and this chart has no truth (--truth-spp 0)"
+        );
+    }
+    output::create_dir(&args.out)?;
+    let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
+    println!("automatic setting:");
+    for r in &auto.reasons {
+        println!("  {r}");
+    }
+    let reference = match exact {
+        Ok(()) => {
+            let start = std::time::Instant::now();
+            let reference = Reference::compute(&scene, ReferenceSettings::for_scene(&scene));
+            println!(
+                "reference: {} samples, {:.1} s",
+                reference.samples,
+                start.elapsed().as_secs_f64()
+            );
+            output::write_exr(
+                &args.out.join("reference.exr"),
+                reference.width,
+                reference.height,
+                &reference.radiance,
+            )?;
+            Some(reference)
+        }
+        Err(_) => {
+            println!(
+                "model {}: against the truth alone (no exact-model reference on this mesh)",
+                scene.material.model.name()
+            );
+            None
+        }
+    };
+    let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
+    let truth = chart_truth(&scene, args, &cache_dir)?;
+    anyhow::ensure!(
+        reference.is_some() || truth.is_some(),
+        "model {}: neither its exact model (not integrated on this mesh) nor the truth (none for this scene) to compare with",
+        scene.material.model.name()
+    );
+    if let Some(t) = &truth {
+        output::write_exr(
+            &args.out.join("truth.exr"),
+            scene.width,
+            scene.height,
+            &t.radiance,
+        )?;
+        output::write_exr(
+            &args.out.join("noise.exr"),
+            scene.width,
+            scene.height,
+            &t.noise,
+        )?;
+    }
+    let gpu = Gpu::new(&GpuOptions {
+        validate: cli.validate,
+        device: cli.device.clone(),
+        ..Default::default()
+    })?;
+    let baselines = crate::chart::Baselines {
+        reference: reference.as_ref().map(|r| &r.radiance[..]),
+        truth: truth
+            .as_ref()
+            .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
+    };
+    let sweep = crate::chart::sweep(&auto.settings, args.quick);
+    // The other models: each with its own scene (material under the model) and reference.
+    use crate::physics::Model;
+    let own = scene.material.model;
+    let others: Vec<Model> = match &args.models {
+        Some(m) => m.iter().copied().filter(|m| *m != own).collect(),
+        // The walks where they apply: eta = 1 (the material takes the model) and a closed
+        // mesh (`preprocess::choose` refuses the rest).
+        None => [
+            Model::Dipole,
+            Model::Halfspace,
+            Model::HalfspaceSingle,
+            Model::HalfspaceAir,
+            Model::Volume,
+        ]
+        .into_iter()
+        .filter(|m| {
+            *m != own
+                && scene.material.with_model(*m).is_ok()
+                && (!m.walks() || scene.mesh.is_closed())
+        })
+        .collect(),
+    };
+    let mut other_scenes = Vec::new();
+    for m in &others {
+        let mut s = scene.clone();
+        s.material = s
+            .material
+            .with_model(*m)
+            .with_context(|| format!("--models {}", m.name()))?;
+        if Reference::supports(*m, &s.mesh).is_err() {
+            anyhow::ensure!(
+                truth.is_some(),
+                "--models {}: {} the model's only independent check is the volumetric truth, and this chart has none (--truth-spp 0)",
+                m.name(),
+                if m.walks() { "the walks' F is a Monte Carlo of the medium;" } else { "on this mesh (not convex) the light across the air is in F;" }
+            );
+            println!(
+                "model {}: against the truth alone (no exact-model reference)",
+                m.name()
+            );
+            other_scenes.push((s, None));
+            continue;
+        }
+        let r = Reference::compute(&s, ReferenceSettings::for_scene(&s));
+        println!("reference of model {}: {} samples", m.name(), r.samples);
+        other_scenes.push((s, Some(r)));
+    }
+    let mut runs = vec![crate::chart::ModelRun {
+        scene: &scene,
+        modes: Blend::ALL.to_vec(),
+        settings: None,
+        against: baselines,
+    }];
+    let truth_baseline = runs[0].against.truth;
+    for (s, r) in &other_scenes {
+        let model = s.material.model;
+        // The walks' own automatic setting (their walk count), and their shorter sweep.
+        let settings = if model.walks() {
+            let own = preprocess::choose(s, &SettingsOverrides::default(), args.target_error)
+                .with_context(|| format!("--models {}", model.name()))?;
+            Some(crate::chart::walk_sweep(&own.settings, args.quick))
+        } else {
+            None
+        };
+        runs.push(crate::chart::ModelRun {
+            scene: s,
+            modes: vec![Blend::for_model(model)],
+            settings,
+            against: crate::chart::Baselines {
+                reference: r.as_ref().map(|r| &r.radiance[..]),
+                truth: truth_baseline,
+            },
+        });
+    }
+    let mut points = crate::chart::measure(
+        &gpu,
+        &crate::chart::Sweep {
+            scene: &scene,
+            auto: &auto,
+            settings: &sweep,
+            target_error: args.target_error,
+            cache_dir: &cache_dir,
+            frames: args.frames,
+        },
+        &runs,
+    )?;
+    for p in &points {
+        println!(
+            "{:<12} {:<16} {:<10} {:>8.2} ms  {:>7.3} % RMS vs model  {:>7.3} % vs truth",
+            p.setting,
+            p.model,
+            p.mode,
+            p.gpu_ms,
+            100.0 * p.rel_rms,
+            100.0 * p.rel_rms_truth
+        );
+    }
+    check_validation(&gpu)?;
+    crate::chart::mark_pareto(&mut points);
+    output::write_atomic(&args.out.join("chart.csv"), |p| {
+        Ok(std::fs::write(p, crate::chart::csv(&points))?)
+    })?;
+    let name = scene
+        .resolved
+        .material
+        .preset
+        .clone()
+        .unwrap_or_else(|| "custom material".into());
+    let mesh = scene
+        .resolved
+        .mesh
+        .builtin
+        .clone()
+        .unwrap_or_else(|| "mesh".into());
+    crate::chart::plot(
+        &args.out,
+        &format!(
+            "{mesh} in {name}: error against frame time ({})",
+            gpu.info.name
+        ),
+        &points,
+    )?;
+    if let Some(a) = points
+        .iter()
+        .find(|p| p.auto && p.mode == "optimized" && p.model == own.name())
+    {
+        println!(
+            "automatic setting (optimized): {:.2} ms, {:.3} % RMS vs model, {:.3} % vs truth, {}",
+            a.gpu_ms,
+            100.0 * a.rel_rms,
+            100.0 * a.rel_rms_truth,
+            if a.pareto {
+                "on the Pareto front"
+            } else {
+                "not on the Pareto front"
+            }
+        );
+    }
+    println!(
+        "wrote chart.csv, chart.svg, chart.png{}{} to {}",
+        if reference.is_some() {
+            ", reference.exr"
+        } else {
+            ""
+        },
+        if truth.is_some() {
+            ", truth.exr, noise.exr"
+        } else {
+            ""
+        },
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The chart's volumetric truth: traced once per scene (and sample count) and cached; none
+/// where the scene's boundary is not index-matched, or with `--truth-spp 0`.
+pub(super) fn chart_truth(
+    scene: &Scene,
+    args: &ChartArgs,
+    cache_dir: &std::path::Path,
+) -> Result<Option<crate::truth::TruthImages>> {
+    use crate::truth::{self, TruthSettings};
+    if args.truth_spp == 0 {
+        println!("truth: left out (--truth-spp 0)");
+        return Ok(None);
+    }
+    let settings = TruthSettings {
+        spp: args.truth_spp,
+        ..Default::default()
+    };
+    if let Err(e) = truth::validate(scene, &settings) {
+        println!("truth: none for this scene, error against the exact model only: {e}");
+        return Ok(None);
+    }
+    let start = std::time::Instant::now();
+    let bar = ProgressBar::new(1000).with_style(
+        ProgressStyle::with_template("truth {bar:40} {percent:>3}% ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let t = truth::cached(scene, &settings, cache_dir, &|f| {
+        bar.set_position((f * 1000.0) as u64)
+    })?;
+    bar.finish_and_clear();
+    println!(
+        "truth: {} paths per pixel and channel, {} ({:.1} s)",
+        args.truth_spp,
+        if t.loaded {
+            "from the cache"
+        } else {
+            "traced and cached"
+        },
+        start.elapsed().as_secs_f64()
+    );
+    Ok(Some(t))
+}

@@ -1,0 +1,117 @@
+//! `compare`: relative error of one image against another, with a reference's noise removed.
+
+use super::*;
+
+pub(super) fn compare(args: &CompareArgs) -> Result<()> {
+    use crate::metrics;
+    if !(args.full_scale.is_finite() && args.full_scale > 0.0) {
+        bail!(
+            "--full-scale {} must be a finite positive relative error (0.1 is 10 %)",
+            args.full_scale
+        );
+    }
+    let (w, h, a) = output::read_exr(&args.render)?;
+    let (w2, h2, b) = output::read_exr(&args.reference)?;
+    finite_image(&args.render, &a)?;
+    finite_image(&args.reference, &b)?;
+    if (w, h) != (w2, h2) {
+        bail!("the images differ in size: {w}x{h} vs {w2}x{h2}");
+    }
+    let noise = match &args.noise {
+        None => None,
+        Some(p) => {
+            let (w3, h3, n) = output::read_exr(p)?;
+            if (w3, h3) != (w, h) {
+                bail!(
+                    "the noise image {} is {w3}x{h3}, the images are {w}x{h}",
+                    p.display()
+                );
+            }
+            Some(n)
+        }
+    };
+    let (report, per_pixel) = metrics::compare(&a, &b, None);
+    if report.pixels == 0 {
+        bail!("no pixel is covered in both images");
+    }
+    // A relative error against a black reference channel is undefined (it once printed
+    // 1e152 %).
+    for (c, name) in ["red", "green", "blue"].iter().enumerate() {
+        let sum: f64 = b
+            .chunks_exact(4)
+            .zip(a.chunks_exact(4))
+            .filter(|(r, x)| r[3] > 0.0 && x[3] > 0.0)
+            .map(|(r, _)| r[c] as f64)
+            .sum();
+        if sum <= 0.0 {
+            bail!(
+                "the reference {} is black in {name} wherever both images are covered: no relative error can be measured against it",
+                args.reference.display()
+            );
+        }
+    }
+    output::create_dir(&args.out)?;
+    let grey: Vec<f32> = per_pixel
+        .iter()
+        .flat_map(|&e| {
+            if e.is_nan() {
+                [0.0, 0.0, 0.0, 0.0]
+            } else {
+                [e, e, e, 1.0]
+            }
+        })
+        .collect();
+    output::write_exr(&args.out.join("error.exr"), w, h, &grey)?;
+    output::write_png(
+        &args.out.join("error.png"),
+        w,
+        h,
+        &metrics::false_colour(&per_pixel, args.full_scale),
+    )?;
+    let binned: Vec<metrics::BinnedError> = [1, 2, 4]
+        .iter()
+        .map(|&k| metrics::compare_binned(&a, &b, noise.as_deref(), w, h, k))
+        .collect();
+    let mut json = serde_json::to_value(&report)?;
+    json["binned"] = serde_json::to_value(&binned)?;
+    output::write_atomic(&args.out.join("error.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&json)?)?)
+    })?;
+    println!("{} pixels compared", report.pixels);
+    for (name, c) in ["red", "green", "blue"].iter().zip(&report.channels) {
+        println!(
+            "{name:>5}: relative RMS {:.3} %, 99th percentile {:.3} %, max {:.3} %",
+            100.0 * c.rel_rms,
+            100.0 * c.p99,
+            100.0 * c.max
+        );
+    }
+    let pct = |v: [f64; 3]| {
+        format!(
+            "{:.2} / {:.2} / {:.2} %",
+            100.0 * v[0],
+            100.0 * v[1],
+            100.0 * v[2]
+        )
+    };
+    for e in &binned {
+        if noise.is_some() {
+            println!(
+                "{0}x{0} bins ({1}): relative RMS {2} with the reference's noise ({3}) removed; measured {4}",
+                e.bin,
+                e.bins,
+                pct(e.rel_rms),
+                pct(e.noise),
+                pct(e.measured)
+            );
+        } else {
+            println!(
+                "{0}x{0} bins ({1}): relative RMS {2}",
+                e.bin,
+                e.bins,
+                pct(e.rel_rms)
+            );
+        }
+    }
+    Ok(())
+}

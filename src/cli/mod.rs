@@ -1,0 +1,651 @@
+//! The `translucent` command line.
+
+mod bench;
+mod borders;
+mod chart;
+mod compare;
+mod precompute;
+mod prt;
+mod reference;
+mod render;
+mod tools;
+mod truth;
+mod view;
+
+use crate::gpu::{list_devices, Gpu, GpuOptions};
+use crate::graph::timing::TimingReport;
+use crate::output;
+use crate::passes::compute::GlobalLayout;
+use crate::preprocess::operators::Blend;
+use crate::preprocess::{self, cache, settings::SettingsOverrides, CacheOutcome};
+use crate::renderer::{Options, Renderer};
+use crate::scene::{Overrides, Scene};
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Mutex;
+
+/// Interactive rendering of translucent objects (Lensch et al. 2002) on Vulkan.
+#[derive(Debug, Parser)]
+#[command(name = "translucent", version, about)]
+pub struct Cli {
+    /// What to do; without a command, renders the default scene.
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    /// Enable the Khronos validation layer; any message makes the run fail.
+    #[arg(long, global = true)]
+    pub validate: bool,
+    /// Vulkan device: index from `translucent devices` or part of its name.
+    #[arg(long, global = true, env = "TRANSLUCENT_DEVICE")]
+    pub device: Option<String>,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Render a scene to render.png, render.exr, timings.json and trace.json.
+    Render(RenderArgs),
+    /// Run the preprocessing (atlas, global response, kernels, blending) and cache it.
+    Precompute(PrecomputeArgs),
+    /// Time every pass over many frames with a moving light, next to its bandwidth bound.
+    Bench(BenchArgs),
+    /// Brute-force reference: B = integral of E R_d over the whole surface (no atlas, no F).
+    Reference(ReferenceArgs),
+    /// Volumetric truth: a Monte Carlo path tracer of the medium inside the mesh (index-matched
+    /// boundary); writes truth.exr, noise.exr (per-pixel standard deviation) and truth.json.
+    Truth(TruthArgs),
+    /// Error of a render against a reference: figures, error image (EXR) and false colour (PNG).
+    Compare(CompareArgs),
+    /// Speed against accuracy: sweep the method's knobs, time each point, compare each with the
+    /// reference; writes chart.csv, chart.svg, chart.png.
+    Chart(ChartArgs),
+    /// Error near chart borders: the method's B texel by texel (CPU, no rasterisation) against
+    /// the reference, by distance to the nearest chart border, for every blending mode.
+    Borders(BordersArgs),
+    /// Tabulate the half-space profile by Monte Carlo (every albedo of the table; writes the
+    /// file the tabulated model ships with, assets/profiles/halfspace.txt).
+    Tabulate(TabulateArgs),
+    /// Write the shipped environment map: a clear sky with a sun disc over a dark ground
+    /// (assets/environments/sky.exr; see `src/environment/sky.rs`).
+    Sky(SkyArgs),
+    /// Environment lighting's order against error and cost: for each spherical-harmonic order,
+    /// the illumination map's irradiance per texel against ray-traced irradiance, the
+    /// transfer's time and memory, the illumination pass's time; writes prt.csv, prt.json,
+    /// prt.png.
+    Prt(PrtArgs),
+    /// List the Vulkan devices and whether each can run the renderer.
+    Devices,
+    /// Open a window: orbit, zoom and pan with the mouse, edit the material, the settings and
+    /// the lights in the panel, save screenshots and the scene; `--script` drives it without
+    /// input.
+    View(ViewArgs),
+}
+
+/// Arguments of `tabulate`.
+#[derive(Debug, Args)]
+pub struct TabulateArgs {
+    /// Paths per albedo.
+    #[arg(long, default_value_t = 4_000_000)]
+    pub paths: u64,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The table file to write.
+    #[arg(long, default_value = "assets/profiles/halfspace.txt")]
+    pub out: PathBuf,
+}
+
+/// Arguments of `sky`.
+#[derive(Debug, Args)]
+pub struct SkyArgs {
+    /// Width in pixels (the height is half).
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// The OpenEXR file to write.
+    #[arg(long, default_value = "assets/environments/sky.exr")]
+    pub out: PathBuf,
+    /// The sun's irradiance at normal incidence over the sky's on level ground (0: no sun).
+    #[arg(long, default_value_t = crate::environment::sky::SUN_TO_SKY)]
+    pub sun_to_sky: f64,
+}
+
+/// Arguments of `prt`.
+#[derive(Debug, Args, Default)]
+pub struct PrtArgs {
+    /// The scene (with an environment light) and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Orders to measure.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6")]
+    pub orders: Vec<u32>,
+    /// Rays per texel of the ray-traced reference.
+    #[arg(long, default_value_t = 4096)]
+    pub reference_rays: u32,
+    /// Compare every this many texels (surely covered ones).
+    #[arg(long, default_value_t = 4)]
+    pub stride: usize,
+    /// Timed frames per order (the illumination pass's median).
+    #[arg(long, default_value_t = 30)]
+    pub frames: usize,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
+/// Arguments of `borders`.
+#[derive(Debug, Args, Default)]
+pub struct BordersArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder for borders.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
+/// Arguments of `view`.
+#[derive(Debug, Args, Default)]
+pub struct ViewArgs {
+    /// The scene and what replaces parts of it (the window starts at the scene's image size).
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Folder for screenshots (key `p`).
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Starting blending mode (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
+    /// A script of viewer actions, as a file or inline text, e.g.
+    /// "frames 3; light 40 0; screenshot lit; quit" (see `src/viewer/script.rs`).
+    #[arg(long)]
+    pub script: Option<String>,
+    /// Present without waiting for vertical blank (mailbox or immediate where offered).
+    #[arg(long)]
+    pub no_vsync: bool,
+    /// More environment maps (OpenEXR or Radiance HDR) to switch between with key `e`, for a
+    /// scene with an environment light.
+    #[arg(long, value_delimiter = ',')]
+    pub environment: Vec<PathBuf>,
+    /// Where an edit of the material's coefficients, index or model re-weights the operators
+    /// (the settings, and so the atlas and the nodes, stay): on the device (its compute
+    /// pass), on the CPU, or `off`: the whole preprocessing for every edit.
+    #[arg(long, value_enum, default_value = "device")]
+    pub reweigh: crate::viewer::Reweigh,
+    /// Milliseconds a material or settings request must stay unchanged before it is
+    /// prepared (the preview shows every edit at once): a slider drag is prepared where it
+    /// stops, not at every value it passes.
+    #[arg(long, default_value_t = 200)]
+    pub settle_ms: u64,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
+/// Arguments of `reference`.
+#[derive(Debug, Args)]
+pub struct ReferenceArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Sample spacing in mm (default: half the smallest z_r).
+    #[arg(long)]
+    pub spacing_mm: Option<f64>,
+    /// Opening angle of the hierarchical sum (default 0.25).
+    #[arg(long)]
+    pub theta: Option<f64>,
+    /// Also compute with half the spacing and theta, and report how much the answer moves.
+    #[arg(long)]
+    pub refine: bool,
+}
+
+/// Arguments of `truth`.
+#[derive(Debug, Args)]
+pub struct TruthArgs {
+    /// The scene and what replaces parts of it (the material needs eta = 1).
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Paths per pixel and channel, both halves together.
+    #[arg(long, default_value_t = 64)]
+    pub spp: u32,
+    /// Trace for this many seconds instead of a number of paths.
+    #[arg(long, conflicts_with = "spp")]
+    pub time: Option<f64>,
+    /// Seed of the random streams (the image is a function of the seed and the samples).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Henyey-Greenstein mean cosine (sigma_s = sigma_s' / (1 - g)); 0 is the isotropic phase
+    /// on the reduced coefficients that the dipole assumes.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub g: f64,
+    /// Count scattering orders from this one on (2: everything but single scattering).
+    #[arg(long, default_value_t = 1)]
+    pub min_order: u32,
+    /// Count scattering orders up to this one (1: single scattering alone).
+    #[arg(long)]
+    pub max_order: Option<u32>,
+}
+
+/// Arguments of `chart`.
+#[derive(Debug, Args)]
+pub struct ChartArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out/chart")]
+    pub out: PathBuf,
+    /// Timed frames per point, spread over three interleaved rounds from 6 frames on (each
+    /// round after one warm-up frame).
+    #[arg(long, default_value_t = 6)]
+    pub frames: usize,
+    /// A few settings only (for CI).
+    #[arg(long)]
+    pub quick: bool,
+    /// Target relative error for the automatic setting.
+    #[arg(long, default_value_t = 0.02)]
+    pub target_error: f64,
+    /// Cache folder for the preprocessing and the truth.
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
+    /// Paths per pixel and channel of the volumetric truth (traced once per scene and cached;
+    /// scenes with eta = 1 only); 0 leaves the truth out.
+    #[arg(long, default_value_t = 128)]
+    pub truth_spp: u32,
+    /// Models to chart besides the scene's, each in its default blending (optimized; simple
+    /// for `volume`, against the truth alone), e.g. "dipole,halfspace"; by default every other
+    /// model that applies (at eta = 1: the dipole, both half-space models and, on a closed
+    /// mesh, the walks; elsewhere the dipole only).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub models: Option<Vec<crate::physics::Model>>,
+}
+
+/// Arguments of `compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// The render (EXR, alpha = coverage).
+    pub render: PathBuf,
+    /// The reference (EXR).
+    pub reference: PathBuf,
+    /// The reference's per-pixel standard deviation (`truth`'s noise.exr): removed from the
+    /// error in quadrature.
+    #[arg(long)]
+    pub noise: Option<PathBuf>,
+    /// Output folder for error.exr, error.png and error.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Relative error shown as full red in error.png.
+    #[arg(long, default_value_t = 0.1)]
+    pub full_scale: f32,
+}
+
+/// Arguments of `bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Frames to time after the warm-up.
+    #[arg(long, default_value_t = 30)]
+    pub frames: usize,
+    /// Warm-up frames (shader compilation, caches), not timed.
+    #[arg(long, default_value_t = 3)]
+    pub warmup: usize,
+    /// Output folder for bench.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Blending mode (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
+    /// How the global pass reads its matrix: texel buffers, storage buffers, or whichever of
+    /// them (and of one lane or the derived lanes per row) runs fastest here, measured.
+    #[arg(long, value_enum, default_value_t = GlobalLayout::Auto)]
+    pub global_layout: GlobalLayout,
+    /// Lanes that sum one row of the global pass: a power of two up to the device's subgroup
+    /// size (default: derived from the subgroup size and the rows' mean length, and printed).
+    #[arg(long)]
+    pub global_lanes: Option<u32>,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
+/// The scene to use and the command-line values that replace parts of it.
+#[derive(Debug, Args, Clone, Default)]
+pub struct SceneArgs {
+    /// Scene file (TOML); the default scene (the bunny in skim milk) without one.
+    pub scene: Option<PathBuf>,
+    /// OBJ mesh replacing the scene's.
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Material preset replacing the scene's (e.g. skimmilk, marble, ketchup).
+    #[arg(long)]
+    pub material: Option<String>,
+    /// Image width in pixels.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Relative index of refraction replacing the material's (1 for `truth`).
+    #[arg(long)]
+    pub eta: Option<f64>,
+    /// Radial profile replacing the material's: dipole, or tabulated (eta = 1 only).
+    #[arg(long, value_enum)]
+    pub model: Option<crate::physics::Model>,
+}
+
+impl SceneArgs {
+    /// The scene file (or the default scene) with the command-line replacements applied.
+    fn load(&self) -> Result<Scene> {
+        let scene = Scene::load(self.scene.as_deref(), &self.overrides())?;
+        for w in &scene.warnings {
+            eprintln!("warning: {w}");
+        }
+        for n in &scene.notes {
+            eprintln!("note: {n}");
+        }
+        Ok(scene)
+    }
+
+    fn overrides(&self) -> Overrides {
+        Overrides {
+            mesh: self.mesh.clone(),
+            material: self.material.clone(),
+            width: self.width,
+            height: self.height,
+            eta: self.eta,
+            model: self.model,
+        }
+    }
+}
+
+/// Preprocessing controls; every value left out is derived from the scene and printed.
+#[derive(Debug, Args, Clone, Default)]
+pub struct PreprocessArgs {
+    /// Atlas texel edge in mm.
+    #[arg(long)]
+    pub texel_mm: Option<f64>,
+    /// Local kernel edge in texels (odd).
+    #[arg(long)]
+    pub kernel: Option<u32>,
+    /// Spacing of the global response's nodes in mm.
+    #[arg(long)]
+    pub node_spacing_mm: Option<f64>,
+    /// Largest fraction of each row of F that pruning may drop (e.g. 0.005).
+    #[arg(long)]
+    pub prune: Option<f64>,
+    /// Random walks per node and channel filling F (model volume).
+    #[arg(long)]
+    pub walk_paths: Option<u32>,
+    /// Target relative error of the render.
+    #[arg(long, default_value_t = 0.02)]
+    pub target_error: f64,
+    /// Cache folder (default: $XDG_CACHE_HOME/translucent or ~/.cache/translucent).
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
+    /// Neither read nor write the cache.
+    #[arg(long)]
+    pub no_cache: bool,
+}
+
+impl PreprocessArgs {
+    fn overrides(&self) -> SettingsOverrides {
+        SettingsOverrides {
+            texel_mm: self.texel_mm,
+            kernel_size: self.kernel,
+            node_spacing_mm: self.node_spacing_mm,
+            prune_tolerance: self.prune,
+            walk_paths: self.walk_paths,
+        }
+    }
+
+    fn cache_dir(&self) -> Option<PathBuf> {
+        (!self.no_cache).then(|| self.cache.clone().unwrap_or_else(cache::default_dir))
+    }
+}
+
+/// Arguments of `precompute`.
+#[derive(Debug, Args, Default)]
+pub struct PrecomputeArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+    /// Also re-weight the operators for the material this many times on the device (the
+    /// viewer's material edit, `passes::reweigh`) and once on the CPU, and print the times.
+    #[arg(long, value_name = "TIMES")]
+    pub reweigh: Option<usize>,
+}
+
+/// Arguments of `render` (no `Default`: the bare command takes clap's defaults, see
+/// `bare_render_args`).
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Frames to render and time (the images are the last frame's).
+    #[arg(long, default_value_t = 10)]
+    pub frames: usize,
+    /// Blending of local and global responses: local, global, simple or optimized (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
+    /// Move the lights a full turn around the object over the frames (no preprocessing).
+    #[arg(long)]
+    pub orbit_light: bool,
+    /// Write every frame as frame_NNNN.png.
+    #[arg(long)]
+    pub save_frames: bool,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
+/// Most frames a command renders or warms up with: a hundred thousand frames are hours on a
+/// CPU device; a count beyond that is a typo, refused before anything runs or is allocated.
+pub const MAX_FRAMES: usize = 100_000;
+
+/// Refuses a frame count outside `min..=MAX_FRAMES`, naming the flag.
+fn frame_count(flag: &str, n: usize, min: usize) -> Result<()> {
+    if n < min || n > MAX_FRAMES {
+        bail!("{flag} {n} must lie between {min} and {MAX_FRAMES}");
+    }
+    Ok(())
+}
+
+/// Refuses an image with NaN or infinite values (a comparison would silently skip them).
+fn finite_image(path: &std::path::Path, rgba: &[f32]) -> Result<()> {
+    let bad = rgba.iter().filter(|v| !v.is_finite()).count();
+    if bad > 0 {
+        bail!(
+            "{} holds {bad} NaN or infinite value(s) of {}: no error can be measured against them",
+            path.display(),
+            rgba.len()
+        );
+    }
+    Ok(())
+}
+
+/// Progress bars, one per preprocessing stage (hidden when stderr is not a terminal).
+struct Bars {
+    multi: MultiProgress,
+    bars: Mutex<Vec<(String, ProgressBar)>>,
+}
+
+impl Bars {
+    fn new() -> Bars {
+        Bars {
+            multi: MultiProgress::new(),
+            bars: Mutex::new(Vec::new()),
+        }
+    }
+
+    fn update(&self, stage: &str, done: u64, total: u64) {
+        let Ok(mut bars) = self.bars.lock() else {
+            return;
+        };
+        let bar = match bars.iter().find(|(s, _)| s == stage) {
+            Some((_, b)) => b.clone(),
+            None => {
+                let b = self.multi.add(ProgressBar::new(total.max(1)));
+                let style =
+                    ProgressStyle::with_template("{prefix:>10} [{bar:40}] {pos}/{len} {elapsed}")
+                        .unwrap_or_else(|_| ProgressStyle::default_bar())
+                        .progress_chars("=> ");
+                b.set_style(style);
+                b.set_prefix(stage.to_string());
+                bars.push((stage.to_string(), b.clone()));
+                b
+            }
+        };
+        bar.set_length(total.max(1));
+        bar.set_position(done);
+        if done >= total {
+            bar.finish();
+        }
+    }
+}
+
+/// Opens the device, chooses the settings, checks the estimate against the device before any
+/// work, and loads or builds the preprocessing (printing the reasons when `verbose`).
+fn open_and_prepare(
+    cli: &Cli,
+    scene: &mut Scene,
+    pre: &PreprocessArgs,
+    verbose: bool,
+) -> Result<(std::sync::Arc<Gpu>, preprocess::Preprocessed)> {
+    let gpu = Gpu::new(&GpuOptions {
+        validate: cli.validate,
+        device: cli.device.clone(),
+        ..Default::default()
+    })?;
+    let p = prepare_verbose(&gpu, scene, pre, verbose)?;
+    Ok((gpu, p))
+}
+
+/// The default model applied to `scene` (`preprocess::model::apply_default`), then its
+/// settings chosen and printed (when `verbose`), and its preprocessing made or loaded.
+fn prepare_verbose(
+    gpu: &Gpu,
+    scene: &mut Scene,
+    pre: &PreprocessArgs,
+    verbose: bool,
+) -> Result<preprocess::Preprocessed> {
+    preprocess::model::apply_default(scene, pre.target_error)?;
+    let scene = &*scene;
+    let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
+    let estimate = preprocess::estimate(&scene.mesh, &scene.material, &choice.settings);
+    if verbose {
+        for r in &choice.reasons {
+            println!("# {r}");
+        }
+        println!("# {}", estimate.describe());
+        if scene.environment.is_some() {
+            println!(
+                "# environment transfer: about {:.1} s ({} texels x {} rays; cached with the preprocessing)",
+                crate::environment::prt::estimate_seconds(estimate.texels, scene.prt),
+                estimate.texels,
+                scene.prt.rays
+            );
+        }
+    }
+    estimate.check(&gpu.info)?;
+    let bars = Bars::new();
+    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
+    let (p, outcome) = preprocess::prepare(scene, &choice, pre.cache_dir().as_deref(), &progress)?;
+    if let (true, CacheOutcome::Hit(path)) = (verbose, &outcome) {
+        println!("# preprocessing loaded from {}", path.display());
+    }
+    Ok(p)
+}
+
+/// The options of `render`'s renderer for blending `mode`:
+/// the deterministic variant (texel buffers, derived lanes), not the measured one (the lanes
+/// change the order of the global sums, and the same command must write the same image every
+/// time), reading back only on request.
+fn image_options(mode: Blend) -> Options {
+    Options {
+        mode,
+        readback_on_request: true,
+        ..Default::default()
+    }
+}
+
+fn check_validation(gpu: &Gpu) -> Result<()> {
+    Ok(gpu.validation.check()?)
+}
+
+/// The bare command's arguments: `render` with clap's defaults, so that both print the same
+/// settings and give the same image (a struct literal would take Rust's `Default` instead, a
+/// pruning target of 0 among them).
+fn bare_render_args() -> Result<RenderArgs> {
+    use clap::{Args as _, FromArgMatches as _};
+    let matches =
+        RenderArgs::augment_args(clap::Command::new("render")).try_get_matches_from(["render"])?;
+    Ok(RenderArgs::from_arg_matches(&matches)?)
+}
+
+/// Runs the command line; returns the process exit code.
+pub fn main() -> ExitCode {
+    // Help and version exit 0; every refused argument exits 1 like any other bad input (clap's
+    // own exit code would be 2).
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+    let result = match &cli.command {
+        None => bare_render_args().and_then(|args| render::render(&cli, &args)),
+        Some(Command::Render(args)) => render::render(&cli, args),
+        Some(Command::Precompute(args)) => precompute::precompute(&cli, args),
+        Some(Command::Bench(args)) => bench::bench(&cli, args),
+        Some(Command::Reference(args)) => reference::reference(args),
+        Some(Command::Truth(args)) => truth::truth(args),
+        Some(Command::Compare(args)) => compare::compare(args),
+        Some(Command::Chart(args)) => chart::chart(&cli, args),
+        Some(Command::Borders(args)) => borders::borders(args),
+        Some(Command::Tabulate(args)) => tools::tabulate(args),
+        Some(Command::Sky(args)) => tools::sky(args),
+        Some(Command::Prt(args)) => prt::prt(&cli, args),
+        Some(Command::Devices) => tools::devices(),
+        Some(Command::View(args)) => view::view(&cli, args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,85 @@
+//! `sky`, `tabulate` and `devices`: the shipped sky, the half-space table, the device list.
+
+use super::*;
+
+pub(super) fn sky(args: &SkyArgs) -> Result<()> {
+    crate::output::check_replaceable(&args.out)?;
+    if !(8..=16384).contains(&args.width) || !args.width.is_multiple_of(2) {
+        anyhow::bail!("--width = {} must be even, between 8 and 16384", args.width);
+    }
+    if !(args.sun_to_sky.is_finite() && (0.0..=1e4).contains(&args.sun_to_sky)) {
+        anyhow::bail!(
+            "--sun-to-sky = {} must lie between 0 and 10000",
+            args.sun_to_sky
+        );
+    }
+    crate::environment::sky::write(&args.out, args.width, args.sun_to_sky)?;
+    eprintln!("wrote {}", args.out.display());
+    Ok(())
+}
+
+pub(super) fn tabulate(args: &TabulateArgs) -> Result<()> {
+    use crate::physics::profile::{table_albedos, table_radii, HalfSpaceTable};
+    if args.paths == 0 || args.paths > 1 << 40 {
+        anyhow::bail!("--paths must be between 1 and 2^40, not {}", args.paths);
+    }
+    // Refused before hours of paths, not after.
+    crate::output::check_replaceable(&args.out)?;
+    let radii = table_radii();
+    let albedos = table_albedos();
+    let clock = std::time::Instant::now();
+    let mut all = Vec::new();
+    let mut multiple = Vec::new();
+    let mut lobes = Vec::new();
+    for (i, &a) in albedos.iter().enumerate() {
+        let e = crate::truth::halfspace::simulate(a, &radii, args.paths, args.seed);
+        eprintln!(
+            "albedo {a:.6} ({}/{}): reflectance {:.5}, orders >= 2 {:.5} ({:.0} s)",
+            i + 1,
+            albedos.len(),
+            e.all.total,
+            e.multiple.total,
+            clock.elapsed().as_secs_f64()
+        );
+        all.push((e.all.total, e.all.cumulative));
+        multiple.push((e.multiple.total, e.multiple.cumulative));
+        lobes.push((e.all.lobe, e.multiple.lobe));
+    }
+    let table = HalfSpaceTable {
+        albedos,
+        radii,
+        all,
+        multiple,
+        lobes,
+        paths: args.paths,
+    };
+    crate::output::write_atomic(&args.out, |tmp| {
+        std::fs::write(tmp, table.to_text()).map_err(anyhow::Error::from)
+    })?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+pub(super) fn devices() -> Result<()> {
+    let list = list_devices()?;
+    if list.is_empty() {
+        bail!("no Vulkan device found; on Debian install mesa-vulkan-drivers for the lavapipe CPU device");
+    }
+    for d in list {
+        let status = match &d.unsupported {
+            None => "usable".to_string(),
+            Some(why) => format!("unusable: lacks {why}"),
+        };
+        println!(
+            "[{}] {} ({}, Vulkan {}, driver {}, {:.0} MiB device-local) {}",
+            d.index,
+            d.name,
+            d.device_type,
+            d.api_version,
+            d.driver,
+            d.device_local_bytes as f64 / (1 << 20) as f64,
+            status
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,96 @@
+//! `truth`: the volumetric path tracer's image of a scene.
+
+use super::*;
+
+pub(super) fn truth(args: &TruthArgs) -> Result<()> {
+    use crate::truth::{self, TruthSettings};
+    let scene = args.input.load()?;
+    let settings = TruthSettings {
+        spp: if args.time.is_some() {
+            u32::MAX
+        } else {
+            args.spp
+        },
+        time_s: args.time,
+        seed: args.seed,
+        g: args.g,
+        min_order: args.min_order,
+        max_order: args.max_order.unwrap_or(u32::MAX),
+    };
+    // Refuse before creating anything.
+    truth::validate(&scene, &settings)?;
+    output::create_dir(&args.out)?;
+    let medium = truth::Medium::new(&scene.material, args.g);
+    println!(
+        "truth: {}x{}, sigma_t {:.4} / {:.4} / {:.4} 1/mm, albedo {:.5} / {:.5} / {:.5}, g {}, {}",
+        scene.width,
+        scene.height,
+        medium.sigma_t[0],
+        medium.sigma_t[1],
+        medium.sigma_t[2],
+        medium.albedo[0],
+        medium.albedo[1],
+        medium.albedo[2],
+        args.g,
+        match args.time {
+            Some(t) => format!("{t} s"),
+            None => format!("{} paths per pixel and channel", args.spp),
+        }
+    );
+    let bar = ProgressBar::new(1000).with_style(
+        ProgressStyle::with_template("{bar:40} {percent:>3}% elapsed {elapsed} ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let t = truth::compute(&scene, &settings, &|f| {
+        bar.set_position((f * 1000.0) as u64)
+    })?;
+    bar.finish_and_clear();
+    let (mean, stderr) = t.object_mean();
+    let noise: Vec<_> = [1, 2, 4].iter().map(|&k| t.noise_at(k)).collect();
+    let out = &args.out;
+    output::write_radiance(out, "truth", t.width, t.height, &t.radiance, scene.exposure)?;
+    output::write_exr(&out.join("noise.exr"), t.width, t.height, &t.noise)?;
+    let info = serde_json::json!({
+        "spp": t.spp, "seconds": t.seconds, "events": t.events, "paths": t.paths,
+        "events_per_second": t.events_per_second(), "truncated_paths": t.truncated_paths,
+        "seed": args.seed, "g": args.g, "min_order": args.min_order, "max_order": args.max_order,
+        "width": t.width, "height": t.height, "pixels": t.pixels,
+        "sigma_t": medium.sigma_t, "albedo": medium.albedo,
+        "noise": noise, "object_mean": mean, "object_mean_stderr": stderr,
+    });
+    output::write_atomic(&out.join("truth.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
+    })?;
+    println!(
+        "{} paths per pixel and channel over {} pixels in {:.1} s: {:.3e} collisions ({:.2} M/s), {} paths cut",
+        t.spp,
+        t.pixels,
+        t.seconds,
+        t.events as f64,
+        t.events_per_second() / 1e6,
+        t.truncated_paths
+    );
+    for n in &noise {
+        println!(
+            "noise after {0}x{0} binning: {1:.2} / {2:.2} / {3:.2} % RMS",
+            n.bin,
+            100.0 * n.rel_noise[0],
+            100.0 * n.rel_noise[1],
+            100.0 * n.rel_noise[2]
+        );
+    }
+    println!(
+        "object mean {:.5e} / {:.5e} / {:.5e} (standard error {:.2} / {:.2} / {:.2} %)",
+        mean[0],
+        mean[1],
+        mean[2],
+        100.0 * stderr[0] / mean[0].max(1e-300),
+        100.0 * stderr[1] / mean[1].max(1e-300),
+        100.0 * stderr[2] / mean[2].max(1e-300)
+    );
+    println!(
+        "wrote truth.exr, noise.exr, truth.png, truth.json to {}",
+        out.display()
+    );
+    Ok(())
+}
