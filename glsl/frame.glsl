@@ -1,5 +1,6 @@
 // Per-frame data shared by every pass: camera, lights and their shadow transforms.
-// Mirrors `passes::frame::FrameUniforms` (std140); keep both in step.
+// Mirrored by `passes::frame::FrameUniforms` (std140), which a test checks against this block
+// member by member, as the shaders compile it.
 #ifndef FRAME_GLSL
 #define FRAME_GLSL
 

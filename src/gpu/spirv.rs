@@ -20,6 +20,7 @@ pub struct Interface {
 }
 
 // Opcodes, decorations, storage classes and dimensions used below (SPIR-V 1.x spec, 3.x).
+const OP_MEMBER_NAME: u32 = 6;
 const OP_TYPE_INT: u32 = 21;
 const OP_TYPE_FLOAT: u32 = 22;
 const OP_TYPE_VECTOR: u32 = 23;
@@ -74,6 +75,8 @@ struct Module {
     member_decorations: BTreeMap<(u32, u32, u32), u32>,
     /// (variable, pointer type, storage class).
     variables: Vec<(u32, u32, u32)>,
+    /// (struct, member) -> name.
+    member_names: BTreeMap<(u32, u32), String>,
 }
 
 impl Module {
@@ -151,6 +154,19 @@ impl Module {
                 OP_MEMBER_DECORATE => {
                     m.member_decorations
                         .insert((arg(0), arg(1), arg(2)), a.get(3).copied().unwrap_or(1));
+                }
+                OP_MEMBER_NAME => {
+                    let bytes: Vec<u8> = a
+                        .get(2..)
+                        .unwrap_or(&[])
+                        .iter()
+                        .flat_map(|w| w.to_le_bytes())
+                        .take_while(|&b| b != 0)
+                        .collect();
+                    m.member_names.insert(
+                        (arg(0), arg(1)),
+                        String::from_utf8_lossy(&bytes).into_owned(),
+                    );
                 }
                 _ => {}
             }
@@ -272,6 +288,74 @@ pub fn reflect(spv: &[u8]) -> Result<Interface, String> {
             .insert(binding, m.descriptor_type(pointee, class)?);
     }
     Ok(out)
+}
+
+/// One member of a block as a shader lays it out: name, byte offset, bytes, and the members of
+/// a struct it holds (of its elements, for an array of structs).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Member {
+    /// The member's name in the shader.
+    pub name: String,
+    /// Byte offset in its block or struct.
+    pub offset: u32,
+    /// Bytes (an array's: all its elements with their stride).
+    pub size: u32,
+    /// The members of the struct it is (or whose array it is); empty otherwise.
+    pub members: Vec<Member>,
+}
+
+/// The members of the uniform or storage block bound at `binding` of set 0 in `spv`, in order:
+/// what a Rust struct that mirrors the block is checked against, member by member.
+pub fn block_layout(spv: &[u8], binding: u32) -> Result<Vec<Member>, String> {
+    let m = Module::parse(spv)?;
+    for &(var, pointer, _) in &m.variables {
+        if m.decorations.get(&(var, DEC_BINDING)) != Some(&binding)
+            || m.decorations.get(&(var, DEC_DESCRIPTOR_SET)).unwrap_or(&0) != &0
+        {
+            continue;
+        }
+        let Type::Pointer(pointee) = m.ty(pointer)? else {
+            return Err(format!("variable %{var} is not a pointer"));
+        };
+        return m.members(*pointee);
+    }
+    Err(format!("no block is bound at binding {binding}"))
+}
+
+impl Module {
+    fn members(&self, id: u32) -> Result<Vec<Member>, String> {
+        let Type::Struct(types) = self.ty(id)? else {
+            return Err(format!("type %{id} is not a struct"));
+        };
+        types
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| {
+                let i = i as u32;
+                let stride = self
+                    .member_decorations
+                    .get(&(id, i, DEC_MATRIX_STRIDE))
+                    .copied();
+                let inner = match self.ty(t)? {
+                    Type::Struct(_) => self.members(t)?,
+                    Type::Array(e, _) if matches!(self.ty(*e)?, Type::Struct(_)) => {
+                        self.members(*e)?
+                    }
+                    _ => Vec::new(),
+                };
+                Ok(Member {
+                    name: self.member_names.get(&(id, i)).cloned().unwrap_or_default(),
+                    offset: self
+                        .member_decorations
+                        .get(&(id, i, DEC_OFFSET))
+                        .copied()
+                        .unwrap_or(0),
+                    size: self.size(t, stride)?,
+                    members: inner,
+                })
+            })
+            .collect()
+    }
 }
 
 /// The interface of a pipeline whose stages are `modules` (their bindings merged; a binding

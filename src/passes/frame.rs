@@ -220,15 +220,75 @@ impl FrameUniforms {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gpu::{shaders, spirv};
 
-    #[test]
-    fn uniform_layout_matches_std140() {
-        // 2 mat4 + 5 vec4 + 8 lights of (4 vec4 + uvec4) + 2 x 48 mat4 + 16 (exit lobe) + 16
-        // (incidence) + 3 x 16 (the half-space's H, flux and slope) + 36 vec4.
-        assert_eq!(std::mem::size_of::<GpuLight>(), 80);
+    /// (name, offset, bytes) of each field of `$t`, in declaration order.
+    macro_rules! fields {
+        ($t:ty { $($f:ident),* $(,)? }) => {{
+            let v = <$t as Zeroable>::zeroed();
+            vec![$((
+                stringify!($f),
+                std::mem::offset_of!($t, $f) as u32,
+                std::mem::size_of_val(&v.$f) as u32,
+            )),*]
+        }};
+    }
+
+    /// Checks a Rust mirror's fields against a block's members as a shader lays them out:
+    /// the same names in the same order, at the same offsets, of the same sizes.
+    fn same(what: &str, rust: &[(&str, u32, u32)], total: usize, shader: &[spirv::Member]) {
+        let shader_list: Vec<(&str, u32, u32)> = shader
+            .iter()
+            .map(|m| (m.name.as_str(), m.offset, m.size))
+            .collect();
         assert_eq!(
-            std::mem::size_of::<FrameUniforms>(),
-            2 * 64 + 5 * 16 + 8 * 80 + 2 * 48 * 64 + 16 * 16 + 16 * 16 + 3 * 16 * 16 + 36 * 16
+            rust,
+            shader_list.as_slice(),
+            "{what}: Rust vs glsl/frame.glsl"
         );
+        let end = shader.last().map_or(0, |m| m.offset + m.size) as usize;
+        assert_eq!(total, end, "{what}: Rust's size vs the shader's");
+    }
+
+    /// `FrameUniforms` and `GpuLight` against the `Frame` block and its `Light` as the shaders
+    /// compile them (reflected from SPIR-V), member by member: the array lengths
+    /// (`MAX_LIGHTS`, `MAX_SHADOW_LAYERS`, the samples) are in the members' sizes, so a
+    /// constant changed on one side alone fails here.
+    #[test]
+    fn uniforms_match_the_shaders_block_member_by_member() {
+        for (name, spv) in [
+            ("composite.frag", shaders::COMPOSITE_FRAG),
+            ("single.frag", shaders::SINGLE_FRAG),
+        ] {
+            let block = spirv::block_layout(spv, 0).unwrap();
+            let frame = fields!(FrameUniforms {
+                view_proj,
+                inverse_view_proj,
+                camera_pos,
+                material,
+                sigma_s,
+                sigma_t,
+                counts,
+                lights,
+                shadow_view_proj,
+                shadow_inverse,
+                exit_lobe,
+                incidence,
+                halfspace_h,
+                halfspace_flux,
+                halfspace_slope,
+                environment,
+            });
+            same(name, &frame, std::mem::size_of::<FrameUniforms>(), &block);
+            let lights = &block.iter().find(|m| m.name == "lights").unwrap().members;
+            let light = fields!(GpuLight {
+                position,
+                direction,
+                radiance,
+                params,
+                layers
+            });
+            same(name, &light, std::mem::size_of::<GpuLight>(), lights);
+        }
     }
 }
