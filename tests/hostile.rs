@@ -75,8 +75,8 @@ fn writers_never_replace_what_is_not_a_regular_file() {
 
 /// Values that made a meaningless result are refused by name: an error picture's full scale
 /// of no error, an object moved so far that f32 coordinates lose its detail (a bunny at 1e8 mm
-/// was cut into 436 000 slivers of its rounding), an empty viewer script (the window stayed
-/// open forever).
+/// was cut into 436 000 slivers of its rounding), coefficients beyond f32 or any material, an
+/// empty viewer script (the window stayed open forever).
 #[test]
 fn meaningless_settings_are_refused_by_name() {
     let dir = temp_dir("meaningless");
@@ -100,6 +100,21 @@ fn meaningless_settings_are_refused_by_name() {
             .arg(dir.join("far"))
             .arg(&scene);
         fails_with(c, "f32 coordinates lose the object's detail");
+    }
+    // Finite in the scene file's f64, not in the f32 the passes hold them in (or far beyond
+    // any material): refused by name.
+    for sigma in ["[1e39, 1.0, 1.0]", "[1.0, 1e-50, 1.0]", "[1.0, 1.0, 1e7]"] {
+        let scene = dir.join("sigma.toml");
+        std::fs::write(
+            &scene,
+            format!("[material]\nsigma_s_prime = {sigma}\nsigma_a = [0.01, 0.01, 0.01]\n"),
+        )
+        .unwrap();
+        let mut c = bin();
+        c.args(["render", "--no-cache", "--out"])
+            .arg(dir.join("sigma"))
+            .arg(&scene);
+        fails_with(c, "per mm lies outside 1e-9..1e6");
     }
     let mut c = bin();
     c.args(["view", "--script", ""]);

@@ -58,12 +58,41 @@ impl Model {
         }
     }
 
+    /// What the model is made of: each model states every property once, here; the
+    /// questions below read them.
+    pub const fn traits(self) -> ModelTraits {
+        let none = ModelTraits {
+            single_pass: false,
+            halfspace_orders: false,
+            crosses_air: false,
+            walks: false,
+            oblique_exit: false,
+        };
+        match self {
+            Model::Dipole | Model::Halfspace => none,
+            Model::HalfspaceSingle => ModelTraits {
+                single_pass: true,
+                halfspace_orders: true,
+                ..none
+            },
+            Model::HalfspaceAir => ModelTraits {
+                single_pass: true,
+                halfspace_orders: true,
+                crosses_air: true,
+                ..none
+            },
+            Model::Volume => ModelTraits {
+                single_pass: true,
+                walks: true,
+                oblique_exit: true,
+                ..none
+            },
+        }
+    }
+
     /// Whether single scattering is its own pass.
     pub fn has_single_pass(self) -> bool {
-        matches!(
-            self,
-            Model::HalfspaceSingle | Model::HalfspaceAir | Model::Volume
-        )
+        self.traits().single_pass
     }
 
     /// Whether F integrates the half-space profile of orders >= 2 with single scattering its
@@ -71,29 +100,28 @@ impl Model {
     /// profile's radiance takes the chord factor, and whose pass the default's rules may
     /// take out.
     pub fn profile_with_single_pass(self) -> bool {
-        matches!(self, Model::HalfspaceSingle | Model::HalfspaceAir)
+        self.traits().halfspace_orders
     }
 
     /// Whether F carries the light across the air between parts of the object
     /// (`preprocess::air`).
     pub fn crosses_air(self) -> bool {
-        self == Model::HalfspaceAir
+        self.traits().crosses_air
     }
 
     /// Whether the composite gives orders >= 2 the half-space's exit lobe of the incidence at
     /// which the lamps' light enters at each pixel (`physics::incidence::HFunction::
     /// multiple_lobe`), keeping of the walks' measured lobe what goes beyond the half-space's
     /// slope there: `volume`, whose walks enter along the lamps but measure one linear lobe
-    /// per node. Measured on the truth bunnies and the stability cases (README, "Models beyond
-    /// the dipole"); the half-space models keep the profile's lobe, which their reference
-    /// computes.
+    /// per node. Measured on the truth bunnies and the stability cases (docs/results); the
+    /// half-space models keep the profile's lobe, which their reference computes.
     pub fn oblique_exit(self) -> bool {
-        self == Model::Volume
+        self.traits().oblique_exit
     }
 
     /// Whether the global response comes from random walks in the mesh.
     pub fn walks(self) -> bool {
-        self == Model::Volume
+        self.traits().walks
     }
 
     /// Whether the profile's radiance is a half-space's gathered over the view ray's length
@@ -101,8 +129,23 @@ impl Model {
     /// with the single-scattering pass, which measures that length. `volume`'s walks measure
     /// their exit lobe in the object itself, which holds it already.
     pub fn gathers_over_chord(self) -> bool {
-        self.profile_with_single_pass()
+        self.traits().halfspace_orders
     }
+}
+
+/// The properties of a model ([`Model::traits`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ModelTraits {
+    /// Single scattering is its own pass (`entry`, `thickness`, `single`).
+    pub single_pass: bool,
+    /// F is the half-space profile of orders >= 2 (single scattering apart).
+    pub halfspace_orders: bool,
+    /// F carries the light across the air between parts of the object.
+    pub crosses_air: bool,
+    /// F comes from random walks inside the mesh.
+    pub walks: bool,
+    /// Orders >= 2 leave with the half-space's lobe of the lamps' incidence at each pixel.
+    pub oblique_exit: bool,
 }
 
 /// A homogeneous medium, per RGB channel.
@@ -149,6 +192,12 @@ pub const PRESET_TOTALS: &[(&str, [f64; 3])] = &[
     ("wholemilk", [0.908, 0.881, 0.759]),
 ];
 
+/// Smallest non-zero scattering or absorption coefficient, 1/mm (a mean free path of 1000 km).
+pub const MIN_COEFFICIENT: f64 = 1e-9;
+
+/// Largest scattering or absorption coefficient, 1/mm (a mean free path of 1 nm).
+pub const MAX_COEFFICIENT: f64 = 1e6;
+
 /// Why material parameters were refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MaterialError {
@@ -158,6 +207,20 @@ pub enum MaterialError {
     /// A coefficient is negative, NaN or infinite.
     #[error("{name}[{channel}] = {value} is not a finite non-negative number (1/mm)")]
     BadCoefficient {
+        /// Which coefficient.
+        name: &'static str,
+        /// 0, 1, 2 for R, G, B.
+        channel: usize,
+        /// The value given.
+        value: f64,
+    },
+    /// A coefficient beyond what any material has and the device's f32 holds with headroom.
+    #[error(
+        "{name}[{channel}] = {value:e} per mm lies outside {MIN_COEFFICIENT:e}..{MAX_COEFFICIENT:e} \
+         (or 0): mean free paths below 1 nm or above 1000 km describe no translucent material, \
+         and the passes hold the coefficients in f32"
+    )]
+    OutOfRange {
         /// Which coefficient.
         name: &'static str,
         /// 0, 1, 2 for R, G, B.
@@ -215,6 +278,13 @@ impl Material {
             for (channel, &value) in values.iter().enumerate() {
                 if !value.is_finite() || value < 0.0 {
                     return Err(MaterialError::BadCoefficient {
+                        name,
+                        channel,
+                        value,
+                    });
+                }
+                if value != 0.0 && !(MIN_COEFFICIENT..=MAX_COEFFICIENT).contains(&value) {
+                    return Err(MaterialError::OutOfRange {
                         name,
                         channel,
                         value,
