@@ -1,4 +1,4 @@
-//! Hostile and careless input, round two (see docs/robustness.md): values that once rendered
+//! Careless input (see docs/robustness.md): values that once rendered
 //! NaN, were accepted silently or named the wrong problem are refused by name; images that
 //! would be black for a reason the user can fix come with a warning, printed and recorded in
 //! timings.json; outputs never overwrite inputs, and the saved scene re-runs from anywhere.
@@ -371,8 +371,15 @@ fn outputs_land_as_a_set() {
     let out = dir.join("out");
     std::fs::create_dir_all(out.join("scene.toml")).unwrap();
     std::fs::write(out.join("render.png"), b"old").unwrap();
-    let stale = out.join(".render.exr.4194999.tmp");
+    // A temporary a killed run left an hour ago (no pid is above 2^22 on Linux).
+    let stale = out.join(".render.exr.4194999.translucent.tmp");
     std::fs::write(&stale, b"left by a killed run").unwrap();
+    std::fs::File::options()
+        .write(true)
+        .open(&stale)
+        .unwrap()
+        .set_modified(std::time::SystemTime::now() - std::time::Duration::from_secs(7200))
+        .unwrap();
     fails_with(render_cmd(&out, 16), "exists and is a folder");
     assert_eq!(std::fs::read(out.join("render.png")).unwrap(), b"old");
     assert!(!out.join("render.exr").exists() && !out.join("timings.json").exists());

@@ -20,10 +20,9 @@ const WALK_COLLISIONS: std::ops::RangeInclusive<f64> = 1.0..=3.0;
 /// The estimate bounds what the upload needs (kernel texel-buffer elements and the device
 /// bytes that do not depend on pruning, within 0.7x to 1.4x), the node count (0.5x to 2x) and
 /// the work (kernel taps as the kernel elements, the walks' collisions from above; entries of F
-/// and the fit follow from the nodes). It once counted k*k + 1 kernel elements per texel where the upload
-/// packs two taps to an element (scenes that fit were refused); it made every rim vertex of a
-/// 2000-gon coin and a 1000-segment cylinder a node, on node supports as long as the object;
-/// it knew nothing of the triangle count.
+/// and the fit follow from the nodes). The meshes are those an estimate can get wrong: long
+/// polygons (a 2000-gon coin, a 1000-segment cylinder, whose rim vertices must not all become
+/// nodes), 235 000 triangles, a kernel buffer that packs two taps to an element.
 #[test]
 fn estimate_bounds_the_requirements() {
     let dir = common::temp_dir("estimate");

@@ -1,5 +1,6 @@
-//! Hostile and careless input, round three (see docs/robustness.md): writers never replace what
-//! is not a regular file, and what they were pointed at is left as it was.
+//! Hostile input (see docs/robustness.md): writers never replace what is not a regular file;
+//! settings that make a result meaningless, or a preprocessing no device takes, are refused by
+//! name before anything is allocated; a setting the model does not use is said.
 
 mod common;
 
@@ -22,8 +23,7 @@ fn kind(path: &Path) -> &'static str {
 
 /// `sky --out`, `tabulate --out` and `render --out` pointed at a FIFO, a symbolic link or a
 /// folder: refused by name, the FIFO still a FIFO, the link still a link and its target's bytes
-/// unchanged (a rename once replaced the system's /dev/full with a regular file and reported
-/// success).
+/// unchanged (a rename would put a regular file in place of a device such as /dev/full).
 #[test]
 fn writers_never_replace_what_is_not_a_regular_file() {
     let dir = temp_dir("not-regular");
@@ -74,9 +74,9 @@ fn writers_never_replace_what_is_not_a_regular_file() {
 }
 
 /// Values that made a meaningless result are refused by name: an error picture's full scale
-/// of no error, an object moved so far that f32 coordinates lose its detail (a bunny at 1e8 mm
-/// was cut into 436 000 slivers of its rounding), coefficients beyond f32 or any material, an
-/// empty viewer script (the window stayed open forever).
+/// of no error, an object moved so far that f32 coordinates lose its detail (its edges would be
+/// split into slivers of their rounding), coefficients beyond f32 or any material, an empty
+/// viewer script (which would leave the window open forever).
 #[test]
 fn meaningless_settings_are_refused_by_name() {
     let dir = temp_dir("meaningless");
@@ -92,7 +92,7 @@ fn meaningless_settings_are_refused_by_name() {
             .arg(dir.join("cmp"));
         fails_with(c, "must be a finite positive relative error");
     }
-    for translate in ["[1e8, 0.0, 0.0]", "[0.0, 0.0, 1e5]"] {
+    for translate in ["[1e8, 0.0, 0.0]", "[0.0, 0.0, 1e6]"] {
         let scene = dir.join("far.toml");
         std::fs::write(&scene, format!("[transform]\ntranslate = {translate}\n")).unwrap();
         let mut c = bin();
@@ -149,9 +149,9 @@ fn walks_given_to_a_model_without_walks_are_said() {
 }
 
 /// Settings whose preprocessing no device takes are refused from the estimate before anything
-/// is allocated, by every command that preprocesses (`render` did; `precompute` and
-/// `borders` allocated 3 GB for 30-104 s and aborted). The watchdog is far beyond the
-/// fraction of a second the refusal takes.
+/// is allocated, by every command that preprocesses (`precompute` and `borders` here), not
+/// after gigabytes and minutes. The watchdog is far beyond the fraction of a second the
+/// refusal takes.
 #[test]
 fn impossible_settings_are_refused_before_allocation() {
     let dir = temp_dir("impossible");

@@ -114,7 +114,7 @@ fn bunny_in_marble() {
 
 // At 128x128, against 512-path truths (`tests/truth-data/bunny-*-128`): `halfspace-air`'s
 // light across the air depends on the node spacing (370 nodes at 64x64, 1839 at 128x128 and
-// 256x256), and at 64x64 it is 5 % brighter than at the 256x256, where 128x128 gives
+// 256x256), and at 64x64 it is 5 % brighter than at 256x256, where 128x128 gives
 // the same (README, `halfspace-air`). Measured: skim milk 6.4 / 4.4 / 4.8 % under
 // `halfspace-single` and 6.4 / 4.9 / 3.8 % under `halfspace-air`; marble 4.5 / 4.7 / 5.0 %
 // and 3.9 / 3.8 / 4.1 %. Skim milk's green under `halfspace-air` was 5.05 % with G's exit

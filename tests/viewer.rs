@@ -484,8 +484,8 @@ fn a_bad_script_is_refused_before_the_window_opens() {
 }
 
 /// Steps a script asks for that the viewer cannot honour stop the script with the step named:
-/// a zoom that would take the camera 50 radii away (it was ignored without a word), a light
-/// beyond the largest radiance a scene file takes (it was clamped with only a log line).
+/// a zoom that would take the camera into the object (not ignored without a word), a light
+/// beyond the largest radiance a scene file takes (not clamped with only a log line).
 #[test]
 fn steps_the_viewer_cannot_honour_stop_the_script() {
     let x = Xvfb::start();

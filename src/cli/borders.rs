@@ -4,7 +4,8 @@ use super::*;
 
 pub(super) fn borders(args: &BordersArgs) -> Result<()> {
     use crate::reference::{borders, ReferenceSettings};
-    let scene = args.input.load()?;
+    let mut scene = args.input.load()?;
+    apply_default_for_reference(&mut scene, args.pre.target_error)?;
     let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     let quiet = |_: &str, _: u64, _: u64| {};
     let (pre, _) = preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &quiet)?;

@@ -15,7 +15,7 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     if let Err(e) = &exact {
         anyhow::ensure!(
             args.truth_spp > 0,
-            "{e}; and this chart has no truth (--truth-spp 0)"
+            "{e}; and this chart has no truth (--truth-spp 0): give --truth-spp, or --model halfspace-single for a chart against the exact model"
         );
     }
     output::create_dir(&args.out)?;
@@ -111,6 +111,9 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             .material
             .with_model(*m)
             .with_context(|| format!("--models {}", m.name()))?;
+        // Its own model, not the default's reason for the scene's.
+        s.model_reason = None;
+        s.resolved.material.model = Some(*m);
         if Reference::supports(*m, &s.mesh).is_err() {
             anyhow::ensure!(
                 truth.is_some(),
@@ -129,10 +132,17 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         println!("reference of model {}: {} samples", m.name(), r.samples);
         other_scenes.push((s, Some(r)));
     }
+    // The scene's own model in every blending mode over the sweep; the walks (each point
+    // walks again) in their own blending over their shorter sweep, as when they are another.
+    let own_walks = scene.material.model.walks();
     let mut runs = vec![crate::chart::ModelRun {
         scene: &scene,
-        modes: Blend::ALL.to_vec(),
-        settings: None,
+        modes: if own_walks {
+            vec![Blend::for_model(scene.material.model)]
+        } else {
+            Blend::ALL.to_vec()
+        },
+        settings: own_walks.then(|| crate::chart::walk_sweep(&auto.settings, args.quick)),
         against: baselines,
     }];
     let truth_baseline = runs[0].against.truth;

@@ -256,7 +256,7 @@ pub struct ChartArgs {
     #[arg(long)]
     pub quick: bool,
     /// Target relative error for the automatic setting.
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = preprocess::DEFAULT_TARGET_ERROR)]
     pub target_error: f64,
     /// Cache folder for the preprocessing and the truth.
     #[arg(long)]
@@ -392,7 +392,7 @@ pub struct PreprocessArgs {
     #[arg(long)]
     pub walk_paths: Option<u32>,
     /// Target relative error of the render.
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = preprocess::DEFAULT_TARGET_ERROR)]
     pub target_error: f64,
     /// Cache folder (default: $XDG_CACHE_HOME/translucent or ~/.cache/translucent).
     #[arg(long)]
@@ -588,6 +588,25 @@ fn image_options(mode: Blend) -> Options {
         readback_on_request: true,
         ..Default::default()
     }
+}
+
+/// The default model applied to `scene` for a command that checks a model against its exact
+/// integral (`reference`, `borders`): refused, with what to do instead, where the default is
+/// a model the exact reference cannot integrate, so that it never checks another model than
+/// `render` renders.
+fn apply_default_for_reference(scene: &mut Scene, target_error: f64) -> Result<()> {
+    let default = preprocess::model::is_default(scene);
+    preprocess::model::apply_default(scene, target_error)?;
+    if let Err(e) = crate::reference::Reference::supports(scene.material.model, &scene.mesh) {
+        if default {
+            bail!(
+                "render's default model for this scene is {}: {e:#}; or give --model halfspace-single for the exact model of the half-space",
+                scene.material.model.name()
+            );
+        }
+        return Err(e);
+    }
+    Ok(())
 }
 
 fn check_validation(gpu: &Gpu) -> Result<()> {

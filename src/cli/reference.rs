@@ -8,8 +8,8 @@ pub(super) const MAX_REFERENCE_SAMPLES: f64 = 5e7;
 pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
     use crate::metrics;
     use crate::reference::{Reference, ReferenceSettings};
-    let scene = args.input.load()?;
-    Reference::supports(scene.material.model, &scene.mesh)?;
+    let mut scene = args.input.load()?;
+    apply_default_for_reference(&mut scene, preprocess::DEFAULT_TARGET_ERROR)?;
     let mut settings = ReferenceSettings::for_scene(&scene);
     if let Some(s) = args.spacing_mm {
         if !(s.is_finite() && s > 0.0) {

@@ -155,21 +155,24 @@ pub fn transfer(mesh: &Mesh, atlas: &Atlas, eta: f64, settings: PrtSettings) -> 
         }
     };
     // The time of the transfer, from a pilot on this machine as it runs now: a strided
-    // sample of the texels, timed and scaled up (their results are the same computed again).
+    // sample of the texels, timed and scaled up (where it is a small part of the work; their
+    // results are the same computed again).
     let texels = atlas.texels.len();
-    let step = (texels / PILOT_TEXELS).max(1);
-    let clock = std::time::Instant::now();
-    let sampled = (0..texels)
-        .step_by(step)
-        .collect::<Vec<_>>()
-        .into_par_iter()
-        .map(|t| texel(t, &mut vec![0f32; k]))
-        .count();
-    let pilot = clock.elapsed().as_secs_f64();
-    tracing::info!(
-        "environment transfer: about {:.1} s on this machine now ({texels} texels x {n_rays} rays; a pilot of {sampled} texels took {pilot:.2} s)",
-        pilot * texels as f64 / sampled.max(1) as f64
-    );
+    if texels >= 4 * PILOT_TEXELS {
+        let step = texels / PILOT_TEXELS;
+        let clock = std::time::Instant::now();
+        let sampled = (0..texels)
+            .step_by(step)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|t| texel(t, &mut vec![0f32; k]))
+            .count();
+        let pilot = clock.elapsed().as_secs_f64();
+        tracing::info!(
+            "environment transfer: about {:.1} s on this machine now ({texels} texels x {n_rays} rays; a pilot of {sampled} texels took {pilot:.2} s)",
+            pilot * texels as f64 / sampled.max(1) as f64
+        );
+    }
     coefficients
         .par_chunks_mut(k)
         .enumerate()

@@ -6,12 +6,20 @@ use crate::graph::timing::{FrameTiming, TimingReport};
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
+/// The suffix of the temporaries this program writes: `.NAME.PID.translucent.tmp`, so that
+/// the removal of stale ones never touches a file of anyone else's.
+const TEMPORARY_SUFFIX: &str = ".translucent.tmp";
+
+/// Oldest a temporary of a process that is gone must be before it is removed: a process of
+/// another host or container writing to the same folder has no entry in this /proc.
+const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(3600);
+
 fn temporary(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+    path.with_file_name(format!(".{name}.{}{TEMPORARY_SUFFIX}", std::process::id()))
 }
 
 /// Refuses `path` as a target to replace when something other than a regular file is there: a
@@ -173,20 +181,44 @@ impl Drop for OutputSet {
     }
 }
 
-/// Removes `.NAME.PID.tmp` files in `dir` whose process no longer runs.
+/// Removes this program's temporaries (`.NAME.PID.translucent.tmp`) in `dir` whose process is
+/// gone and that are older than `STALE_AFTER` (an hour); once per folder and process (a run that
+/// writes many files scans its folder once).
 pub fn remove_stale_temporaries(dir: &Path) {
+    static CLEANED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let key = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    if let Ok(mut cleaned) = CLEANED.lock() {
+        if cleaned.contains(&key) {
+            return;
+        }
+        cleaned.push(key);
+    }
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
     for e in entries.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        let Some(stem) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) else {
+        let Some(stem) = name
+            .strip_prefix('.')
+            .and_then(|n| n.strip_suffix(TEMPORARY_SUFFIX))
+        else {
             continue;
         };
         let Some(pid) = stem.rsplit('.').next().and_then(|p| p.parse::<u32>().ok()) else {
             continue;
         };
-        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+        let old = e
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_some_and(|age| age >= STALE_AFTER);
+        let regular = e.file_type().is_ok_and(|t| t.is_file());
+        if regular
+            && old
+            && pid != std::process::id()
+            && !Path::new(&format!("/proc/{pid}")).exists()
+        {
             let _ = std::fs::remove_file(e.path());
         }
     }
@@ -394,13 +426,26 @@ mod tests {
             .file_type()
             .is_symlink());
         assert_eq!(std::fs::read(&target).unwrap(), b"kept");
-        // A regular file is replaced; a temporary left by a process that is gone (no pid is
-        // above 2^22 on Linux) is removed by the next write in its folder.
-        let stale = dir.join(".cache.bin.4294967.tmp");
-        std::fs::write(&stale, b"left by a killed run").unwrap();
+        // A regular file is replaced; a temporary of this program left an hour ago by a
+        // process that is gone (no pid is above 2^22 on Linux) is removed by the next write in
+        // its folder; a fresh one, and a file of the same shape not ours, stay.
+        let stale = dir.join(".cache.bin.4294967.translucent.tmp");
+        let fresh = dir.join(".other.bin.4294967.translucent.tmp");
+        let foreign = dir.join(".notes.2023.tmp");
+        for f in [&stale, &fresh, &foreign] {
+            std::fs::write(f, b"left by a killed run").unwrap();
+        }
+        let hour_ago = std::time::SystemTime::now() - STALE_AFTER;
+        std::fs::File::options()
+            .write(true)
+            .open(&stale)
+            .unwrap()
+            .set_modified(hour_ago)
+            .unwrap();
         write_atomic(&target, |p| Ok(std::fs::write(p, b"new")?)).unwrap();
         assert_eq!(std::fs::read(&target).unwrap(), b"new");
         assert!(!stale.exists());
+        assert!(fresh.exists() && foreign.exists());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

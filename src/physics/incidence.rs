@@ -334,7 +334,7 @@ mod tests {
         );
     }
 
-    /// The Monte Carlo figures at 60 degrees: all orders +4 % (skim milk red), +7 %
+    /// Independent Monte Carlo figures at 60 degrees: all orders +4 % (skim milk red), +7 %
     /// (skim blue), +31 % (ketchup red) over normal incidence.
     #[test]
     fn oblique_totals_match_the_measured_ones() {

@@ -39,6 +39,9 @@ pub fn builds() -> usize {
 /// Most texels an atlas may have unless told otherwise (a 1024 x 1024 atlas).
 pub const DEFAULT_MAX_TEXELS: f64 = 1024.0 * 1024.0;
 
+/// The target error a command uses unless given one (`--target-error`): 2 %.
+pub const DEFAULT_TARGET_ERROR: f64 = 0.02;
+
 /// Seconds spent in each stage.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageTimes {
@@ -119,7 +122,7 @@ pub fn choose(
     }
     // The model is the material's; said with the derived settings, with why.
     let m = &scene.material;
-    // Where a rule of the default model that needed more than the scene chose it, its reason.
+    // Where the default chose the model (`model::apply_default`), its reason.
     let why = scene.model_reason.as_deref().unwrap_or_else(|| {
         match (m.model, m.model == crate::physics::Model::for_eta(m.eta)) {
             (crate::physics::Model::HalfspaceSingle, true) => {
@@ -502,7 +505,7 @@ impl Preprocessed {
         }
         if let Some(w) = &o.walks {
             lines.push(format!(
-                "walks: {} per node and channel, {} in all, {:.1} collisions each, {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light; {:.1} s (a pilot estimated {:.1} s)",
+                "walks: {} per node and channel, {} in all, {:.1} collisions each, {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light; {:.1} s{}",
                 w.paths_per_node,
                 w.paths,
                 w.events as f64 / w.paths.max(1) as f64,
@@ -512,7 +515,11 @@ impl Preprocessed {
                 w.left[1],
                 w.left[2],
                 w.seconds,
-                w.estimated_seconds
+                if w.estimated_seconds > 0.0 {
+                    format!(" (a pilot estimated {:.1} s)", w.estimated_seconds)
+                } else {
+                    String::new()
+                }
             ));
             let n = o.exit_slopes.len().max(1) as f64;
             let mean: [f64; 3] =

@@ -91,7 +91,8 @@ pub struct WalkReport {
     /// Fraction of the entering flux that left after `min_order` or more events, per channel
     /// (over every node, weighted by area).
     pub left: [f64; 3],
-    /// Seconds the walks were estimated to take before they started, from a timed pilot.
+    /// Seconds the walks were estimated to take before they started, from a timed pilot (0
+    /// where there were too few nodes for one).
     pub estimated_seconds: f64,
     /// Seconds they took.
     pub seconds: f64,
@@ -468,26 +469,28 @@ pub fn walk_response(
         )
     };
     // The time of the walks, from a pilot on this machine as it runs now: a strided sample of
-    // the sources with an eighth of their walks, timed and scaled up. Its columns are dropped.
-    let pilot_step = (n / PILOT_SOURCES).max(1);
-    let pilot_paths = (paths / 8).max(PILOT_MIN_PATHS).min(paths);
-    let clock = std::time::Instant::now();
-    let pilot: Vec<Column> = (0..n)
-        .step_by(pilot_step)
-        .collect::<Vec<_>>()
-        .into_par_iter()
-        .map_init(scratch, |s, p| walk_source(s, (p, pilot_paths)))
-        .collect();
-    let pilot_seconds = clock.elapsed().as_secs_f64();
-    let estimated_seconds = pilot_seconds * n as f64 / pilot.len().max(1) as f64 * paths as f64
-        / pilot_paths.max(1) as f64;
-    drop(pilot);
-    done.store(0, std::sync::atomic::Ordering::Relaxed);
-    tracing::info!(
-        "walks: about {estimated_seconds:.1} s on this machine now ({} paths per node and channel on {n} nodes; a pilot of {} nodes with {pilot_paths} took {pilot_seconds:.2} s)",
-        paths,
-        n.div_ceil(pilot_step)
-    );
+    // the sources with an eighth of their walks, timed and scaled up (where it is a small part
+    // of the work). Its columns are dropped.
+    let mut estimated_seconds = 0.0;
+    if n >= 4 * PILOT_SOURCES {
+        let pilot_step = n / PILOT_SOURCES;
+        let pilot_paths = (paths / 8).max(PILOT_MIN_PATHS).min(paths);
+        let clock = std::time::Instant::now();
+        let pilot: Vec<Column> = (0..n)
+            .step_by(pilot_step)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map_init(scratch, |s, p| walk_source(s, (p, pilot_paths)))
+            .collect();
+        let pilot_seconds = clock.elapsed().as_secs_f64();
+        estimated_seconds = pilot_seconds * n as f64 / pilot.len().max(1) as f64 * paths as f64
+            / pilot_paths.max(1) as f64;
+        done.store(0, std::sync::atomic::Ordering::Relaxed);
+        tracing::info!(
+            "walks: about {estimated_seconds:.1} s on this machine now ({paths} paths per node and channel on {n} nodes; a pilot of {} nodes with {pilot_paths} took {pilot_seconds:.2} s)",
+            pilot.len()
+        );
+    }
     let clock = std::time::Instant::now();
     let mut report = WalkReport {
         paths_per_node: paths,

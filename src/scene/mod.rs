@@ -118,9 +118,10 @@ pub const LONG_EDGE_SPACINGS: f64 = 3.0;
 pub const MAX_RADIUS_MM: f32 = 1e7;
 
 /// Largest distance of the object's farthest point from the origin, in object radii: f32
-/// positions there are spaced at most 1e-4 of the radius (2^-23 x 839), far below any texel.
-/// A small object moved far away would otherwise be cut into slivers of its rounding.
-pub const MAX_OFFSET_RADII: f32 = 839.0;
+/// positions there are spaced at most 1e-3 of the radius (2^-23 x 8390), a tenth of the finest
+/// derived texel. A small object moved far away would otherwise be cut into slivers of its
+/// rounding.
+pub const MAX_OFFSET_RADII: f32 = 8390.0;
 
 /// `p` made absolute (symbolic links resolved where it exists), for the resolved scene.
 pub fn absolute(p: &Path) -> std::path::PathBuf {

@@ -118,7 +118,8 @@ pub enum TruthError {
     /// A time budget shorter than the least a truth takes.
     #[error(
         "one sample per pixel and half takes about {0:.1} s here, more than twice the --time \
-         budget of {1} s: give --time {0:.0} or more, or fewer pixels"
+         budget of {1} s: give --time {least} or more, or fewer pixels",
+        least = (.0 / 2.0).ceil().max(1.0)
     )]
     BudgetTooShort(f64, f64),
     /// A surface with a border.
@@ -553,6 +554,9 @@ pub fn compute_with_clock(
         }
     }
     let tracer = Tracer::new(scene, settings)?;
+    // Seconds since the tracing started (the ray-casting structure built).
+    let t0 = clock();
+    let clock = || clock() - t0;
     let (w, h) = (scene.width, scene.height);
     let covered: Vec<u32> = (0..w * h)
         .into_par_iter()
@@ -675,8 +679,8 @@ const ROUND_CHUNKS: usize = 16;
 /// Pixels the pilot of a time budget samples.
 pub const PILOT_PIXELS: usize = 64;
 
-/// The random stream of the pilot's samples, apart from the image's (whose last seed word is
-/// the round, far below this).
+/// The random stream of the pilot's samples (in the place of the image's half, 0 or 1), apart
+/// from the image's.
 const PILOT_STREAM: u64 = u64::MAX;
 
 /// Bump whenever the truth's results change for the same inputs.

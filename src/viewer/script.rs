@@ -105,7 +105,6 @@ fn finite(v: f32, what: &str) -> Result<f32> {
     Ok(v)
 }
 
-/// The light kinds a light can be made into here (environment lights come from scene files).
 /// Largest window side a script may ask for: the largest image side (as `[output]`'s).
 const MAX_WINDOW: u32 = 16384;
 
@@ -115,6 +114,7 @@ fn plain(word: Option<&str>) -> Result<Option<String>> {
         .transpose()
 }
 
+/// The light kinds a light can be made into here (environment lights come from scene files).
 fn light_kind(word: Option<&str>) -> Result<LightKind> {
     match word.context("missing light kind")? {
         "directional" => Ok(LightKind::Directional),
