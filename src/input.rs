@@ -58,7 +58,8 @@ pub fn check_regular(path: &Path, meta: &std::fs::Metadata, cap: u64, what: &str
     Ok(())
 }
 
-fn kind_of(ft: &std::fs::FileType) -> &'static str {
+/// What a path that is not a regular file is, for messages: "a folder", "a FIFO (named pipe)"...
+pub fn kind_of(ft: &std::fs::FileType) -> &'static str {
     use std::os::unix::fs::FileTypeExt;
     if ft.is_dir() {
         "a folder"

@@ -40,11 +40,7 @@ fn writers_never_replace_what_is_not_a_regular_file() {
     let folder = dir.join("folder.exr");
     std::fs::create_dir(&folder).unwrap();
     for (path, needle, was) in [
-        (
-            &fifo,
-            "is not a regular file (a device, FIFO or socket)",
-            "special",
-        ),
+        (&fifo, "is a FIFO (named pipe)", "special"),
         (&link, "is a symbolic link", "link"),
         (&folder, "is a folder", "folder"),
     ] {

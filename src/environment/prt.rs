@@ -155,27 +155,29 @@ pub fn transfer(mesh: &Mesh, atlas: &Atlas, eta: f64, settings: PrtSettings) -> 
         }
     };
     // The time of the transfer, from a pilot on this machine as it runs now: a strided
-    // sample of the texels, timed and scaled up (where it is a small part of the work; their
-    // results are the same computed again).
+    // sample of the texels (where it is a small part of the work), timed and scaled up. The
+    // rest are computed after it.
     let texels = atlas.texels.len();
-    if texels >= 4 * PILOT_TEXELS {
-        let step = texels / PILOT_TEXELS;
+    let step = (texels >= 4 * PILOT_TEXELS).then_some(texels / PILOT_TEXELS);
+    let piloted = |t: usize| step.is_some_and(|s| t.is_multiple_of(s));
+    if let Some(step) = step {
         let clock = std::time::Instant::now();
-        let sampled = (0..texels)
-            .step_by(step)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|t| texel(t, &mut vec![0f32; k]))
+        let sampled = coefficients
+            .par_chunks_mut(k)
+            .enumerate()
+            .filter(|(t, _)| piloted(*t))
+            .map(|(t, out)| texel(t, out))
             .count();
         let pilot = clock.elapsed().as_secs_f64();
         tracing::info!(
-            "environment transfer: about {:.1} s on this machine now ({texels} texels x {n_rays} rays; a pilot of {sampled} texels took {pilot:.2} s)",
+            "environment transfer: about {:.1} s on this machine now ({texels} texels x {n_rays} rays; a pilot of {sampled} texels, one in {step}, took {pilot:.2} s)",
             pilot * texels as f64 / sampled.max(1) as f64
         );
     }
     coefficients
         .par_chunks_mut(k)
         .enumerate()
+        .filter(|(t, _)| !piloted(*t))
         .for_each(|(t, out)| texel(t, out));
     Transfer {
         settings,

@@ -30,10 +30,8 @@ pub fn check_replaceable(path: &Path) -> Result<()> {
         Ok(meta) if !meta.file_type().is_file() => {
             let what = if meta.file_type().is_symlink() {
                 "a symbolic link"
-            } else if meta.is_dir() {
-                "a folder"
             } else {
-                "not a regular file (a device, FIFO or socket)"
+                crate::input::kind_of(&meta.file_type())
             };
             anyhow::bail!(
                 "'{}' exists and is {what}: it is not replaced; choose another output name",

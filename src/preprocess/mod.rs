@@ -196,8 +196,6 @@ pub struct Estimate {
     pub texels: u64,
     /// Global nodes.
     pub nodes: u64,
-    /// Entries of F before pruning (nodes^2).
-    pub dense_entries: u64,
     /// Device bytes of the per-frame data that do not depend on pruning (kernels, atlas images).
     pub device_bytes_min: u64,
     /// Device bytes if nothing is pruned.
@@ -315,7 +313,6 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
     Estimate {
         texels,
         nodes,
-        dense_entries: nodes * nodes,
         device_bytes_min,
         device_bytes_max: device_bytes_min + counts.bytes(Item::GlobalEntries),
         kernel_elements,
