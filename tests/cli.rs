@@ -715,10 +715,10 @@ fn truth_writes_image_noise_and_figures_and_compare_removes_its_noise() {
         .arg(dir.join("cmp2"));
     fails_with(c, "is 2x2, the images are 32x32");
     let mut c = bin();
-    c.args(["truth", "--spp", "2", "--eta", "1.3", "--out"])
+    c.args(["truth", "--spp", "2", "--g", "1", "--out"])
         .arg(dir.join("c"))
         .arg(&scene);
-    fails_with(c, "eta = 1.3");
+    fails_with(c, "--g 1 must lie in (-1, 1)");
     assert!(!dir.join("c").exists(), "a refused run creates nothing");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -50,9 +50,20 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
     let out = &args.out;
     output::write_radiance(out, "truth", t.width, t.height, &t.radiance, scene.exposure)?;
     output::write_exr(&out.join("noise.exr"), t.width, t.height, &t.noise)?;
+    // The surface's reflection alone, where there is one (a refractive boundary).
+    let refractive = scene.material.eta != 1.0;
+    if refractive {
+        output::write_exr(
+            &out.join("truth_surface.exr"),
+            t.width,
+            t.height,
+            &t.surface,
+        )?;
+    }
     let info = serde_json::json!({
         "spp": t.spp, "seconds": t.seconds, "events": t.events, "paths": t.paths,
         "events_per_second": t.events_per_second(), "truncated_paths": t.truncated_paths,
+        "capped_connections": t.capped_connections, "eta": scene.material.eta,
         "seed": args.seed, "g": args.g, "min_order": args.min_order, "max_order": args.max_order,
         "width": t.width, "height": t.height, "pixels": t.pixels,
         "sigma_t": medium.sigma_t, "albedo": medium.albedo,
@@ -62,13 +73,14 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
     })?;
     println!(
-        "{} paths per pixel and channel over {} pixels in {:.1} s: {:.3e} collisions ({:.2} M/s), {} paths cut",
+        "{} paths per pixel and channel over {} pixels in {:.1} s: {:.3e} collisions ({:.2} M/s), {} paths cut, {} refracted connections dropped",
         t.spp,
         t.pixels,
         t.seconds,
         t.events as f64,
         t.events_per_second() / 1e6,
-        t.truncated_paths
+        t.truncated_paths,
+        t.capped_connections
     );
     for n in &noise {
         println!(
@@ -89,7 +101,12 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
         100.0 * stderr[2] / mean[2].max(1e-300)
     );
     println!(
-        "wrote truth.exr, noise.exr, truth.png, truth.json to {}",
+        "wrote truth.exr, noise.exr, {}truth.png, truth.json to {}",
+        if refractive {
+            "truth_surface.exr, "
+        } else {
+            ""
+        },
         out.display()
     );
     Ok(())

@@ -328,6 +328,15 @@ impl Environment {
         (w, self.radiance[i].map(|c| c as f64), pdf)
     }
 
+    /// Radiance arriving from the unit direction `w` of the map's frame: the work map's pixel
+    /// it falls in (the piecewise-constant map that [`Environment::sample`] draws from).
+    pub fn radiance_from(&self, w: DVec3) -> [f64; 3] {
+        let (u, v) = coordinates(w);
+        let x = ((u * self.width as f64) as u32).min(self.width - 1);
+        let y = ((v * self.height as f64) as u32).min(self.height - 1);
+        self.radiance[(y * self.width + x) as usize].map(|c| c as f64)
+    }
+
     /// The map without its sun projected on spherical harmonics of `order`, turned by
     /// `rotation` (map frame -> world): per coefficient, RGB.
     pub fn sh_coefficients(&self, order: u32, rotation: Quat) -> Vec<[f64; 3]> {

@@ -377,6 +377,17 @@ impl Bvh {
             >= 2
     }
 
+    /// Unit normal of triangle `t` pointing out of the enclosed volume.
+    pub fn outward_normal(&self, t: u32) -> DVec3 {
+        let [a, b, c] = self.tris[t as usize];
+        ((b - a).cross(c - a) * self.orientation).normalize()
+    }
+
+    /// The first corner of triangle `t` (a point of its plane).
+    pub fn vertex(&self, t: u32) -> DVec3 {
+        self.tris[t as usize][0]
+    }
+
     /// Whether anything blocks the segment from `o` along `d` up to `t_max`.
     pub fn occluded(&self, o: DVec3, d: DVec3, t_max: f64) -> bool {
         let mut blocked = false;

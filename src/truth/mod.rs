@@ -4,9 +4,9 @@
 //! The object is a closed mesh filled with the material's medium: scattering sigma_s =
 //! sigma_s' / (1 - g) with a Henyey-Greenstein phase function of mean cosine g (g = 0, the
 //! default, is the isotropic phase on the reduced coefficients that the dipole assumes), and
-//! absorption sigma_a, per RGB channel. The boundary is index-matched (eta = 1): no reflection,
-//! no refraction, so light enters and leaves along straight lines and the transport equation is
-//! solved without approximation:
+//! absorption sigma_a, per RGB channel. With an index-matched boundary (eta = 1) there is no
+//! reflection and no refraction, so light enters and leaves along straight lines and the
+//! transport equation is solved without approximation:
 //!
 //! - A camera ray through each pixel centre (the same rays as `reference`) enters the medium.
 //!   Free-flight distances are sampled exactly (pdf sigma_t e^(-sigma_t s)); a flight that
@@ -33,10 +33,12 @@
 //! - Samples are split into two independent halves A and B: the image is (A + B) / 2 and the
 //!   standard deviation of each pixel is estimated by |A - B| / 2.
 //!
-//! A smooth dielectric boundary (eta != 1) is refused: a delta light seen through a smooth
-//! interface is reached only by a path that refracts exactly into the light's direction, which
-//! a path tracer samples with probability zero.
+//! A smooth dielectric boundary (eta != 1) reflects and refracts at every crossing and reaches
+//! delta lights by refracted connections found per triangle: see [`dielectric`]. The image is
+//! then the subsurface light plus the surface's mirror reflection, which [`Truth::surface`]
+//! also holds alone.
 
+pub mod dielectric;
 pub mod halfspace;
 
 use crate::geometry::bvh::{Bvh, Crossing};
@@ -87,12 +89,10 @@ impl Default for TruthSettings {
 /// Why a scene cannot be traced.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TruthError {
-    /// The boundary is a smooth dielectric.
+    /// The single-scattering quadrature was asked for a smooth dielectric boundary.
     #[error(
-        "truth traces an index-matched boundary only (eta = 1.0), the scene has eta = {0}: \
-         through a smooth dielectric a point or directional light is reached only by a path \
-         that refracts exactly towards it, which a path tracer never samples. Set `eta = 1.0` \
-         under [material] (or pass --eta 1) and compare with a render of the same scene"
+        "the single-scattering quadrature traces an index-matched boundary only (eta = 1.0), \
+         the scene has eta = {0}"
     )]
     Eta(f64),
     /// The Henyey-Greenstein parameter is out of range.
@@ -197,6 +197,12 @@ pub struct PathResult {
     pub events: u64,
     /// Whether [`MAX_EVENTS`] cut the path.
     pub truncated: bool,
+    /// Radiance of the surface's mirror reflection (light that never entered the medium),
+    /// not in `radiance`; 0 at eta = 1.
+    pub surface: f64,
+    /// Refracted connections dropped because their inverse-probability estimate took too many
+    /// trials ([`dielectric`]).
+    pub capped: u64,
 }
 
 /// The path tracer of one scene.
@@ -206,6 +212,8 @@ pub struct Tracer<'a> {
     /// The medium traced.
     pub medium: Medium,
     eps: f64,
+    /// Relative index of the medium (1: index-matched).
+    eta: f64,
     min_order: u32,
     max_order: u32,
 }
@@ -225,6 +233,7 @@ impl<'a> Tracer<'a> {
             bvh: Bvh::new(&scene.mesh.positions, &scene.mesh.indices),
             medium: Medium::new(&scene.material, settings.g),
             eps: 1e-9 * radius.max(1e-3) as f64,
+            eta: scene.material.eta,
             min_order: settings.min_order,
             max_order: settings.max_order,
         }
@@ -382,6 +391,9 @@ impl<'a> Tracer<'a> {
         rng: &mut Rng,
         scratch: &mut Scratch,
     ) -> PathResult {
+        if self.eta != 1.0 {
+            return self.refracted_radiance(o, d, c, rng, scratch);
+        }
         let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
         let mut r = PathResult::default();
         let (mut o, mut d) = (o, d);
@@ -426,13 +438,9 @@ impl<'a> Tracer<'a> {
     }
 }
 
-/// Whether `scene` can be traced with `settings`, without building anything: an index-matched
-/// boundary, no texture, a phase parameter in (-1, 1), an order window starting at 1 or later.
+/// Whether `scene` can be traced with `settings`, without building anything: a closed mesh, no
+/// texture, a phase parameter in (-1, 1), an order window starting at 1 or later.
 pub fn validate(scene: &Scene, settings: &TruthSettings) -> Result<(), TruthError> {
-    let eta = scene.material.eta;
-    if (eta - 1.0).abs() > 1e-9 {
-        return Err(TruthError::Eta(eta));
-    }
     if !(settings.g.is_finite() && settings.g.abs() < 1.0) {
         return Err(TruthError::BadG(settings.g));
     }
@@ -468,8 +476,12 @@ pub struct Truth {
     pub width: u32,
     /// Image height.
     pub height: u32,
-    /// Radiance, RGBA f32, alpha 1 where the object is seen.
+    /// Radiance, RGBA f32, alpha 1 where the object is seen: the subsurface light and the
+    /// surface's reflection.
     pub radiance: Vec<f32>,
+    /// The surface's mirror reflection alone (part of `radiance`), RGBA, same alpha; 0 at
+    /// eta = 1.
+    pub surface: Vec<f32>,
     /// Per-pixel standard deviation of `radiance` (|A - B| / 2), RGBA, same alpha.
     pub noise: Vec<f32>,
     /// Paths per pixel and channel (both halves).
@@ -482,6 +494,8 @@ pub struct Truth {
     pub paths: u64,
     /// Paths cut by [`MAX_EVENTS`].
     pub truncated_paths: u64,
+    /// Refracted connections dropped after too many trials (see [`dielectric`]).
+    pub capped_connections: u64,
     /// Covered pixels.
     pub pixels: usize,
 }
@@ -566,9 +580,9 @@ pub fn compute_with_clock(
         })
         .collect();
     let per_half = settings.spp.div_ceil(2);
-    // Sums of each half per covered pixel and channel.
-    let mut sums = vec![[[0.0f64; 3]; 2]; covered.len()];
-    let (mut events, mut paths, mut truncated) = (0u64, 0u64, 0u64);
+    // Sums of each half per covered pixel and channel, then of the surface's part of both.
+    let mut sums = vec![[[0.0f64; 3]; 3]; covered.len()];
+    let (mut events, mut paths, mut truncated, mut capped) = (0u64, 0u64, 0u64, 0u64);
     if let Some(budget) = settings.time_s {
         // One sample per pixel and half is the least a truth can be: timed on a strided sample
         // of the pixels (seeded apart from the image's samples, and dropped), and refused where
@@ -608,28 +622,34 @@ pub fn compute_with_clock(
             .zip(covered.chunks(chunk))
             .enumerate()
         {
-            let (e, p, t) = sums
+            let (e, p, t, m) = sums
                 .par_iter_mut()
                 .zip(covered)
                 .map_init(Scratch::default, |scratch, (sum, &i)| {
                     let (o, d) = camera_ray(scene, i % w, i / w);
-                    let (mut e, mut p, mut t) = (0u64, 0u64, 0u64);
-                    for (half, s) in sum.iter_mut().enumerate() {
+                    let (mut e, mut p, mut t, mut m) = (0u64, 0u64, 0u64, 0u64);
+                    for half in 0..2 {
                         let mut rng = Rng::new(&[settings.seed, i as u64, half as u64, k]);
-                        for (c, v) in s.iter_mut().enumerate() {
+                        for c in 0..3 {
                             let r = tracer.radiance(o, d, c, &mut rng, scratch);
-                            *v += r.radiance;
+                            sum[half][c] += r.radiance + r.surface;
+                            sum[2][c] += r.surface;
                             e += r.events;
                             p += 1;
                             t += r.truncated as u64;
+                            m += r.capped;
                         }
                     }
-                    (e, p, t)
+                    (e, p, t, m)
                 })
-                .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+                .reduce(
+                    || (0, 0, 0, 0),
+                    |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3),
+                );
             events += e;
             paths += p;
             truncated += t;
+            capped += m;
             if settings.time_s.is_none() {
                 progress((done as f64 + (j + 1) as f64 / chunks as f64) / per_half as f64);
             }
@@ -649,26 +669,31 @@ pub fn compute_with_clock(
     let n = done as f64;
     let mut radiance = vec![0.0f32; (4 * w * h) as usize];
     let mut noise = vec![0.0f32; (4 * w * h) as usize];
+    let mut surface = vec![0.0f32; (4 * w * h) as usize];
     for (sum, &i) in sums.iter().zip(&covered) {
         let i = i as usize;
         for c in 0..3 {
             let (a, b) = (sum[0][c] / n, sum[1][c] / n);
             radiance[4 * i + c] = (0.5 * (a + b)) as f32;
             noise[4 * i + c] = (0.5 * (a - b).abs()) as f32;
+            surface[4 * i + c] = (0.5 * sum[2][c] / n) as f32;
         }
         radiance[4 * i + 3] = 1.0;
         noise[4 * i + 3] = 1.0;
+        surface[4 * i + 3] = 1.0;
     }
     Ok(Truth {
         width: w,
         height: h,
         radiance,
         noise,
+        surface,
         spp: 2 * done,
         seconds: clock(),
         events,
         paths,
         truncated_paths: truncated,
+        capped_connections: capped,
         pixels: covered.len(),
     })
 }
@@ -725,7 +750,8 @@ pub fn key(scene: &Scene, settings: &TruthSettings) -> u64 {
     h.finish()
 }
 
-/// A truth image and its per-pixel standard deviation.
+/// A truth image of the subsurface light (the surface's reflection taken out: the models
+/// render the light under the surface) and its per-pixel standard deviation.
 #[derive(Debug, Clone)]
 pub struct TruthImages {
     /// Radiance, RGBA (alpha = coverage).
@@ -769,7 +795,12 @@ pub fn cached(
         }
         tracing::warn!("truth cache {} unreadable: tracing again", image.display());
     }
-    let t = compute(scene, settings, progress)?;
+    let mut t = compute(scene, settings, progress)?;
+    for (v, s) in t.radiance.chunks_mut(4).zip(t.surface.chunks(4)) {
+        for c in 0..3 {
+            v[c] -= s[c];
+        }
+    }
     output::create_dir(dir)?;
     output::write_exr(&image, t.width, t.height, &t.radiance)?;
     output::write_exr(&noise, t.width, t.height, &t.noise)?;
