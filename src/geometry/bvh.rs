@@ -377,6 +377,54 @@ impl Bvh {
             >= 2
     }
 
+    /// The distance from `p` to the nearest point of any triangle, or `limit` if none is
+    /// nearer: what a walk may travel from `p` in any direction without meeting the surface.
+    pub fn distance_within(&self, p: DVec3, limit: f64) -> f64 {
+        let box_distance2 = |n: &Node| {
+            let q = p.clamp(n.lo, n.hi);
+            q.distance_squared(p)
+        };
+        let mut best2 = limit * limit;
+        let mut stack = [0u32; 64];
+        let mut top = 0usize;
+        if box_distance2(&self.nodes[0]) < best2 {
+            stack[0] = 0;
+            top = 1;
+        }
+        while top > 0 {
+            top -= 1;
+            let node = self.nodes[stack[top] as usize];
+            if box_distance2(&node) >= best2 {
+                continue;
+            }
+            if node.count > 0 {
+                for &t in &self.order[node.start as usize..(node.start + node.count) as usize] {
+                    let [a, b, c] = self.tris[t as usize];
+                    best2 = best2.min(closest_on_triangle(p, a, b, c).distance_squared(p));
+                }
+            } else {
+                let (l, r) = (node.start, node.start + 1);
+                let (dl, dr) = (
+                    box_distance2(&self.nodes[l as usize]),
+                    box_distance2(&self.nodes[r as usize]),
+                );
+                // The nearer child on top, visited first.
+                let pairs = if dl <= dr {
+                    [(r, dr), (l, dl)]
+                } else {
+                    [(l, dl), (r, dr)]
+                };
+                for (i, d2) in pairs {
+                    if d2 < best2 {
+                        stack[top] = i;
+                        top += 1;
+                    }
+                }
+            }
+        }
+        best2.sqrt()
+    }
+
     /// Unit normal of triangle `t` pointing out of the enclosed volume.
     pub fn outward_normal(&self, t: u32) -> DVec3 {
         let [a, b, c] = self.tris[t as usize];
@@ -405,6 +453,40 @@ impl Bvh {
     }
 }
 
+/// The point of triangle (a, b, c) nearest to `p` (Ericson, Real-Time Collision Detection,
+/// 5.1.5: the Voronoi regions of the corners, edges and face).
+fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    a + ab * (vb * denom) + ac * (vc * denom)
+}
+
 /// A ray with its reciprocal direction (for the box tests).
 struct Ray {
     o: DVec3,
@@ -426,6 +508,35 @@ impl Ray {
 mod tests {
     use super::*;
     use crate::scene::mesh::Mesh;
+
+    /// The nearest distance to the surface against the brute-force minimum over every
+    /// triangle, and against the box's closed form inside it; capped at the limit.
+    #[test]
+    fn distance_to_the_surface_is_the_nearest_triangle() {
+        let m = Mesh::sphere(10.0, 24);
+        let bvh = Bvh::new(&m.positions, &m.indices);
+        let mut rng = crate::numeric::rng::Rng::new(&[3]);
+        for _ in 0..500 {
+            let p = DVec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 30.0 - 15.0;
+            let brute = bvh
+                .tris
+                .iter()
+                .map(|&[a, b, c]| closest_on_triangle(p, a, b, c).distance(p))
+                .fold(f64::INFINITY, f64::min);
+            assert!((bvh.distance_within(p, 100.0) - brute).abs() < 1e-12, "{p}");
+            assert_eq!(bvh.distance_within(p, 0.5 * brute), 0.5 * brute);
+        }
+        let b = Mesh::cuboid(glam::Vec3::new(10.0, 20.0, 30.0), 6);
+        let bvh = Bvh::new(&b.positions, &b.indices);
+        for (p, want) in [
+            (DVec3::new(1.0, 2.0, 3.0), 4.0),
+            (DVec3::new(0.0, 0.0, 0.0), 5.0),
+            (DVec3::new(8.0, 0.0, 0.0), 3.0),
+            (DVec3::new(8.0, 14.0, 0.0), 5.0),
+        ] {
+            assert!((bvh.distance_within(p, 100.0) - want).abs() < 1e-9, "{p}");
+        }
+    }
 
     #[test]
     fn rays_hit_a_box_where_expected() {

@@ -230,14 +230,15 @@ pub struct Work {
 /// Seconds per unit of [`Work`] on one thread, calibrated on 2 cores over meshes from a
 /// 704-triangle box to a 235 000-triangle bunny, long-triangle meshes included: kernel taps,
 /// dense entries and fit products (parallel), triangles (a serial and a parallel share), walk
-/// collisions (a ray cast through the BVH and a scattering event each).
+/// collisions (a scattering event each, and a ray cast through the BVH for the flights that
+/// leave the ball around the last search free of the surface).
 mod cost {
     pub const KERNEL_TAP: f64 = 5.0e-7;
     pub const DENSE_ENTRY: f64 = 6.0e-7;
     pub const FIT_PRODUCT: f64 = 9.0e-8;
     pub const TRIANGLE_SERIAL: f64 = 2.0e-6;
     pub const TRIANGLE_PARALLEL: f64 = 5.0e-6;
-    pub const WALK_COLLISION: f64 = 0.6e-6;
+    pub const WALK_COLLISION: f64 = 0.3e-6;
 }
 
 impl Work {

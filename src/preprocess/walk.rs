@@ -300,6 +300,11 @@ const PILOT_SOURCES: usize = 32;
 /// otherwise).
 const PILOT_MIN_PATHS: u32 = 8;
 
+/// The largest ball a walk looks for around a collision, in mean free paths: a walk leaves a
+/// ball of r free paths after about r^2 flights, and the search for the nearest surface grows
+/// with the ball.
+const BALL_FREE_PATHS: f64 = 16.0;
+
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
 /// walks did, `paths` paths per node and channel, counting exits after `min_order` or more
 /// scattering events.
@@ -360,9 +365,25 @@ pub fn walk_response(
                         let mut x = at + d * eps;
                         let mut order = 0u32;
                         let mut events = 0u64;
+                        // A ball that no surface enters (centre, radius squared): a flight
+                        // that ends inside it cannot meet the surface and needs no ray cast.
+                        // It changes no walk, only what a walk costs.
+                        let mut ball = (x, 0.0f64);
                         loop {
                             let s = -(1.0 - rng.uniform()).ln() / sigma_t;
-                            if let Some(hit) = bvh.intersect(x, d, s) {
+                            let end = x + d * s;
+                            let mut inside = end.distance_squared(ball.0) < ball.1;
+                            if !inside {
+                                // A new ball about the flight's start: within it no ray cast.
+                                let r = bvh.distance_within(x, BALL_FREE_PATHS / sigma_t);
+                                // Rounding: a margin far above f64's relative precision.
+                                let r = r * (1.0 - 1e-9) - eps;
+                                if r > 0.0 {
+                                    ball = (x, r * r);
+                                    inside = s < r;
+                                }
+                            }
+                            if let Some(hit) = (!inside).then(|| bvh.intersect(x, d, s)).flatten() {
                                 if order >= min_order {
                                     left[c] += weight;
                                     let normal =
@@ -403,13 +424,14 @@ pub fn walk_response(
                                                 < 0.0 =>
                                     {
                                         x = out + d * (h.t + eps);
+                                        ball = (x, 0.0);
                                         counters[3] += 1;
                                         continue;
                                     }
                                     _ => break,
                                 }
                             }
-                            x += d * s;
+                            x = end;
                             order += 1;
                             events += 1;
                             if rng.uniform() >= albedo {
