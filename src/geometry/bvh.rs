@@ -533,6 +533,7 @@ mod tests {
             (DVec3::new(0.0, 0.0, 0.0), 5.0),
             (DVec3::new(8.0, 0.0, 0.0), 3.0),
             (DVec3::new(8.0, 14.0, 0.0), 5.0),
+            (DVec3::new(8.0, 14.0, 18.0), 34f64.sqrt()),
         ] {
             assert!((bvh.distance_within(p, 100.0) - want).abs() < 1e-9, "{p}");
         }

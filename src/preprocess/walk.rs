@@ -372,7 +372,9 @@ pub fn walk_response(
                         loop {
                             let s = -(1.0 - rng.uniform()).ln() / sigma_t;
                             let end = x + d * s;
-                            let mut inside = end.distance_squared(ball.0) < ball.1;
+                            // Both ends inside the (convex) ball: the flight meets no surface.
+                            let mut inside = x.distance_squared(ball.0) < ball.1
+                                && end.distance_squared(ball.0) < ball.1;
                             if !inside {
                                 // A new ball about the flight's start: within it no ray cast.
                                 let r = bvh.distance_within(x, BALL_FREE_PATHS / sigma_t);
