@@ -466,6 +466,11 @@ impl Tracer<'_> {
                 }
                 continue;
             }
+            if order >= self.max_order {
+                // A scattering event beyond the window: the light of the last order counted
+                // has left (or been reflected on) along the specular chain followed so far.
+                return r;
+            }
             o += d * s;
             order += 1;
             r.events += 1;
@@ -474,7 +479,7 @@ impl Tracer<'_> {
                 r.radiance +=
                     scale * albedo * self.refracted_next_event(o, d, c, rng, &mut r.capped);
             }
-            if order >= self.max_order || rng.uniform() >= albedo {
+            if rng.uniform() >= albedo {
                 return r;
             }
             d = self.medium.sample_phase(d, rng);
