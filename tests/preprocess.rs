@@ -86,9 +86,12 @@ fn top(p: &Preprocessed, size: [f32; 3]) -> Vec<bool> {
         .collect()
 }
 
+/// A semi-infinite slab under uniform light returns R_total from every interior texel, for the
+/// longest diffusion (skim milk), the channels farthest apart (skin1) and the shortest
+/// (ketchup).
 #[test]
 fn slab_under_uniform_light_reflects_r_total() {
-    for name in ["skimmilk", "marble", "skin1", "ketchup"] {
+    for name in ["skimmilk", "skin1", "ketchup"] {
         let m = Material::preset(name).unwrap();
         let r_total = m.total_reflectance();
         let (p, size) = semi_infinite_slab(&m);
