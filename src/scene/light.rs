@@ -56,15 +56,21 @@ impl Light {
                 let d = self.position.as_dvec3() - x;
                 let r2 = d.length_squared().max(1e-8);
                 let wi = d / r2.sqrt();
-                let mut s = 1.0 / r2;
-                if self.kind == LightKind::Spot {
-                    let c = (-wi).dot(self.direction.as_dvec3().normalize());
-                    let edge = self.cos_cone as f64;
-                    let t = ((c - edge) / (0.05 * (1.0 - edge))).clamp(0.0, 1.0);
-                    s *= t * t * (3.0 - 2.0 * t);
-                }
-                (wi, r2.sqrt(), s)
+                (wi, r2.sqrt(), 1.0 / r2 * self.cone_weight(-wi))
             }
         }
+    }
+
+    /// The spot's smooth cone edge for light leaving it along the unit direction `travel`: 1
+    /// inside, falling to 0 over the outer 5 % of 1 - cos of the half-angle; 1 for every other
+    /// kind.
+    pub fn cone_weight(&self, travel: DVec3) -> f64 {
+        if self.kind != LightKind::Spot {
+            return 1.0;
+        }
+        let c = travel.dot(self.direction.as_dvec3().normalize());
+        let edge = self.cos_cone as f64;
+        let t = ((c - edge) / (0.05 * (1.0 - edge))).clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
     }
 }

@@ -52,7 +52,7 @@
 //! light that crossed the object unscattered. At eta != 1 every surface is an interface
 //! between air and the medium: parts must not touch or overlap.
 
-use super::{PathResult, Scratch, Tracer, MAX_EVENTS};
+use super::{PathResult, Tracer, MAX_EVENTS};
 use crate::numeric::rng::Rng;
 use crate::scene::desc::LightKind;
 use glam::DVec3;
@@ -138,12 +138,11 @@ fn through_plane(h1: f64, h2: f64, along: f64, eta: f64) -> (f64, f64, f64, f64)
 /// What a lamp is to a connection: light arriving from one direction (directional lights,
 /// one direction of an environment), or from a point.
 #[derive(Debug, Clone, Copy)]
-enum Source {
+enum Source<'a> {
     /// Unit direction towards the light; irradiance across the beam.
     Direction(DVec3, f64),
-    /// Position; intensity; for a spot, its axis (unit, the way it shines) and cosine of the
-    /// cone's edge.
-    Point(DVec3, f64, Option<(DVec3, f64)>),
+    /// A point or spot light and its intensity in this channel.
+    Point(&'a crate::scene::light::Light, f64),
 }
 
 /// One refracted connection from a point inside to a lamp.
@@ -219,7 +218,8 @@ impl Tracer<'_> {
                     irradiance: e * cos_i * transmitted / cos_t,
                 })
             }
-            Source::Point(q, intensity, spot) => {
+            Source::Point(lamp, intensity) => {
+                let q = lamp.position.as_dvec3();
                 let height = n.dot(q - a);
                 if height <= 0.0 {
                     return None;
@@ -238,12 +238,7 @@ impl Tracer<'_> {
                 if distance <= 0.0 {
                     return None;
                 }
-                let mut i = intensity;
-                if let Some((axis, edge)) = spot {
-                    let c = (entry - q).normalize().dot(axis);
-                    let t = ((c - edge) / (0.05 * (1.0 - edge))).clamp(0.0, 1.0);
-                    i *= t * t * (3.0 - 2.0 * t);
-                }
+                let i = intensity * lamp.cone_weight((entry - q).normalize());
                 let transmitted = 1.0 - fresnel_reflectance(cos_i, eta);
                 Some(Connection {
                     triangle: k,
@@ -285,7 +280,7 @@ impl Tracer<'_> {
     ) -> f64 {
         let straight = match source {
             Source::Direction(w, _) => w,
-            Source::Point(q, ..) => (q - x).normalize(),
+            Source::Point(lamp, _) => (lamp.position.as_dvec3() - x).normalize(),
         };
         let straight_walk = self.walk(x, straight, source);
         let draw = |rng: &mut Rng| {
@@ -303,8 +298,8 @@ impl Tracer<'_> {
         let from = found.entry + n * self.eps;
         let blocked = match source {
             Source::Direction(w, _) => self.bvh.occluded(from, w, f64::INFINITY),
-            Source::Point(q, ..) => {
-                let to = q - from;
+            Source::Point(lamp, _) => {
+                let to = lamp.position.as_dvec3() - from;
                 let length = to.length();
                 self.bvh.occluded(from, to / length, length)
             }
@@ -343,26 +338,14 @@ impl Tracer<'_> {
                 continue;
             }
             let source = match l.kind {
-                LightKind::Environment => {
-                    let Some(env) = &self.scene.environment else {
-                        continue;
-                    };
-                    let (w, radiance, pdf) =
-                        env.sample([rng.uniform(), rng.uniform(), rng.uniform()]);
-                    if pdf <= 0.0 || radiance[c] <= 0.0 {
-                        continue;
-                    }
-                    Source::Direction(l.rotation.as_dquat() * w, le * radiance[c] / pdf)
-                }
+                LightKind::Environment => match self.sample_sky(l, c, rng) {
+                    Some((w, radiance, pdf)) => Source::Direction(w, le * radiance / pdf),
+                    None => continue,
+                },
                 LightKind::Directional => {
                     Source::Direction(-l.direction.as_dvec3().normalize(), le)
                 }
-                LightKind::Point => Source::Point(l.position.as_dvec3(), le, None),
-                LightKind::Spot => Source::Point(
-                    l.position.as_dvec3(),
-                    le,
-                    Some((l.direction.as_dvec3().normalize(), l.cos_cone as f64)),
-                ),
+                LightKind::Point | LightKind::Spot => Source::Point(l, le),
             };
             sum += self.refracted_light(x, d, c, source, rng, capped);
         }
@@ -378,7 +361,6 @@ impl Tracer<'_> {
         d: DVec3,
         c: usize,
         rng: &mut Rng,
-        _scratch: &mut Scratch,
     ) -> PathResult {
         let (sigma_t, albedo, eta) = (self.medium.sigma_t[c], self.medium.albedo[c], self.eta);
         let counted = |order: u32| order >= self.min_order && order <= self.max_order;
@@ -418,7 +400,11 @@ impl Tracer<'_> {
                 let f = fresnel_reflectance(cos_i, eta);
                 let mirror = reflect(d, n);
                 let from = p + n * self.eps;
-                let escapes = !self.bvh.occluded(from, mirror, f64::INFINITY);
+                let reflected = rng.uniform() < f;
+                // Whether the mirror ray leaves for the sky: needed for the sky's image, and to
+                // end a reflected path.
+                let escapes = (reflected || self.scene.environment.is_some())
+                    && !self.bvh.occluded(from, mirror, f64::INFINITY);
                 // The mirror image of the sky, its expectation taken here for both choices.
                 if escapes {
                     let l = scale * f * self.sky(mirror, c);
@@ -429,7 +415,7 @@ impl Tracer<'_> {
                     }
                 }
                 speculars += 1;
-                if rng.uniform() < f {
+                if reflected {
                     if escapes {
                         return r;
                     }

@@ -358,18 +358,11 @@ impl<'a> Tracer<'a> {
                 continue;
             }
             if l.kind == crate::scene::desc::LightKind::Environment {
-                // One direction drawn by the map's brightness (sun included).
-                let Some(env) = &self.scene.environment else {
-                    continue;
-                };
-                let (w, radiance, pdf) = env.sample([rng.uniform(), rng.uniform(), rng.uniform()]);
-                if pdf <= 0.0 || radiance[c] <= 0.0 {
-                    continue;
+                if let Some((wi, radiance, pdf)) = self.sample_sky(l, c, rng) {
+                    let tau =
+                        self.medium.sigma_t[c] * self.inside_length(x, wi, f64::INFINITY, depth, s);
+                    sum += le * radiance / pdf * self.medium.phase(d.dot(wi)) * (-tau).exp();
                 }
-                let wi = l.rotation.as_dquat() * w;
-                let tau =
-                    self.medium.sigma_t[c] * self.inside_length(x, wi, f64::INFINITY, depth, s);
-                sum += le * radiance[c] / pdf * self.medium.phase(d.dot(wi)) * (-tau).exp();
                 continue;
             }
             let (wi, dist, scale) = l.towards(x);
@@ -382,6 +375,20 @@ impl<'a> Tracer<'a> {
         sum
     }
 
+    /// One direction of the environment light `l` drawn by the map's brightness (sun
+    /// included): the world direction towards it, the map's radiance in channel `c` and the
+    /// density; `None` without a map or where the draw carries nothing.
+    fn sample_sky(
+        &self,
+        l: &crate::scene::light::Light,
+        c: usize,
+        rng: &mut Rng,
+    ) -> Option<(DVec3, f64, f64)> {
+        let env = self.scene.environment.as_ref()?;
+        let (w, radiance, pdf) = env.sample([rng.uniform(), rng.uniform(), rng.uniform()]);
+        (pdf > 0.0 && radiance[c] > 0.0).then(|| (l.rotation.as_dquat() * w, radiance[c], pdf))
+    }
+
     /// Radiance of channel `c` arriving at `o` from the direction `-d` (`o` outside the object).
     pub fn radiance(
         &self,
@@ -392,7 +399,7 @@ impl<'a> Tracer<'a> {
         scratch: &mut Scratch,
     ) -> PathResult {
         if self.eta != 1.0 {
-            return self.refracted_radiance(o, d, c, rng, scratch);
+            return self.refracted_radiance(o, d, c, rng);
         }
         let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
         let mut r = PathResult::default();
