@@ -660,8 +660,10 @@ mod tests {
     /// tabulated exit lobe. Ketchup: the red channel's diffusion length is 5 mm, the box 2 m.
     #[test]
     fn a_large_box_returns_the_half_space_total_and_lobe() {
-        let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 8);
-        let nodes = Nodes::build(&mesh, 250.0);
+        // Two segments a side: a node at each face's centre, its support a flat square
+        // hundreds of diffusion lengths across, and few nodes to walk from.
+        let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 4);
+        let nodes = Nodes::build(&mesh, 500.0);
         let m = medium_of("ketchup", true);
         let centre = nodes
             .positions
@@ -736,8 +738,10 @@ mod tests {
     /// incidence's.
     #[test]
     fn walks_enter_along_the_lamp() {
-        let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 8);
-        let nodes = Nodes::build(&mesh, 250.0);
+        // Two segments a side: a node at each face's centre, its support a flat square
+        // hundreds of diffusion lengths across, and few nodes to walk from.
+        let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 4);
+        let nodes = Nodes::build(&mesh, 500.0);
         let m = medium_of("ketchup", true);
         let find = |z: f32| {
             nodes
@@ -960,8 +964,8 @@ mod tests {
     /// lit evenly around it, without a drift along any side beyond the walks' noise.
     #[test]
     fn light_leaves_the_sides_of_a_cube_lit_from_above_leaning_down() {
-        let mesh = Mesh::cuboid(glam::Vec3::splat(20.0), 8);
-        let nodes = Nodes::build(&mesh, 2.5);
+        let mesh = Mesh::cuboid(glam::Vec3::splat(20.0), 4);
+        let nodes = Nodes::build(&mesh, 5.0);
         let m = medium_of("skimmilk", true);
         let lamp = Light {
             kind: LightKind::Directional,
