@@ -18,6 +18,23 @@ pub const MAX_TEXTURE_BYTES: u64 = 256 << 20;
 /// Largest cache or EXR file read back.
 pub const MAX_DATA_BYTES: u64 = 8 << 30;
 
+/// Widest and tallest image read back or written, pixels per side: the largest 2D image of
+/// common devices.
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
+/// The machine's memory, bytes (`MemTotal` of /proc/meminfo; 16 GiB where it cannot be read):
+/// what an input may make the program allocate is bounded by a part of it.
+pub fn host_memory_bytes() -> u64 {
+    std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|text| {
+            let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+            let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+            Some(kib * 1024)
+        })
+        .unwrap_or(16 << 30)
+}
+
 /// Reads `path` whole if it is a regular file (symbolic links followed) of at most `cap`
 /// bytes; otherwise an error naming `what`, the path and what it is instead.
 pub fn read_regular(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {

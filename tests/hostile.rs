@@ -39,11 +39,27 @@ fn writers_never_replace_what_is_not_a_regular_file() {
     std::os::unix::fs::symlink(&target, &link).unwrap();
     let folder = dir.join("folder.exr");
     std::fs::create_dir(&folder).unwrap();
+    // A character device like /dev/full (major 1, minor 7), made here: where mknod is not
+    // allowed (not root), the FIFO stands for every special file.
+    let device = dir.join("full");
+    let made_device = std::process::Command::new("mknod")
+        .arg(&device)
+        .args(["c", "1", "7"])
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !made_device {
+        println!("mknod not allowed here: no character device tried");
+    }
     for (path, needle, was) in [
+        (&device, "is a character device", "special"),
         (&fifo, "is a FIFO (named pipe)", "special"),
         (&link, "is a symbolic link", "link"),
         (&folder, "is a folder", "folder"),
     ] {
+        if path == &device && !made_device {
+            continue;
+        }
         let mut c = bin();
         c.args(["sky", "--width", "16", "--out"]).arg(path);
         fails_with(c, needle);
@@ -54,6 +70,43 @@ fn writers_never_replace_what_is_not_a_regular_file() {
     fails_with(c, "is a symbolic link");
     assert_eq!(kind(&link), "link");
     assert_eq!(std::fs::read(&target).unwrap(), b"the link's target");
+
+    // The last file `truth`, `reference` and `compare` write a FIFO or a link: refused
+    // before the work (a truth of 100 000 paths per pixel would run for hours).
+    let traced = dir.join("traced");
+    std::fs::create_dir(&traced).unwrap();
+    assert!(std::process::Command::new("mkfifo")
+        .arg(traced.join("truth.json"))
+        .status()
+        .unwrap()
+        .success());
+    std::os::unix::fs::symlink(&target, traced.join("reference.json")).unwrap();
+    std::os::unix::fs::symlink(&target, traced.join("error.json")).unwrap();
+    let image = dir.join("a.exr");
+    translucent::output::write_exr(&image, 2, 2, &[0.5; 16]).unwrap();
+    for (args, needle) in [
+        (
+            vec!["truth", "--spp", "100000"],
+            "truth.json' exists and is a FIFO (named pipe)",
+        ),
+        (
+            vec!["reference"],
+            "reference.json' exists and is a symbolic link",
+        ),
+    ] {
+        let mut c = bin();
+        c.args(&args).arg("--out").arg(&traced);
+        common::fails_within(c, needle, std::time::Duration::from_secs(60));
+    }
+    let mut c = bin();
+    c.arg("compare")
+        .arg(&image)
+        .arg(&image)
+        .arg("--out")
+        .arg(&traced);
+    fails_with(c, "error.json' exists and is a symbolic link");
+    assert!(!traced.join("truth.exr").exists() && !traced.join("error.exr").exists());
+    assert_eq!(kind(&traced.join("truth.json")), "special");
 
     // One of a render's files a link: refused before any work, nothing of the set written.
     let out = dir.join("out");
@@ -112,9 +165,64 @@ fn meaningless_settings_are_refused_by_name() {
             .arg(&scene);
         fails_with(c, "per mm lies outside 1e-9..1e6");
     }
+    // Positions and the exposure, finite in f64, checked in the f32 they are used in.
+    for (text, needle) in [
+        (
+            "[camera]\nposition = [0.0, 0.0, 1e39]\ntarget = [0.0, 0.0, 0.0]\n",
+            "[camera] position = [0.0, 0.0, 1e39]: coordinates beyond 1e15 mm",
+        ),
+        (
+            "[[lights]]\nkind = \"point\"\nposition = [1e20, 0.0, 0.0]\n",
+            "position = [1e20, 0.0, 0.0]: coordinates beyond 1e15 mm",
+        ),
+        ("[output]\nexposure = 1e39\n", "within f32's range"),
+        ("[output]\nexposure = 1e-50\n", "within f32's range"),
+        // Counted before it is built: a billion triangles.
+        (
+            "[mesh]\nbuiltin = \"sphere\"\nsegments = 2048\nsubdivide = 4\n",
+            "would have 1072693248 triangles",
+        ),
+    ] {
+        let scene = dir.join("f32.toml");
+        std::fs::write(&scene, text).unwrap();
+        let mut c = bin();
+        c.args(["render", "--no-cache", "--out"])
+            .arg(dir.join("f32"))
+            .arg(&scene);
+        common::fails_within(c, needle, std::time::Duration::from_secs(60));
+    }
     let mut c = bin();
     c.args(["view", "--script", ""]);
     fails_with(c, "--script has no commands");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An EXR given to `compare` whose header declares more pixels than any image read back is
+/// refused before the decoder allocates them (a 344-byte file once asked for 24 GiB).
+#[test]
+fn declared_image_sizes_are_checked_before_allocation() {
+    let dir = temp_dir("declared");
+    let path = dir.join("huge.exr");
+    translucent::output::write_exr(&path, 8, 4, &[1.0; 8 * 4 * 4]).unwrap();
+    let mut exr = std::fs::read(&path).unwrap();
+    // Both windows (box2i: x min, y min, x max, y max) stretched to 65536 x 32768.
+    for name in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+        let at = exr.windows(name.len()).position(|w| w == name).unwrap() + name.len() + 4;
+        exr[at + 8..at + 12].copy_from_slice(&65535i32.to_le_bytes());
+        exr[at + 12..at + 16].copy_from_slice(&32767i32.to_le_bytes());
+    }
+    std::fs::write(&path, &exr).unwrap();
+    let mut c = bin();
+    c.arg("compare")
+        .arg(&path)
+        .arg(&path)
+        .arg("--out")
+        .arg(dir.join("cmp"));
+    common::fails_within(
+        c,
+        "declares 65536 x 32768 pixels: at most 16384 x 16384 are read",
+        std::time::Duration::from_secs(60),
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -549,3 +549,28 @@ fn light_is_never_negative() {
         );
     }
 }
+
+/// A run that only reads the cache removes the temporaries killed runs left there (an
+/// interrupted cache write once left 4 MB that no later run removed); a fresh one stays.
+#[test]
+fn reading_the_cache_removes_stale_temporaries() {
+    use translucent::preprocess::cache;
+    let dir = std::env::temp_dir().join(format!("translucent-stale-cache-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // No process has a pid above 2^22 on Linux: the writer is gone.
+    let stale = dir.join(".0123456789abcdef.bin.4294967.translucent.tmp");
+    let fresh = dir.join(".fedcba9876543210.bin.4294967.translucent.tmp");
+    for f in [&stale, &fresh] {
+        std::fs::write(f, b"left by a killed run").unwrap();
+    }
+    let two_hours_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+    std::fs::File::options()
+        .write(true)
+        .open(&stale)
+        .unwrap()
+        .set_modified(two_hours_ago)
+        .unwrap();
+    assert!(cache::load::<Vec<u8>>(&dir, 7).unwrap().is_none());
+    assert!(!stale.exists() && fresh.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

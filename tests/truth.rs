@@ -548,6 +548,26 @@ fn open_meshes_are_refused() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// An image whose sums would not fit in half of the machine's memory is refused before
+/// anything is allocated (16384 x 16384 pixels keep about 32 GiB).
+#[test]
+fn images_beyond_memory_are_refused() {
+    let scene = common::scene(
+        "[mesh]\nbuiltin = \"sphere\"\nsegments = 8\n[output]\nwidth = 16384\nheight = 16384\n",
+    );
+    let bytes = 16384u64 * 16384 * truth::BYTES_PER_PIXEL;
+    let memory = translucent::input::host_memory_bytes();
+    if bytes <= memory / 2 {
+        println!("{memory} bytes of memory take a truth of 16384 x 16384: not tried");
+        return;
+    }
+    let e = truth::compute(&scene, &TruthSettings::default(), &quiet).unwrap_err();
+    assert!(
+        e.to_string().contains("above half of this machine's"),
+        "{e}"
+    );
+}
+
 /// A time budget stops the tracing once another round as long as the last would overrun it;
 /// a budget below half of what one sample per pixel and half takes is refused, from a pilot
 /// on a sample of the pixels. Checked by the work done under a clock the test controls (each
@@ -569,7 +589,16 @@ fn time_budget() {
     // Readings: 0 at the start, 0.1 and 0.2 around the pilot, 0.3 at the start of the rounds,
     // then one at the end of each round: 0.4, 0.5, ... The round ending at 1.0 is the last
     // (another would end past 1.05): seven rounds.
-    let t = truth::compute_with_clock(&scene, &s(1.05), &|_| {}, &clock).unwrap();
+    let reports = std::sync::Mutex::new(Vec::new());
+    let progress = |f: f64| reports.lock().unwrap().push(f);
+    let t = truth::compute_with_clock(&scene, &s(1.05), &progress, &clock).unwrap();
+    // Progress within each round too (per chunk of pixels), never backwards, within [0, 1].
+    let reports = reports.into_inner().unwrap();
+    assert!(reports.len() > 2 * 7, "{reports:?}");
+    assert!(
+        reports.windows(2).all(|p| p[0] <= p[1]) && reports.iter().all(|f| (0.0..=1.0).contains(f)),
+        "{reports:?}"
+    );
     assert!(
         t.pixels > 0 && t.pixels <= truth::PILOT_PIXELS,
         "{}",

@@ -10,6 +10,7 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
             args.full_scale
         );
     }
+    output::check_targets(&args.out, &["error.exr", "error.png", "error.json"])?;
     let (w, h, a) = output::read_exr(&args.render)?;
     let (w2, h2, b) = output::read_exr(&args.reference)?;
     finite_image(&args.render, &a)?;

@@ -32,6 +32,15 @@ pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
         }
         settings.theta = t;
     }
+    output::check_targets(
+        &args.out,
+        &[
+            "reference.exr",
+            "reference.png",
+            "vertices.csv",
+            "reference.json",
+        ],
+    )?;
     output::create_dir(&args.out)?;
     let start = std::time::Instant::now();
     let r = Reference::compute(&scene, settings);

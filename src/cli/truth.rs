@@ -19,6 +19,16 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
     };
     // Refuse before creating anything.
     truth::validate(&scene, &settings)?;
+    output::check_targets(
+        &args.out,
+        &[
+            "truth.exr",
+            "truth.png",
+            "noise.exr",
+            "truth_surface.exr",
+            "truth.json",
+        ],
+    )?;
     output::create_dir(&args.out)?;
     let medium = truth::Medium::new(&scene.material, args.g);
     println!(

@@ -42,6 +42,15 @@ pub fn check_replaceable(path: &Path) -> Result<()> {
     }
 }
 
+/// Refuses, before any work, a command's output folder `dir` where one of the files it will
+/// write (`names`) exists and is not a regular file ([`check_replaceable`]): the refusal
+/// comes before minutes of tracing, not after them.
+pub fn check_targets(dir: &Path, names: &[&str]) -> Result<()> {
+    names
+        .iter()
+        .try_for_each(|name| check_replaceable(&dir.join(name)))
+}
+
 /// A name the viewer's commands write under their output folder: one plain file name, so that
 /// what they write stays inside that folder.
 pub fn plain_name(name: &str) -> Result<&str> {
@@ -281,6 +290,19 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     let meta =
         std::fs::metadata(path).with_context(|| format!("cannot read '{}'", path.display()))?;
     crate::input::check_regular(path, &meta, crate::input::MAX_DATA_BYTES, "image")?;
+    // The declared size, checked before the decoder allocates what the header claims.
+    let header = exr::meta::MetaData::read_from_file(path, false)
+        .with_context(|| format!("cannot read '{}'", path.display()))?;
+    let most = crate::input::MAX_IMAGE_SIDE as usize;
+    for layer in &header.headers {
+        let (w, h) = (layer.layer_size.width(), layer.layer_size.height());
+        if w > most || h > most {
+            anyhow::bail!(
+                "'{}' declares {w} x {h} pixels: at most {most} x {most} are read",
+                path.display()
+            );
+        }
+    }
     let image = read_first_rgba_layer_from_file(
         path,
         |resolution, _| {

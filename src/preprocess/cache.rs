@@ -73,8 +73,10 @@ pub fn store<T: serde::Serialize>(dir: &Path, key: u64, value: &T) -> Result<Pat
 }
 
 /// Loads the entry for `key`: `Ok(None)` if there is none, an error naming the problem if
-/// the file is stale or corrupt.
+/// the file is stale or corrupt. Temporaries that killed runs left in the folder go first: a
+/// run that only reads the cache cleans it too.
 pub fn load<T: serde::de::DeserializeOwned>(dir: &Path, key: u64) -> Result<Option<T>> {
+    crate::output::remove_stale_temporaries(dir);
     let p = path(dir, key);
     match std::fs::metadata(&p) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),

@@ -259,18 +259,6 @@ impl Work {
 /// 2D image of common devices.
 pub const MAX_ATLAS_TEXELS: u64 = 16384 * 16384;
 
-/// The machine's memory, bytes (`MemTotal` of /proc/meminfo; 16 GiB where it cannot be read).
-pub fn host_memory_bytes() -> u64 {
-    std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|text| {
-            let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
-            let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-            Some(kib * 1024)
-        })
-        .unwrap_or(16 << 30)
-}
-
 /// Estimates a preprocessing run (see [`Estimate`]).
 pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
     let area = mesh.surface_area();
@@ -365,7 +353,7 @@ impl Estimate {
                 "the atlas would need about {atlas} texels, above the {MAX_ATLAS_TEXELS} of a 16384 x 16384 image; use a larger --texel-mm (or [settings] texel_mm)"
             );
         }
-        let most = host_memory_bytes() / 2;
+        let most = crate::input::host_memory_bytes() / 2;
         if self.device_bytes_min > most {
             anyhow::bail!(
                 "the scene needs at least {} MiB of per-frame data, above half of this machine's {} MiB of memory, in which it is built; use a larger --texel-mm (or [settings] texel_mm) or a smaller --kernel",

@@ -687,11 +687,24 @@ impl Mesh {
         self.triangle_count() - before
     }
 
+    /// The rings from pole to pole and the segments around the equator of
+    /// [`Mesh::sphere`]`(_, segments)`.
+    fn sphere_grid(segments: u32) -> (u32, u32) {
+        let seg = segments.max(3);
+        ((seg / 2).max(2), seg)
+    }
+
+    /// The triangles [`Mesh::sphere`]`(_, segments)` has, known before it is built: a fan
+    /// at each pole and two per cell between.
+    pub fn sphere_triangles(segments: u32) -> u64 {
+        let (rings, seg) = Mesh::sphere_grid(segments);
+        seg as u64 * (2 * rings as u64 - 2)
+    }
+
     /// A UV sphere of `radius` around the origin with `segments` around the equator. The seam
     /// column repeats the first one's positions exactly and the poles are one point each.
     pub fn sphere(radius: f32, segments: u32) -> Mesh {
-        let seg = segments.max(3);
-        let rings = (seg / 2).max(2);
+        let (rings, seg) = Mesh::sphere_grid(segments);
         let mut m = Mesh {
             has_uvs: true,
             ..Mesh::default()
@@ -732,30 +745,47 @@ impl Mesh {
         m
     }
 
-    /// A box centred on the origin with edge lengths `size`; the longest edge has `segments`
-    /// subdivisions, the others proportionally many. Faces do not share vertices.
-    pub fn cuboid(size: Vec3, segments: u32) -> Mesh {
+    /// The six faces of [`Mesh::cuboid`]`(size, segments)`: (normal, u axis, v axis, cells
+    /// along u, cells along v), with u x v = normal, so triangles wind counter-clockwise.
+    fn cuboid_faces(size: Vec3, segments: u32) -> [(Vec3, Vec3, Vec3, u32, u32); 6] {
         let longest = size.max_element();
         let steps = |len: f32| ((len / longest * segments as f32).round() as u32).max(1);
-        let h = 0.5 * size;
-        let mut m = Mesh {
-            has_uvs: true,
-            ..Mesh::default()
-        };
-        // (normal, u axis, v axis): u x v = normal, so triangles wind counter-clockwise.
-        let faces = [
+        [
             (Vec3::X, Vec3::NEG_Z, Vec3::Y),
             (Vec3::NEG_X, Vec3::Z, Vec3::Y),
             (Vec3::Y, Vec3::X, Vec3::NEG_Z),
             (Vec3::NEG_Y, Vec3::X, Vec3::Z),
             (Vec3::Z, Vec3::X, Vec3::Y),
             (Vec3::NEG_Z, Vec3::NEG_X, Vec3::Y),
-        ];
-        for (n, u, v) in faces {
-            let (nu, nv) = (
+        ]
+        .map(|(n, u, v)| {
+            (
+                n,
+                u,
+                v,
                 steps((u * size).abs().max_element()),
                 steps((v * size).abs().max_element()),
-            );
+            )
+        })
+    }
+
+    /// The triangles [`Mesh::cuboid`]`(size, segments)` has, known before it is built.
+    pub fn cuboid_triangles(size: Vec3, segments: u32) -> u64 {
+        Mesh::cuboid_faces(size, segments)
+            .iter()
+            .map(|f| 2 * f.3 as u64 * f.4 as u64)
+            .sum()
+    }
+
+    /// A box centred on the origin with edge lengths `size`; the longest edge has `segments`
+    /// subdivisions, the others proportionally many. Faces do not share vertices.
+    pub fn cuboid(size: Vec3, segments: u32) -> Mesh {
+        let h = 0.5 * size;
+        let mut m = Mesh {
+            has_uvs: true,
+            ..Mesh::default()
+        };
+        for (n, u, v, nu, nv) in Mesh::cuboid_faces(size, segments) {
             let base = m.positions.len() as u32;
             let (eu, ev, en) = (
                 (u * h).abs().max_element(),
@@ -1038,6 +1068,24 @@ mod tests {
             assert!(
                 (p.dot(*n) - (n.abs() * Vec3::new(20.0, 20.0, 5.0)).max_element()).abs() < 1e-4
             );
+        }
+    }
+
+    #[test]
+    fn triangle_counts_are_known_before_building() {
+        for seg in [3, 4, 7, 8, 33] {
+            assert_eq!(
+                Mesh::sphere(1.0, seg).triangle_count() as u64,
+                Mesh::sphere_triangles(seg),
+                "sphere, {seg} segments"
+            );
+            for size in [Vec3::splat(2.0), Vec3::new(40.0, 2.0, 13.0)] {
+                assert_eq!(
+                    Mesh::cuboid(size, seg).triangle_count() as u64,
+                    Mesh::cuboid_triangles(size, seg),
+                    "box {size}, {seg} segments"
+                );
+            }
         }
     }
 

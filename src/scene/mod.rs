@@ -140,6 +140,21 @@ fn cone_misses(apex: Vec3, axis: Vec3, half_angle: f32, center: Vec3, radius: f3
     (off - spread > half_angle).then_some(off)
 }
 
+/// Refuses a mesh of `triangles` that `steps` subdivisions (each quadruples them) would take
+/// past [`MAX_TRIANGLES`], before it is built or subdivided.
+fn check_triangles(triangles: u64, steps: u32) -> Result<()> {
+    let total = triangles.saturating_mul(4u64.saturating_pow(steps));
+    if total > MAX_TRIANGLES as u64 {
+        let after = if steps > 0 {
+            format!(" ({triangles} subdivided {steps} times)")
+        } else {
+            String::new()
+        };
+        bail!("the mesh would have {total} triangles{after}; at most {MAX_TRIANGLES} are supported (fewer [mesh] segments or subdivide steps)");
+    }
+    Ok(())
+}
+
 fn vec3(a: [f64; 3]) -> Vec3 {
     Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)
 }
@@ -147,6 +162,19 @@ fn vec3(a: [f64; 3]) -> Vec3 {
 fn finite(name: &str, v: &[f64]) -> Result<()> {
     if v.iter().any(|x| !x.is_finite()) {
         bail!("{name} = {v:?} must be finite");
+    }
+    Ok(())
+}
+
+/// Largest coordinate of a camera or lamp position, mm: positions are used in f32, where a
+/// squared distance of 1e30 still leaves eight decades below overflow (3.4e38).
+pub const MAX_POSITION_MM: f64 = 1e15;
+
+/// Checks a position given in the scene file in the precision it is used in (f32, squared).
+fn position_mm(name: &str, v: &[f64; 3]) -> Result<()> {
+    finite(name, v)?;
+    if v.iter().any(|x| x.abs() > MAX_POSITION_MM) {
+        bail!("{name} = {v:?}: coordinates beyond {MAX_POSITION_MM:e} mm overflow the f32 arithmetic they are used in");
     }
     Ok(())
 }
@@ -231,6 +259,10 @@ impl Scene {
             }
         }
         let units = *md.units.get_or_insert(Units::Mm);
+        let steps = *md.subdivide.get_or_insert(0);
+        if steps > 4 {
+            bail!("[mesh] subdivide = {steps}: at most 4 steps (each quadruples the triangles)");
+        }
         let mut mesh = match (&md.obj, &md.builtin) {
             (Some(_), Some(b)) => bail!("[mesh] gives both obj and builtin = {b:?}; choose one"),
             (Some(obj), None) => {
@@ -239,6 +271,7 @@ impl Scene {
                     bail!("mesh file '{}' does not exist", p.display());
                 }
                 let mesh = Mesh::load_obj(&p)?;
+                check_triangles(mesh.triangle_count() as u64, steps)?;
                 // The resolved scene (saved beside the render) names it from anywhere.
                 md.obj = Some(absolute(&p));
                 mesh
@@ -247,7 +280,11 @@ impl Scene {
                 let name = builtin.clone().unwrap_or_else(|| "bunny".into());
                 md.builtin = Some(name.clone());
                 match name.as_str() {
-                    "bunny" => Mesh::parse_obj("builtin bunny", BUNNY_OBJ)?,
+                    "bunny" => {
+                        let mesh = Mesh::parse_obj("builtin bunny", BUNNY_OBJ)?;
+                        check_triangles(mesh.triangle_count() as u64, steps)?;
+                        mesh
+                    }
                     "sphere" => {
                         let r = *md.radius.get_or_insert(25.0);
                         let s = *md.segments.get_or_insert(64);
@@ -257,6 +294,7 @@ impl Scene {
                         if !(r.is_finite() && r > 0.0) {
                             bail!("[mesh] radius = {r} must be a finite positive length");
                         }
+                        check_triangles(Mesh::sphere_triangles(s), steps)?;
                         Mesh::sphere(r as f32, s)
                     }
                     "box" => {
@@ -268,24 +306,15 @@ impl Scene {
                         if size.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
                             bail!("[mesh] size = {size:?} must be three positive lengths");
                         }
+                        check_triangles(Mesh::cuboid_triangles(vec3(size), s), steps)?;
                         Mesh::cuboid(vec3(size), s)
                     }
                     other => bail!("unknown builtin mesh '{other}'; choose bunny, sphere or box"),
                 }
             }
         };
-        let steps = *md.subdivide.get_or_insert(0);
-        if steps > 4 {
-            bail!("[mesh] subdivide = {steps}: at most 4 steps (each quadruples the triangles)");
-        }
         for _ in 0..steps {
             mesh = mesh.subdivide();
-        }
-        if mesh.triangle_count() > MAX_TRIANGLES {
-            bail!(
-                "the mesh has {} triangles; at most {MAX_TRIANGLES} are supported",
-                mesh.triangle_count()
-            );
         }
         let texture = match &md.texture {
             Some(t) => {
@@ -399,8 +428,8 @@ impl Scene {
             (DVec3::from_array(target) + DVec3::new(0.0, 0.25, 1.0).normalize() * dist).to_array(),
         );
         let up = *cd.up.get_or_insert([0.0, 1.0, 0.0]);
-        finite("[camera] position", &position)?;
-        finite("[camera] target", &target)?;
+        position_mm("[camera] position", &position)?;
+        position_mm("[camera] target", &target)?;
         let view_dir = DVec3::from_array(target) - DVec3::from_array(position);
         if view_dir.length() < 1e-6 {
             bail!("[camera] position and target coincide");
@@ -545,7 +574,7 @@ impl Scene {
                     let Some(p) = l.position else {
                         bail!("{} is required for a {:?} light", name("position"), l.kind);
                     };
-                    finite(&name("position"), &p)?;
+                    position_mm(&name("position"), &p)?;
                     let (direction, cos_cone) = if l.kind == LightKind::Spot {
                         let to_center = (center.as_dvec3() - DVec3::from_array(p)).to_array();
                         let d = unit(&name("direction"), *l.direction.get_or_insert(to_center))?;
@@ -617,8 +646,9 @@ impl Scene {
         if width == 0 || height == 0 {
             bail!("[output] size {width}x{height} must be at least 1x1");
         }
-        if width > 16384 || height > 16384 {
-            bail!("[output] size {width}x{height} exceeds 16384 pixels per side");
+        let most = crate::input::MAX_IMAGE_SIDE;
+        if width > most || height > most {
+            bail!("[output] size {width}x{height} exceeds {most} pixels per side");
         }
         let settings = crate::preprocess::settings::SettingsOverrides::from(desc.settings);
         crate::preprocess::settings::validate(&settings).context("[settings]")?;
@@ -633,8 +663,13 @@ impl Scene {
         // Auto exposure: a white Lambertian surface facing the strongest light (at the object's
         // centre) maps to 0.8 of full scale.
         let exposure = match od.exposure {
-            Some(e) if e.is_finite() && e > 0.0 => e,
-            Some(e) => bail!("[output] exposure = {e} must be a finite positive number"),
+            // Used in f32: neither rounded to 0 (a black image) nor to infinity.
+            Some(e) if e.is_finite() && e > 0.0 && (e as f32).is_normal() => e,
+            Some(e) => bail!(
+                "[output] exposure = {e} must be a positive number within f32's range ({:e} to {:e}), in which it is used",
+                f32::MIN_POSITIVE,
+                f32::MAX
+            ),
             None => {
                 let peak = lights
                     .iter()
@@ -893,6 +928,23 @@ mod tests {
             ),
             ("[mesh]\nbuiltin = \"box\"\nsegments = 0", "segments"),
             ("[mesh]\nsubdivide = 9", "subdivide"),
+            (
+                "[output]\nshadow_map = 15",
+                "shadow_map = 15 must lie between 16 and 16384",
+            ),
+            (
+                "[output]\nshadow_map = 16385",
+                "shadow_map = 16385 must lie between 16 and 16384",
+            ),
+            // Counted before anything is built: a billion triangles, 50 million.
+            (
+                "[mesh]\nbuiltin = \"sphere\"\nsegments = 2048\nsubdivide = 4",
+                "would have 1072693248 triangles (4190208 subdivided 4 times)",
+            ),
+            (
+                "[mesh]\nbuiltin = \"box\"\nsegments = 2048",
+                "would have 50331648 triangles",
+            ),
             ("[[lights]]\nkind = \"point\"", "position"),
             (
                 "[[lights]]\nkind = \"directional\"\ndirection = [0.0, 0.0, 0.0]",

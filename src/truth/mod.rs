@@ -128,7 +128,17 @@ pub enum TruthError {
          shared by an odd number of triangles), so a path cannot tell inside from outside"
     )]
     Open,
+    /// An image whose sums and outputs would not fit in half of the machine's memory.
+    #[error(
+        "a truth of {0} x {1} pixels keeps about {2} MiB of sums and images, above half of \
+         this machine's {3} MiB of memory: give fewer pixels (--width, --height)"
+    )]
+    TooLarge(u32, u32, u64, u64),
 }
+
+/// Bytes a truth keeps per pixel: its sums (two halves and the surface, three channels, f64)
+/// and three RGBA f32 images (radiance, noise, surface), besides a covered pixel's index.
+pub const BYTES_PER_PIXEL: u64 = 9 * 8 + 3 * 16 + 4;
 
 /// The medium of one scene, per channel.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -463,6 +473,12 @@ pub fn validate(scene: &Scene, settings: &TruthSettings) -> Result<(), TruthErro
     if !scene.mesh.is_borderless() {
         return Err(TruthError::Open);
     }
+    let (w, h) = (scene.width, scene.height);
+    let bytes = w as u64 * h as u64 * BYTES_PER_PIXEL;
+    let memory = crate::input::host_memory_bytes();
+    if bytes > memory / 2 {
+        return Err(TruthError::TooLarge(w, h, bytes >> 20, memory >> 20));
+    }
     Ok(())
 }
 
@@ -590,6 +606,9 @@ pub fn compute_with_clock(
     // Sums of each half per covered pixel and channel, then of the surface's part of both.
     let mut sums = vec![[[0.0f64; 3]; 3]; covered.len()];
     let (mut events, mut paths, mut truncated, mut capped) = (0u64, 0u64, 0u64, 0u64);
+    // Under a time budget, the time a round is expected to take: the pilot's, then the last
+    // round's. Progress within a round follows it (the clock is read once a round).
+    let mut expected_round = 0.0;
     if let Some(budget) = settings.time_s {
         // One sample per pixel and half is the least a truth can be: timed on a strided sample
         // of the pixels (seeded apart from the image's samples, and dropped), and refused where
@@ -615,9 +634,13 @@ pub fn compute_with_clock(
         if round > 2.0 * budget {
             return Err(TruthError::BudgetTooShort(round, budget));
         }
+        expected_round = round;
     }
     let mut done = 0u32;
     let mut round_start = clock();
+    // The fraction last reported: progress never goes back where a round ends sooner than
+    // expected.
+    let mut shown = 0.0f64;
     // A round runs in chunks of pixels (each pixel's samples are seeded by the pixel, so the
     // chunks change nothing of the image): progress within long rounds.
     let chunk = covered.len().div_ceil(ROUND_CHUNKS).max(1);
@@ -657,16 +680,21 @@ pub fn compute_with_clock(
             paths += p;
             truncated += t;
             capped += m;
-            if settings.time_s.is_none() {
-                progress((done as f64 + (j + 1) as f64 / chunks as f64) / per_half as f64);
-            }
+            let part = (j + 1) as f64 / chunks as f64;
+            shown = shown.max(match settings.time_s {
+                Some(budget) => ((round_start + part * expected_round) / budget).min(1.0),
+                None => (done as f64 + part) / per_half as f64,
+            });
+            progress(shown);
         }
         done += 1;
         let elapsed = clock();
         let round = elapsed - round_start;
         round_start = elapsed;
+        expected_round = round;
         if let Some(budget) = settings.time_s {
-            progress((elapsed / budget).min(1.0));
+            shown = shown.max((elapsed / budget).min(1.0));
+            progress(shown);
             // Stop when another round as long as this one would overrun the budget.
             if elapsed + round > budget {
                 break;
