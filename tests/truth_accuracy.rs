@@ -57,8 +57,8 @@ fn check(
         ..Options::default()
     };
     let out = common::render(scene, &pre, options, 1);
-    // Finite; not yet non-negative: optimized blending's fitted weights can go negative on
-    // small images (the open robustness issue), which this comparison then counts as error.
+    // Finite. The sign is held where it is made (`preprocess.rs` light_is_never_negative);
+    // a negative pixel here would count as error against the truth.
     assert!(out.radiance.iter().all(|v| v.is_finite()));
     let e = metrics::compare_binned(&out.radiance, &truth, Some(&noise), w, h, 4);
     println!(
