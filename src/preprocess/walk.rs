@@ -660,7 +660,7 @@ mod tests {
     /// tabulated exit lobe. Ketchup: the red channel's diffusion length is 5 mm, the box 2 m.
     #[test]
     fn a_large_box_returns_the_half_space_total_and_lobe() {
-        // Two segments a side: a node at each face's centre, its support a flat square
+        // Four segments a side: a node at each face's centre, its support a flat square
         // hundreds of diffusion lengths across, and few nodes to walk from.
         let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 4);
         let nodes = Nodes::build(&mesh, 500.0);
@@ -738,7 +738,7 @@ mod tests {
     /// incidence's.
     #[test]
     fn walks_enter_along_the_lamp() {
-        // Two segments a side: a node at each face's centre, its support a flat square
+        // Four segments a side: a node at each face's centre, its support a flat square
         // hundreds of diffusion lengths across, and few nodes to walk from.
         let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 4);
         let nodes = Nodes::build(&mesh, 500.0);
