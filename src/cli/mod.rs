@@ -64,8 +64,9 @@ pub enum Command {
     /// Error near chart borders: the method's B texel by texel (CPU, no rasterisation) against
     /// the reference, by distance to the nearest chart border, for every blending mode.
     Borders(BordersArgs),
-    /// Tabulate the half-space profile by Monte Carlo (every albedo of the table; writes the
-    /// file the tabulated model ships with, assets/profiles/halfspace.txt).
+    /// Tabulate the half-space profile by Monte Carlo (every albedo of the table, behind a
+    /// boundary of relative index --eta; writes the files the tabulated model ships with,
+    /// assets/profiles/halfspace*.txt).
     Tabulate(TabulateArgs),
     /// Write the shipped environment map: a clear sky with a sun disc over a dark ground
     /// (assets/environments/sky.exr; see `src/environment/sky.rs`).
@@ -92,9 +93,13 @@ pub struct TabulateArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// The table file to write.
-    #[arg(long, default_value = "assets/profiles/halfspace.txt")]
-    pub out: PathBuf,
+    /// Relative index of refraction of the boundary (1: index-matched).
+    #[arg(long, default_value_t = 1.0)]
+    pub eta: f64,
+    /// The table file to write [default: the shipped one of --eta,
+    /// assets/profiles/halfspace.txt or assets/profiles/halfspace-eta<ETA>.txt].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 /// Arguments of `sky`.

@@ -23,8 +23,14 @@ pub(super) fn tabulate(args: &TabulateArgs) -> Result<()> {
     if args.paths == 0 || args.paths > 1 << 40 {
         anyhow::bail!("--paths must be between 1 and 2^40, not {}", args.paths);
     }
+    if !args.eta.is_finite() || !(1.0..=3.0).contains(&args.eta) {
+        anyhow::bail!("--eta must be between 1 and 3, not {}", args.eta);
+    }
+    let out = args.out.clone().unwrap_or_else(|| {
+        std::path::Path::new("assets/profiles").join(HalfSpaceTable::file_name(args.eta))
+    });
     // Refused before hours of paths, not after.
-    crate::output::check_replaceable(&args.out)?;
+    crate::output::check_replaceable(&out)?;
     let radii = table_radii();
     let albedos = table_albedos();
     let clock = std::time::Instant::now();
@@ -32,7 +38,7 @@ pub(super) fn tabulate(args: &TabulateArgs) -> Result<()> {
     let mut multiple = Vec::new();
     let mut lobes = Vec::new();
     for (i, &a) in albedos.iter().enumerate() {
-        let e = crate::truth::halfspace::simulate(a, &radii, args.paths, args.seed);
+        let e = crate::physics::halfspace::simulate(a, args.eta, &radii, args.paths, args.seed);
         eprintln!(
             "albedo {a:.6} ({}/{}): reflectance {:.5}, orders >= 2 {:.5} ({:.0} s)",
             i + 1,
@@ -46,6 +52,7 @@ pub(super) fn tabulate(args: &TabulateArgs) -> Result<()> {
         lobes.push((e.all.lobe, e.multiple.lobe));
     }
     let table = HalfSpaceTable {
+        eta: args.eta,
         albedos,
         radii,
         all,
@@ -53,10 +60,10 @@ pub(super) fn tabulate(args: &TabulateArgs) -> Result<()> {
         lobes,
         paths: args.paths,
     };
-    crate::output::write_atomic(&args.out, |tmp| {
+    crate::output::write_atomic(&out, |tmp| {
         std::fs::write(tmp, table.to_text()).map_err(anyhow::Error::from)
     })?;
-    println!("wrote {}", args.out.display());
+    println!("wrote {}", out.display());
     Ok(())
 }
 

@@ -11,7 +11,7 @@
 //! incidence they fall to 0.78 of normal incidence. A model whose multiple scattering is the
 //! normal-incidence profile and whose single scattering is exact per frame (`halfspace-single`,
 //! `volume`) is therefore too bright where light grazes the surface unless it takes this
-//! factor; the half-space tracer at oblique incidence checks it (`truth::halfspace`).
+//! factor; the half-space tracer at oblique incidence checks it (`physics::halfspace`).
 
 /// Gauss-Legendre nodes on (0, 1) for the H function's integral.
 const NODES: usize = 64;

@@ -656,7 +656,7 @@ mod tests {
 
     /// On a box much larger than the diffusion length the walks return what a half-space
     /// returns: the tabulated totals of orders >= 2 and of every order (an independent
-    /// simulation, `truth::halfspace`, of a flat medium), and at the centre of a face the
+    /// simulation, `physics::halfspace`, of a flat medium), and at the centre of a face the
     /// tabulated exit lobe. Ketchup: the red channel's diffusion length is 5 mm, the box 2 m.
     #[test]
     fn a_large_box_returns_the_half_space_total_and_lobe() {
