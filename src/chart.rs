@@ -56,7 +56,7 @@ pub struct Point {
     /// model without one: the walks).
     pub rel_rms: f64,
     /// Relative RMS error against volumetric truth after 4x4 binning with the truth's noise
-    /// removed, worst channel (NaN where the scene has no truth: eta != 1).
+    /// removed, worst channel (NaN where the scene has no truth).
     pub rel_rms_truth: f64,
     /// 99th percentile of the per-pixel relative error, worst channel.
     pub p99: f64,

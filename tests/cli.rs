@@ -142,7 +142,10 @@ fn bad_scene_files_are_refused_clearly() {
         "--out",
     ]);
     model.arg(dir.join("out"));
-    fails_with(model, "model 'halfspace-single' is the profile of an index-matched medium (eta = 1), not eta = 1.3");
+    fails_with(
+        model,
+        "model 'halfspace-single' needs an index-matched medium (eta = 1), not eta = 1.3",
+    );
     // The exact-model reference does not integrate the walks' F: refused, naming truth.
     let mut walked = bin();
     walked.args([

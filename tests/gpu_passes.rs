@@ -361,6 +361,9 @@ fn slab_radiance_through_the_whole_pipeline() {
     let eta = s.material.eta;
     let e = fresnel_transmittance(eta, 1.0);
     let r_total = s.material.total_reflectance();
+    // Seen along the normal: the profile's exit lobe there (the half-space behind the
+    // boundary, the default at skin1's eta).
+    let profiles = s.material.profiles();
     for mode in [Blend::Simple, Blend::Optimized] {
         let out = common::render(
             &s,
@@ -373,7 +376,9 @@ fn slab_radiance_through_the_whole_pipeline() {
         );
         // The 8 x 8 central pixels see the slab within a few mm of its centre, at normal exit.
         for c in 0..3 {
-            let want = fresnel_transmittance(eta, 1.0) * e * r_total[c] / std::f64::consts::PI;
+            let want =
+                fresnel_transmittance(eta, 1.0) * e * r_total[c] * profiles[c].exit_lobe(1.0)
+                    / std::f64::consts::PI;
             let mut sum = 0.0;
             for y in 28..36 {
                 for x in 28..36 {
@@ -817,7 +822,7 @@ fn csr_of(rows: &[Vec<(u32, translucent::physics::Rgb)>]) -> Csr {
 /// f16 rounding of the receiving texel's kernel, 2^-11 of its sum; F within 2^-11 of its
 /// row's sum), the same pruned F, fitted W (on the scale of F's row) and direct terms, and
 /// the same image to 0.1 %. For the dipole at a new index and for the tabulated half-space
-/// profile.
+/// profiles, behind a refractive boundary and index-matched.
 ///
 /// W is compared entry by entry since the fit's constrained solver is exact. That comparison
 /// found the disc mean of sliver texels losing all its precision in single precision (the
@@ -834,7 +839,15 @@ fn material_edits_re_weighted_on_the_device_equal_a_fresh_preprocessing() {
     let gpu = common::gpu();
     let mut reweigher = Reweigher::new(&gpu, Geometry::of(&shown)).unwrap();
     let edits = [
-        Material::custom([0.9, 1.1, 1.6], [0.02, 0.05, 0.3], 1.4).unwrap(),
+        Material::custom([0.9, 1.1, 1.6], [0.02, 0.05, 0.3], 1.4)
+            .unwrap()
+            .with_model(Model::Dipole)
+            .unwrap(),
+        // Behind a boundary between the tables' indices.
+        Material::custom([0.9, 1.1, 1.6], [0.02, 0.05, 0.3], 1.35)
+            .unwrap()
+            .with_model(Model::Halfspace)
+            .unwrap(),
         Material::custom([0.7, 1.2, 1.9], [0.0014, 0.0025, 0.0142], 1.0)
             .unwrap()
             .with_model(Model::HalfspaceSingle)

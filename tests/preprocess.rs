@@ -174,7 +174,11 @@ fn spot_reference(d: &Dipole, a: f64, r: f64) -> f64 {
 
 #[test]
 fn pencil_beam_follows_the_profile() {
-    let m = Material::preset("skimmilk").unwrap();
+    // The dipole's own profile, against which the spot's reference is integrated.
+    let m = Material::preset("skimmilk")
+        .unwrap()
+        .with_model(translucent::physics::Model::Dipole)
+        .unwrap();
     // 0.5 mm texels, 7x7 kernels (radius 1.75 mm), nodes 1 mm apart. The slab needs no
     // margin: B(r) from a spot does not depend on surface beyond r.
     let size = [44.0, 10.0, 44.0];

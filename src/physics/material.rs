@@ -14,8 +14,9 @@ use serde::{Deserialize, Serialize};
 pub enum Model {
     /// The classical dipole (Jensen et al. 2001), the paper's model; any eta.
     Dipole,
-    /// The exact half-space profile of an index-matched medium (eta = 1 only), every
-    /// scattering order, from Monte Carlo; the exit taken as diffuse.
+    /// The exact half-space profile, every scattering order, from Monte Carlo: index-matched
+    /// from the shipped table, behind a refractive boundary (eta != 1) the channel's own
+    /// half-space with Fresnel reflection and refraction; the exit lobe the half-space's.
     Halfspace,
     /// The exact half-space profile of orders >= 2 and single scattering computed per frame
     /// along each view ray (the `thickness` and `single` passes); eta = 1 only.
@@ -36,14 +37,15 @@ pub enum Model {
 
 impl Model {
     /// The most accurate model for a medium of relative index `eta` that needs nothing of the
-    /// scene's geometry or lights: the tabulated profile where it applies (eta = 1), the dipole
-    /// elsewhere: the material's model before a command applies the default's decision, which
-    /// also weighs the mesh, the lights and the target error (`preprocess::model::decide`).
+    /// scene's geometry or lights: the tabulated profile, with per-frame single scattering
+    /// where that applies (eta = 1), of every order behind a refractive boundary: the
+    /// material's model before a command applies the default's decision, which also weighs
+    /// the mesh, the lights and the target error (`preprocess::model::decide`).
     pub fn for_eta(eta: f64) -> Model {
         if eta == 1.0 {
             Model::HalfspaceSingle
         } else {
-            Model::Dipole
+            Model::Halfspace
         }
     }
 
@@ -67,9 +69,13 @@ impl Model {
             crosses_air: false,
             walks: false,
             oblique_exit: false,
+            refracts: false,
         };
         match self {
-            Model::Dipole | Model::Halfspace => none,
+            Model::Dipole | Model::Halfspace => ModelTraits {
+                refracts: true,
+                ..none
+            },
             Model::HalfspaceSingle => ModelTraits {
                 single_pass: true,
                 halfspace_orders: true,
@@ -119,6 +125,12 @@ impl Model {
         self.traits().oblique_exit
     }
 
+    /// Whether the model holds a refractive boundary (any eta), not only an index-matched
+    /// one (eta = 1).
+    pub fn refracts(self) -> bool {
+        self.traits().refracts
+    }
+
     /// Whether the global response comes from random walks in the mesh.
     pub fn walks(self) -> bool {
         self.traits().walks
@@ -146,6 +158,9 @@ pub struct ModelTraits {
     pub walks: bool,
     /// Orders >= 2 leave with the half-space's lobe of the lamps' incidence at each pixel.
     pub oblique_exit: bool,
+    /// The model holds a refractive boundary (eta != 1): Fresnel reflection and refraction
+    /// where light crosses the surface, in its profile and its exit lobe.
+    pub refracts: bool,
 }
 
 /// A homogeneous medium, per RGB channel.
@@ -234,8 +249,8 @@ pub enum MaterialError {
     /// eta out of the physical range the model supports.
     #[error("index of refraction eta = {0} is outside the supported range [1.0, 3.0]")]
     BadEta(f64),
-    /// The tabulated profile asked for a medium that is not index-matched.
-    #[error("model '{0}' is the profile of an index-matched medium (eta = 1), not eta = {1}; use model 'dipole' or eta = 1")]
+    /// A model of an index-matched medium asked for one that is not.
+    #[error("model '{0}' needs an index-matched medium (eta = 1), not eta = {1}: its single scattering and walks assume light crosses the surface unbent; use model 'halfspace' or 'dipole', or eta = 1")]
     HalfspaceNeedsIndexMatch(&'static str, f64),
 }
 
@@ -312,7 +327,7 @@ impl Material {
 
     /// The same medium with `model` (refused where it does not apply).
     pub fn with_model(self, model: Model) -> Result<Material, MaterialError> {
-        if model != Model::Dipole && self.eta != 1.0 {
+        if !model.refracts() && self.eta != 1.0 {
             return Err(MaterialError::HalfspaceNeedsIndexMatch(
                 model.name(),
                 self.eta,
@@ -356,6 +371,16 @@ impl Material {
                 self.sigma_s_prime[c],
                 self.sigma_a[c],
                 self.eta,
+            )),
+            _ if self.eta != 1.0 => Profile::Tabulated(Tabulated::behind_boundary(
+                self.sigma_s_prime[c],
+                self.sigma_a[c],
+                self.eta,
+                if self.model.has_single_pass() {
+                    Orders::Multiple
+                } else {
+                    Orders::All
+                },
             )),
             Model::Halfspace | Model::HalfspaceSingle | Model::HalfspaceAir | Model::Volume => {
                 Profile::Tabulated(Tabulated::new(

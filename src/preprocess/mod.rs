@@ -123,6 +123,7 @@ pub fn choose(
     // The model is the material's; said with the derived settings, with why.
     let m = &scene.material;
     // Where the default chose the model (`model::apply_default`), its reason.
+    let boundary = model::behind_boundary_reason(m.eta);
     let why = scene.model_reason.as_deref().unwrap_or_else(|| {
         match (m.model, m.model == crate::physics::Model::for_eta(m.eta)) {
             (crate::physics::Model::HalfspaceSingle, true) => {
@@ -135,9 +136,7 @@ pub fn choose(
             {
                 "exact half-space profile of every order (eta = 1; under an environment the per-frame single scattering would see its sun alone)"
             }
-            (crate::physics::Model::Dipole, true) => {
-                "the classical dipole (the half-space models need eta = 1)"
-            }
+            (crate::physics::Model::Halfspace, true) => boundary.as_str(),
             (_, _) => "given",
         }
     });

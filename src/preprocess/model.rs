@@ -4,7 +4,9 @@
 //! in the scene file (`[material] model`) or on the command line (`--model`) is used as given.
 //! Otherwise, in this order:
 //!
-//! - **eta != 1: the dipole**, the one model of a refractive boundary.
+//! - **eta != 1: `halfspace`**, the half-space profile of every order behind the refractive
+//!   boundary (its own tables, with Fresnel reflection and refraction at every crossing): per-frame
+//!   single scattering and the walks of `volume` are models of an index-matched surface.
 //! - **An environment light: `halfspace`**, whose profile carries every order: the per-frame
 //!   single scattering integrates delta lights along the view rays and would see the sky's sun
 //!   alone.
@@ -79,10 +81,7 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
     }
     let m = &scene.material;
     if m.eta != 1.0 {
-        return Some((
-            Model::Dipole,
-            "the classical dipole (the half-space models need eta = 1)".to_string(),
-        ));
+        return Some((Model::Halfspace, behind_boundary_reason(m.eta)));
     }
     if scene.environment.is_some() {
         return Some((
@@ -104,6 +103,11 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
         Model::HalfspaceSingle,
         "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1; the walks of volume need a closed mesh lit by lamps)".to_string(),
     ))
+}
+
+/// Why the default is `halfspace` behind a refractive boundary.
+pub fn behind_boundary_reason(eta: f64) -> String {
+    format!("exact half-space profile of every order behind the refractive boundary (eta = {eta}; per-frame single scattering and the walks of volume need eta = 1)")
 }
 
 /// Applies [`decide`] to `scene`: its material takes the default model, recorded in its
@@ -256,7 +260,7 @@ mod tests {
         };
         let skim = "[material]\npreset = \"skimmilk\"\n";
         let model = |s: &Scene, target: f64| decide(s, target).map(|(m, _)| m);
-        assert_eq!(model(&scene(skim), 0.02), Some(Model::Dipole));
+        assert_eq!(model(&scene(skim), 0.02), Some(Model::Halfspace));
         let matched = format!("{skim}eta = 1.0\n");
         assert_eq!(model(&scene(&matched), 0.02), Some(Model::Volume));
         // Single scattering's share below a coarse target: in the profile.

@@ -198,8 +198,8 @@ pub struct MaterialDesc {
     pub sigma_a: Option<[f64; 3]>,
     /// Relative index of refraction.
     pub eta: Option<f64>,
-    /// The radial profile: "dipole" or "tabulated" (eta = 1 only); by default the tabulated
-    /// profile where eta = 1, the dipole elsewhere.
+    /// The model of the material's response (`physics::Model`); by default the one the scene
+    /// calls for (`preprocess::model::decide`).
     pub model: Option<crate::physics::Model>,
 }
 

@@ -883,7 +883,7 @@ mod tests {
             .model
         };
         use crate::physics::Model;
-        assert_eq!(load("[material]\npreset = \"skimmilk\""), Model::Dipole);
+        assert_eq!(load("[material]\npreset = \"skimmilk\""), Model::Halfspace);
         assert_eq!(
             load("[material]\npreset = \"skimmilk\"\neta = 1.0"),
             Model::HalfspaceSingle

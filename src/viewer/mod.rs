@@ -583,8 +583,7 @@ impl Running {
             Action::Eta(eta) => {
                 let m = self.wanted().material;
                 // The model stays where it applies at the new index; else the index's own.
-                let keep =
-                    (m.model == crate::physics::Model::Dipole || eta == 1.0).then_some(m.model);
+                let keep = (m.model.refracts() || eta == 1.0).then_some(m.model);
                 self.request_coefficients(m.sigma_s_prime, m.sigma_a, eta, keep, app)?;
             }
             Action::Model(model) => {

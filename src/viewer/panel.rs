@@ -207,7 +207,7 @@ fn material(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
         .selected_text(m.model.name())
         .show_ui(ui, |ui| {
             for &model in Model::value_variants() {
-                let allowed = model == Model::Dipole || m.eta == 1.0;
+                let allowed = model.refracts() || m.eta == 1.0;
                 let item = ui.add_enabled(
                     allowed,
                     egui::Button::selectable(m.model == model, model.name()),
