@@ -1,6 +1,6 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// B = (B^l + B^g) T, L = F_t(eta, w_o) B / pi. B^l is filtered bilinearly over the covered
+// B = (B^l + B^g) T, L = F_t(eta, w_o) B / pi, plus the surface's own reflection (SURFACE). B^l is filtered bilinearly over the covered
 // texels of the atlas only (alpha 1), so chart borders do not pull in gutter texels. Writes L
 // (linear) and its tone-mapped display value (exposure, sRGB curve); alpha marks coverage.
 #include "frame.glsl"
@@ -10,8 +10,14 @@ layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
 layout(set = 0, binding = 3) uniform sampler2D albedo_texture;
 // Single scattering along the view ray (the `single` pass), added where SINGLE.
 layout(set = 0, binding = 4) uniform sampler2D single;
-// The lights' shadow maps, for the oblique exit lobe's visibility (OBLIQUE).
+// The lights' shadow maps, for the oblique exit lobe's visibility (OBLIQUE) and the lamps'
+// highlights (SURFACE).
 layout(set = 0, binding = 5) uniform sampler2DArrayShadow shadow_maps;
+// The environment map's radiance per pixel, rows from the top (+Y), for the surface's mirror
+// reflection (SURFACE; frame.surface.zw its size, 0 where there is none).
+layout(std430, set = 0, binding = 6) readonly buffer EnvironmentMap {
+    vec4 environment_map[];
+};
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
@@ -50,6 +56,10 @@ layout(constant_id = 2) const bool CHORD = false;
 // light enters here (`volume` in a scene without an environment, whose sky this does not
 // weigh): see oblique_exit.
 layout(constant_id = 3) const bool OBLIQUE = false;
+// True where the surface's own reflection is added: a refractive boundary (eta != 1) with the
+// surface on. The light it reflects is what the illumination pass's Fresnel transmittance kept
+// out of the medium.
+layout(constant_id = 4) const bool SURFACE = false;
 
 // The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
 // (three square roots instead of a pow, which was a third of the former tone-mapping pass on
@@ -133,6 +143,58 @@ vec3 oblique_exit(vec3 x, vec3 n, float mu, vec3 k, vec3 walks) {
     return mix(walks, lobe, lit);
 }
 
+// The surface's own reflection towards v at x (normal n facing v): the environment map's pixel
+// in the mirror direction (the piecewise-constant map the truth and the reference read) times
+// Fresnel's reflectance, and for a rough surface (alpha > 0) each lamp's GGX highlight, D G2 F /
+// (4 cos_o) with the height-correlated Smith masking, times its irradiance, cosine and shadow
+// (physics::surface::ggx_reflection). The environment's sun is in its map: no highlight of its
+// own. The mirror ray is not traced: where it would meet the object itself the map is seen.
+vec3 surface_reflection(vec3 x, vec3 n, vec3 v) {
+    float eta = frame.material.x;
+    float cos_o = max(dot(n, v), 0.0);
+    vec3 l = vec3(0.0);
+    uint w = uint(frame.surface.z);
+    uint h = uint(frame.surface.w);
+    if (w > 0u && h > 0u) {
+        vec3 r = reflect(-v, n);
+        vec3 m = vec3(dot(frame.world_to_map[0].xyz, r), dot(frame.world_to_map[1].xyz, r),
+                      dot(frame.world_to_map[2].xyz, r));
+        float u = atan(m.x, -m.z) / (2.0 * PI);
+        u = u < 0.0 ? u + 1.0 : u;
+        float t = acos(clamp(m.y, -1.0, 1.0)) / PI;
+        uint px = min(uint(u * float(w)), w - 1u);
+        uint py = min(uint(t * float(h)), h - 1u);
+        l += (1.0 - fresnel_transmittance(eta, cos_o)) * frame.environment_scale.rgb
+            * environment_map[py * w + px].rgb;
+    }
+    float a = frame.surface.x;
+    if (a > 0.0 && cos_o > 0.0) {
+        float a2 = a * a;
+        uint lights = frame.counts.x;
+        for (uint i = 0u; i < lights; ++i) {
+            if (uint(frame.lights[i].params.w) == LIGHT_SUN) {
+                continue;
+            }
+            vec3 wi;
+            vec3 irradiance;
+            light_at(frame.lights[i], x, wi, irradiance);
+            float cos_i = dot(n, wi);
+            if (cos_i <= 0.0) {
+                continue;
+            }
+            vec3 hv = normalize(wi + v);
+            float nh = max(dot(n, hv), 0.0);
+            float q = nh * nh * (a2 - 1.0) + 1.0;
+            float d = a2 / (PI * q * q);
+            float masking = 0.5 / (cos_o * sqrt(cos_i * cos_i * (1.0 - a2) + a2)
+                + cos_i * sqrt(cos_o * cos_o * (1.0 - a2) + a2));
+            float f = 1.0 - fresnel_transmittance(eta, max(dot(hv, wi), 0.0));
+            l += irradiance * (d * masking * f * cos_i * shadow_visibility(shadow_maps, i, x, n));
+        }
+    }
+    return l;
+}
+
 void main() {
     vec3 n = normalize(in_normal);
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
@@ -161,6 +223,9 @@ void main() {
             l *= 1.0 - exp(-frame.sigma_t.rgb * s.a);
         }
         l += s.rgb;
+    }
+    if (SURFACE) {
+        l += surface_reflection(in_position, dot(n, v) < 0.0 ? -n : n, v);
     }
     out_radiance = vec4(l, 1.0);
     out_display = vec4(srgb_encode(l * push.exposure), 1.0);

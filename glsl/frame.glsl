@@ -49,6 +49,11 @@ layout(std140, set = 0, binding = 0) uniform Frame {
     vec4 halfspace_slope[INCIDENCE_SAMPLES]; // the slope k of 1 + k (mu - 2/3) with the mean exit
                                              // cosine of their lobe
     vec4 environment[MAX_SH_COEFFICIENTS]; // rgb: the environment's SH coefficients, turned, scaled
+    // The surface's own reflection (`composite`, where it is on and eta != 1):
+    vec4 surface;           // x: GGX alpha (roughness^2; 0: smooth, no lamp highlights),
+                            // zw: the environment map's width and height (0: no mirror image)
+    vec4 environment_scale; // rgb: the environment light's radiance scale
+    vec4 world_to_map[3];   // rows: world -> the environment map's frame
 } frame;
 
 // The profile's exit radiance relative to a Lambertian exit at exit cosine mu (1 for the

@@ -66,11 +66,15 @@ pub enum Item {
     /// The environment's transfer per atlas texel: its spherical-harmonic coefficients as f16,
     /// eight to an element (scenes with an environment light; 1 element else).
     EnvironmentTransfer,
+    /// The environment map's radiance per pixel, host-visible, for the surface's mirror
+    /// reflection (scenes whose surface reflects under an environment light, room for the
+    /// largest map the viewer can switch to; 1 element else).
+    EnvironmentMap,
 }
 
 impl Item {
     /// Every item, in the memory report's order.
-    pub const ALL: [Item; 28] = [
+    pub const ALL: [Item; 29] = [
         Item::AtlasVertices,
         Item::AtlasIndices,
         Item::CoveredTexels,
@@ -99,6 +103,7 @@ impl Item {
         Item::SingleDepth,
         Item::EntryDepth,
         Item::EnvironmentTransfer,
+        Item::EnvironmentMap,
     ];
 
     /// Its name: the Vulkan object's debug name and the memory report's label.
@@ -132,6 +137,7 @@ impl Item {
             Item::SingleDepth => "single-scattering depth",
             Item::EntryDepth => "light-entry depth",
             Item::EnvironmentTransfer => "environment transfer",
+            Item::EnvironmentMap => "environment map",
         }
     }
 
@@ -156,7 +162,8 @@ impl Item {
             | Item::NodeRadiosity
             | Item::Radiance
             | Item::RadianceReadback
-            | Item::SingleScattering => F::R32G32B32A32_SFLOAT,
+            | Item::SingleScattering
+            | Item::EnvironmentMap => F::R32G32B32A32_SFLOAT,
             Item::GatherEntries => F::R32G32_SFLOAT,
             Item::EntryDepth => F::R32_SFLOAT,
             Item::Texture => F::R8G8B8A8_SRGB,
@@ -230,6 +237,8 @@ pub struct Counts {
     pub single: bool,
     /// Environment transfer elements per atlas texel (0 without an environment light).
     pub transfer_per_texel: u64,
+    /// Environment map pixels the surface's reflection reads (0 where it reads none).
+    pub environment_pixels: u64,
 }
 
 impl Counts {
@@ -256,6 +265,7 @@ impl Counts {
             | Item::RadianceReadback
             | Item::DisplayReadback => self.pixels,
             Item::EnvironmentTransfer => self.atlas_texels * self.transfer_per_texel,
+            Item::EnvironmentMap => self.environment_pixels,
             Item::EntryDepth => {
                 if self.single {
                     self.shadow_side * self.shadow_side * self.shadow_layers

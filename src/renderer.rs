@@ -107,6 +107,31 @@ impl std::fmt::Debug for WindowOutput {
     }
 }
 
+/// Writes `scene`'s environment map into `buffer` for the surface's mirror reflection (nothing
+/// where the surface reflects none: the buffer's one pixel stays black).
+fn write_environment_map(buffer: &Buffer, scene: &Scene) -> Result<()> {
+    let Some(env) = scene.environment.as_ref() else {
+        return Ok(());
+    };
+    if passes::data::environment_pixels(scene) == 0 {
+        return Ok(());
+    }
+    let pixels: Vec<[f32; 4]> = env
+        .radiance
+        .iter()
+        .map(|c| [c[0], c[1], c[2], 0.0])
+        .collect();
+    let bytes: &[u8] = bytemuck::cast_slice(&pixels);
+    if bytes.len() as u64 > buffer.size || !buffer.write_mapped(bytes) {
+        anyhow::bail!(
+            "the environment map ({}x{}) does not fit the host-visible buffer made for it",
+            env.width,
+            env.height
+        );
+    }
+    Ok(())
+}
+
 /// The environment's per-texel transfer for `scene` (None without an environment light),
 /// loaded from `cache` or computed (and stored there), timed and logged.
 pub fn environment_transfer(
@@ -161,6 +186,8 @@ pub struct Renderer {
     scene: Scene,
     graph: FrameGraph,
     uniforms: Arc<Buffer>,
+    /// The environment map the surface reflects (`write_environment_map`).
+    environment_map: Arc<Buffer>,
     hdr_readback: Arc<Buffer>,
     display_readback: Arc<Buffer>,
     capture: Option<CaptureBuffers>,
@@ -303,6 +330,16 @@ impl Renderer {
             vk::BufferUsageFlags::UNIFORM_BUFFER,
             MemoryLocation::CpuToGpu,
         )?);
+        // The environment map for the surface's mirror reflection, host-visible so that the
+        // viewer switches maps in place (one black pixel where the surface reflects none).
+        let environment_map = Arc::new(Buffer::new(
+            gpu,
+            Item::EnvironmentMap.name(),
+            passes::data::environment_pixels(&scene).max(1) * Item::EnvironmentMap.bytes(),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?);
+        write_environment_map(&environment_map, &scene)?;
         let pixels = w as u64 * h as u64;
         let readback = |item: Item| host_buffer(gpu, item.name(), pixels * item.bytes());
         let hdr_readback = readback(Item::RadianceReadback)?;
@@ -318,6 +355,7 @@ impl Renderer {
 
         let mut g = RenderGraph::new();
         let frame = g.import_buffer(uniforms.clone(), None);
+        let environment = g.import_buffer(environment_map.clone(), None);
         let vertices = g.import_buffer(data.vertices.clone(), None);
         let indices = g.import_buffer(data.indices.clone(), None);
         let texels = g.import_buffer(data.texels.clone(), None);
@@ -480,6 +518,8 @@ impl Renderer {
                 chord: scene.material.model.gathers_over_chord(),
                 shadow_maps,
                 oblique: scene.material.model.oblique_exit() && scene.environment.is_none(),
+                environment,
+                surface: scene.surface.reflects(&scene.material),
             },
             passes::composite::CompositeTargets {
                 hdr,
@@ -575,6 +615,7 @@ impl Renderer {
             scene,
             graph,
             uniforms,
+            environment_map,
             hdr_readback,
             display_readback,
             capture,
@@ -781,9 +822,10 @@ impl Renderer {
 
     /// Lights the scene with another environment map (the transfer does not depend on the map;
     /// the next frame runs every light pass).
-    pub fn set_environment(&mut self, env: Arc<crate::environment::Environment>) {
+    pub fn set_environment(&mut self, env: Arc<crate::environment::Environment>) -> Result<()> {
         self.scene.environment = Some(env);
         self.last_lights = None;
+        write_environment_map(&self.environment_map, &self.scene)
     }
 
     /// Seconds the environment's transfer took to compute (0 without an environment).

@@ -348,9 +348,23 @@ pub struct SceneArgs {
     /// Relative index of refraction replacing the material's (1 for `truth`).
     #[arg(long)]
     pub eta: Option<f64>,
-    /// Radial profile replacing the material's: dipole, or tabulated (eta = 1 only).
+    /// Model of the material's response replacing the scene's.
     #[arg(long, value_enum)]
     pub model: Option<crate::physics::Model>,
+    /// The surface's own reflection (eta != 1: the environment in the mirror direction, the
+    /// lamps' highlights with `[material] roughness`): on (the default) or off (the subsurface
+    /// light alone).
+    #[arg(long, value_enum)]
+    pub surface: Option<OnOff>,
+}
+
+/// A switch on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnOff {
+    /// On.
+    On,
+    /// Off.
+    Off,
 }
 
 impl SceneArgs {
@@ -374,6 +388,7 @@ impl SceneArgs {
             height: self.height,
             eta: self.eta,
             model: self.model,
+            surface: self.surface.map(|s| s == OnOff::On),
         }
     }
 }

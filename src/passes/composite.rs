@@ -4,7 +4,9 @@
 //! compute pass of its own over every pixel; here it costs the covered fragments only.)
 //! For `volume` the lamps' shadow maps are read too: orders >= 2 leave with the half-space's
 //! lobe of the incidence at which the lamps' light enters each pixel (`oblique_exit` in
-//! glsl/composite.frag).
+//! glsl/composite.frag). Behind a refractive boundary the surface's own reflection is added:
+//! the environment map in the mirror direction and the lamps' GGX highlights, with Fresnel's
+//! weight (`surface_reflection`).
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::PassName;
@@ -54,6 +56,10 @@ pub struct CompositeInputs {
     /// Whether orders >= 2 take the half-space's exit lobe of the lamps' incidence at each
     /// pixel (`Model::oblique_exit`, in a scene without an environment light).
     pub oblique: bool,
+    /// The environment map's radiance per pixel (one black pixel where none is reflected).
+    pub environment: ResourceId,
+    /// Whether the surface's own reflection is added (`scene::Surface::reflects`).
+    pub surface: bool,
 }
 
 /// The images `composite` writes.
@@ -77,6 +83,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
         .access(i.texture, Access::Sampled(Stage::Fragment))
         .access(i.single, Access::Sampled(Stage::Fragment))
         .access(i.shadow_maps, Access::Sampled(Stage::Fragment))
+        .access(i.environment, Access::StorageRead(Stage::Fragment))
         .access(t.hdr, Access::ColorAttachment)
         .access(t.display, Access::ColorAttachment)
         .access(t.depth, Access::DepthAttachment)
@@ -89,6 +96,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                 .sampled(3, i.texture, Sampler::linear(gpu, true)?)
                 .sampled(4, i.single, Sampler::nearest(gpu)?)
                 .sampled(5, i.shadow_maps, Sampler::shadow(gpu)?)
+                .storage_buffer(6, i.environment)
                 .finish()?;
             let pipeline = Pipeline::graphics::<f32>(
                 gpu,
@@ -107,6 +115,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                         i.single_pass as u32,
                         i.chord as u32,
                         i.oblique as u32,
+                        i.surface as u32,
                     ],
                 },
                 set,

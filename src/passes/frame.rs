@@ -37,6 +37,9 @@ pub struct FrameUniforms {
     halfspace_flux: [[f32; 4]; INCIDENCE_SAMPLES],
     halfspace_slope: [[f32; 4]; INCIDENCE_SAMPLES],
     environment: [[f32; 4]; MAX_SH_COEFFICIENTS],
+    surface: [f32; 4],
+    environment_scale: [f32; 4],
+    world_to_map: [[f32; 4]; 3],
 }
 
 /// Spherical-harmonic coefficients of the environment in the uniforms (`MAX_SH_COEFFICIENTS`
@@ -151,6 +154,9 @@ impl FrameUniforms {
         u.halfspace_h = material.halfspace_h;
         u.halfspace_flux = material.halfspace_flux;
         u.halfspace_slope = material.halfspace_slope;
+        if scene.surface.reflects(&scene.material) {
+            u.surface[0] = crate::physics::surface::alpha(scene.surface.roughness) as f32;
+        }
         let mut layer = 0usize;
         // An environment's sun goes last (the illumination pass treats it apart).
         let ordered = lights
@@ -184,6 +190,16 @@ impl FrameUniforms {
                     penumbra = env.sun.map_or(0.0, |s| {
                         shadow.depth_range_mm * s.angular_radius.tan() as f32 / shadow.texel_mm
                     });
+                    // The map itself for the surface's mirror reflection.
+                    if crate::passes::data::environment_pixels(scene) > 0 {
+                        u.surface[2] = env.width as f32;
+                        u.surface[3] = env.height as f32;
+                        u.environment_scale = light.radiance.extend(0.0).to_array();
+                        let to_map = glam::Mat3::from_quat(light.rotation.inverse());
+                        for (row, k) in u.world_to_map.iter_mut().zip(0..3) {
+                            *row = to_map.row(k).extend(0.0).to_array();
+                        }
+                    }
                     let c = env.coefficients(scene.prt.order, light.rotation);
                     for (u, c) in u.environment.iter_mut().zip(&c) {
                         let r = light.radiance.as_dvec3();
@@ -278,6 +294,9 @@ mod tests {
                 halfspace_flux,
                 halfspace_slope,
                 environment,
+                surface,
+                environment_scale,
+                world_to_map,
             });
             same(name, &frame, std::mem::size_of::<FrameUniforms>(), &block);
             let lights = &block.iter().find(|m| m.name == "lights").unwrap().members;

@@ -6,6 +6,7 @@ pub mod incidence;
 pub mod material;
 pub mod profile;
 pub mod rgb;
+pub mod surface;
 
 pub use dipole::{fresnel_diffuse_reflectance, fresnel_transmittance, Dipole};
 pub use material::{Material, MaterialError, Model};

@@ -14,7 +14,8 @@
 //!   second order by its covariance (tr(C H) with H the Hessian of R_d(|x - y|) in y); nearer
 //!   ones are summed sample by sample. A sample containing the receiver contributes its disc mean of
 //!   R_d (the integrable peak), not R_d(0).
-//! - Pixels: a camera ray through each pixel centre finds the visible point; L = F_t(eta, w_o)
+//! - Pixels: a camera ray through each pixel centre finds the visible point (the surface's own
+//!   reflection added as the composite adds it, `surface_reflection`); L = F_t(eta, w_o)
 //!   B / pi. Vertices: B at each mesh vertex.
 //!
 //! Its own error is measured by halving the spacing and theta ([`ReferenceSettings::refined`]).
@@ -482,6 +483,7 @@ impl Reference {
                             // The half-space's higher orders gathered over the view ray's
                             // length inside only (the composite's chord factor).
                             let inside = chord.then(|| chord_length(bvh, o, d, hit.t));
+                            let surface = surface_reflection(scene, bvh, p, n, d);
                             let l = |c: usize| {
                                 let gathered = inside
                                     .flatten()
@@ -489,6 +491,7 @@ impl Reference {
                                 ft * profiles[c].exit_lobe(cos_o) * b[c] * gathered
                                     / std::f64::consts::PI
                                     + ss[c]
+                                    + surface[c]
                             };
                             [l(0) as f32, l(1) as f32, l(2) as f32, 1.0]
                         }
@@ -511,6 +514,49 @@ impl Reference {
             settings,
         }
     }
+}
+
+/// The surface's own reflection at `p` (shading normal `n`) towards the camera ray's origin
+/// (the ray's unit direction `d`), where the scene's surface reflects (`Surface::reflects`):
+/// the environment map's pixel in the mirror direction times Fresnel's reflectance, as the
+/// composite reads it (the mirror ray not traced), and for a rough surface each lamp's GGX
+/// highlight with its shadow traced. Zero elsewhere.
+fn surface_reflection(scene: &Scene, bvh: &Bvh, p: DVec3, n: DVec3, d: DVec3) -> [f64; 3] {
+    use crate::physics::surface::{alpha, fresnel_reflectance, ggx_reflection};
+    let mut out = [0.0; 3];
+    if !scene.surface.reflects(&scene.material) {
+        return out;
+    }
+    let eta = scene.material.eta;
+    let wo = -d;
+    let n = if n.dot(wo) < 0.0 { -n } else { n };
+    if let Some((env, light)) = scene.environment_light() {
+        let r = d - 2.0 * d.dot(n) * n;
+        let seen = env.radiance_from(light.rotation.as_dquat().inverse() * r);
+        let f = fresnel_reflectance(eta, n.dot(wo).max(0.0));
+        for c in 0..3 {
+            out[c] += f * light.radiance[c] as f64 * seen[c];
+        }
+    }
+    let a = alpha(scene.surface.roughness);
+    if a > 0.0 {
+        let (_, radius) = scene.bounds();
+        let eps = 1e-5 * radius as f64;
+        for l in &scene.lights {
+            let (wi, dist, scale) = l.towards(p);
+            if scale <= 0.0 || n.dot(wi) <= 0.0 {
+                continue;
+            }
+            if bvh.occluded(p + n * eps, wi, dist - 2.0 * eps) {
+                continue;
+            }
+            let g = scale * ggx_reflection(eta, a, n, wi, wo);
+            for c in 0..3 {
+                out[c] += l.radiance[c] as f64 * g;
+            }
+        }
+    }
+    out
 }
 
 /// The length inside the object of the camera ray `o + t d` that enters it at `entry`: to the

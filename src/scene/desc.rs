@@ -201,6 +201,9 @@ pub struct MaterialDesc {
     /// The model of the material's response (`physics::Model`); by default the one the scene
     /// calls for (`preprocess::model::decide`).
     pub model: Option<crate::physics::Model>,
+    /// Roughness of the surface in [0, 1] (GGX, alpha = roughness^2): 0 is a smooth
+    /// dielectric, whose mirror image of a lamp has no extent; above it lamps give highlights.
+    pub roughness: Option<f64>,
 }
 
 /// `[output]`.
@@ -215,6 +218,10 @@ pub struct OutputDesc {
     pub exposure: Option<f64>,
     /// Shadow-map edge length in texels.
     pub shadow_map: Option<u32>,
+    /// Whether the image holds the surface's own reflection (eta != 1): the environment in
+    /// the mirror direction and the lamps' highlights, with Fresnel's weight. On by default;
+    /// off leaves the subsurface light alone, for comparisons.
+    pub surface: Option<bool>,
 }
 
 /// `[settings]`: the preprocessing settings a scene gives (a saved viewer scene names those

@@ -37,6 +37,25 @@ pub struct Overrides {
     pub eta: Option<f64>,
     /// `--model`: the radial profile, replacing the material's.
     pub model: Option<crate::physics::Model>,
+    /// `--surface`: whether the image holds the surface's own reflection.
+    pub surface: Option<bool>,
+}
+
+/// The surface's own reflection, resolved (`[output] surface`, `[material] roughness`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Surface {
+    /// Whether the image holds it.
+    pub on: bool,
+    /// Roughness in [0, 1] (GGX, alpha = roughness^2; 0: smooth).
+    pub roughness: f64,
+}
+
+impl Surface {
+    /// Whether `material` reflects anything here: the surface on and a refractive boundary
+    /// (an index-matched surface reflects nothing).
+    pub fn reflects(&self, material: &Material) -> bool {
+        self.on && material.eta != 1.0
+    }
 }
 
 /// The camera, resolved.
@@ -92,6 +111,8 @@ pub struct Scene {
     /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
     /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
+    /// The surface's own reflection.
+    pub surface: Surface,
     /// The preprocessing settings the scene file gives (`[settings]`); the command line's
     /// win over them ([`crate::preprocess::choose`]).
     pub settings: crate::preprocess::settings::SettingsOverrides,
@@ -229,6 +250,9 @@ impl Scene {
         }
         if let Some(model) = overrides.model {
             desc.material.model = Some(model);
+        }
+        if let Some(surface) = overrides.surface {
+            desc.output.surface = Some(surface);
         }
         if let Some(w) = overrides.width {
             desc.output.width = Some(w);
@@ -626,6 +650,10 @@ impl Scene {
                 }
             }
         };
+        let roughness = *mat.roughness.get_or_insert(0.0);
+        if !(0.0..=1.0).contains(&roughness) {
+            bail!("[material] roughness = {roughness} must lie between 0 (smooth) and 1");
+        }
         let material = match mat.model {
             Some(model) => material.with_model(model).context("[material]")?,
             // Under an environment the per-frame single scattering would see its sun alone
@@ -641,6 +669,10 @@ impl Scene {
 
         // Output.
         let od = &mut desc.output;
+        let surface = Surface {
+            on: *od.surface.get_or_insert(true),
+            roughness,
+        };
         let width = *od.width.get_or_insert(512);
         let height = *od.height.get_or_insert(512);
         if width == 0 || height == 0 {
@@ -764,6 +796,7 @@ impl Scene {
             height,
             exposure: exposure as f32,
             shadow_map,
+            surface,
             settings,
             resolved: desc,
             warnings,
@@ -898,6 +931,38 @@ mod tests {
         );
     }
 
+    /// The surface's reflection is on by default and reflects behind a refractive boundary
+    /// only; `[output] surface = false` and `--surface off` take it out.
+    #[test]
+    fn the_surface_key_and_flag_resolve() {
+        let load = |text: &str, surface: Option<bool>| {
+            Scene::from_desc(
+                SceneDesc::parse(text).unwrap(),
+                Path::new(""),
+                &Overrides {
+                    surface,
+                    ..Default::default()
+                },
+            )
+            .unwrap()
+        };
+        let s = load("[material]\npreset = \"marble\"\nroughness = 0.25", None);
+        assert_eq!(
+            s.surface,
+            Surface {
+                on: true,
+                roughness: 0.25
+            }
+        );
+        assert!(s.surface.reflects(&s.material));
+        let matched = load("[material]\npreset = \"marble\"\neta = 1.0", None);
+        assert!(!matched.surface.reflects(&matched.material));
+        assert!(!load("[output]\nsurface = false", None).surface.on);
+        let off = load("", Some(false));
+        assert!(!off.surface.on);
+        assert!(off.resolved.to_toml().contains("surface = false"));
+    }
+
     #[test]
     fn bad_descriptions_are_refused_with_the_field_named() {
         let cases = [
@@ -912,6 +977,10 @@ mod tests {
                 "sigma_a",
             ),
             ("[material]\npreset = \"marble\"\neta = 0.0", "eta"),
+            (
+                "[material]\npreset = \"marble\"\nroughness = 1.5",
+                "roughness = 1.5 must lie between 0 (smooth) and 1",
+            ),
             (
                 "[material]\npreset = \"marble\"\nmodel = \"halfspace-single\"",
                 "index-matched medium (eta = 1), not eta = 1.5",

@@ -770,7 +770,7 @@ impl Running {
         self.status = format!("environment {}", env.source);
         self.scene.environment = Some(env.clone());
         if let Some(r) = self.renderer.as_mut() {
-            r.set_environment(env);
+            r.set_environment(env)?;
         }
         Ok(())
     }
