@@ -646,6 +646,35 @@ fn cached_truth_is_reused_and_a_corrupt_one_retraced() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The cached truth is the image the renderer shows: behind a refractive boundary under a
+/// sky it keeps the surface's mirror reflection, and with the surface off it leaves it out
+/// (another cache entry; the same paths, so the difference is the reflection alone).
+#[test]
+fn cached_truth_keeps_the_surface_where_the_render_shows_it() {
+    let text = "[mesh]\nbuiltin = \"sphere\"\nradius = 5.0\nsegments = 24\n\
+                [[lights]]\nkind = \"environment\"\n\
+                [material]\npreset = \"ketchup\"\neta = 1.5\n[output]\nwidth = 8\nheight = 8\n";
+    let on = common::scene(text);
+    let mut off = on.clone();
+    off.surface.on = false;
+    let dir = common::temp_dir("truth-cache-surface");
+    let s = TruthSettings {
+        spp: 2,
+        ..Default::default()
+    };
+    assert_ne!(truth::key(&on, &s), truth::key(&off, &s));
+    let with = truth::cached(&on, &s, &dir, &quiet).unwrap();
+    let without = truth::cached(&off, &s, &dir, &quiet).unwrap();
+    assert!(!with.loaded && !without.loaded);
+    let mut reflected = 0.0;
+    for (a, b) in with.radiance.iter().zip(&without.radiance) {
+        assert!(a >= b, "{a} < {b}");
+        reflected += (a - b) as f64;
+    }
+    assert!(reflected > 0.0, "no reflection kept");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Two boxes that share a face are one medium: the same image as the single box of their
 /// union (a parity count of crossings would leave the medium at the shared face).
 #[test]

@@ -782,11 +782,14 @@ pub fn key(scene: &Scene, settings: &TruthSettings) -> u64 {
     h.write(&settings.g.to_le_bytes());
     h.write(&settings.min_order.to_le_bytes());
     h.write(&settings.max_order.to_le_bytes());
+    // Whether the image keeps the surface's reflection (`cached`).
+    h.write(&[scene.surface.reflects(&scene.material) as u8]);
     h.finish()
 }
 
-/// A truth image of the subsurface light (the surface's reflection taken out: the models
-/// render the light under the surface) and its per-pixel standard deviation.
+/// A truth image as the renderer shows the scene (the surface's mirror reflection kept where
+/// the scene's surface reflects, `scene::Surface::reflects`, taken out where it does not) and
+/// its per-pixel standard deviation.
 #[derive(Debug, Clone)]
 pub struct TruthImages {
     /// Radiance, RGBA (alpha = coverage).
@@ -831,9 +834,11 @@ pub fn cached(
         tracing::warn!("truth cache {} unreadable: tracing again", image.display());
     }
     let mut t = compute(scene, settings, progress)?;
-    for (v, s) in t.radiance.chunks_mut(4).zip(t.surface.chunks(4)) {
-        for c in 0..3 {
-            v[c] -= s[c];
+    if !scene.surface.reflects(&scene.material) {
+        for (v, s) in t.radiance.chunks_mut(4).zip(t.surface.chunks(4)) {
+            for c in 0..3 {
+                v[c] -= s[c];
+            }
         }
     }
     output::create_dir(dir)?;
