@@ -6,7 +6,22 @@
 //! cases per property is bounded (PROPTEST_CASES overrides), so CI spends a few seconds here.
 
 use proptest::prelude::*;
+use proptest::test_runner::RngSeed;
 use std::path::Path;
+
+/// `cases` cases from a fixed seed: the same cases, and the same time, on every run, so that CI
+/// is reproducible; `PROPTEST_RNG_SEED=N` explores others.
+fn config(cases: u32) -> ProptestConfig {
+    let default = ProptestConfig::default();
+    ProptestConfig {
+        cases,
+        rng_seed: match default.rng_seed {
+            RngSeed::Random => RngSeed::Fixed(1),
+            given => given,
+        },
+        ..default
+    }
+}
 use translucent::scene::{desc::SceneDesc, mesh::Mesh, Overrides, Scene};
 
 fn seeds(ext: &str) -> Vec<Vec<u8>> {
@@ -200,7 +215,7 @@ fn check_script(bytes: &[u8]) {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+    #![proptest_config(config(400))]
 
     #[test]
     fn map_decoders_survive_mutated_seeds(seed in 0usize..2, edits in prop::collection::vec(edit(), 1..12)) {
@@ -365,7 +380,7 @@ fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
 proptest! {
     // Each case is a whole run of the binary (about a second): few cases, mutations of the
     // scene seeds that still parse often enough to reach the renderer.
-    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    #![proptest_config(config(24))]
 
     #[test]
     fn command_line_gives_a_clean_image_or_a_message(

@@ -92,7 +92,12 @@ fn top(p: &Preprocessed, size: [f32; 3]) -> Vec<bool> {
 #[test]
 fn slab_under_uniform_light_reflects_r_total() {
     for name in ["skimmilk", "skin1", "ketchup"] {
-        let m = Material::preset(name).unwrap();
+        // The dipole: a tabulated profile's operators take twice as long to build here, and
+        // the whole pipeline checks its R_total (tests/gpu_passes.rs slab_radiance).
+        let m = Material::preset(name)
+            .unwrap()
+            .with_model(translucent::physics::Model::Dipole)
+            .unwrap();
         let r_total = m.total_reflectance();
         let (p, size) = semi_infinite_slab(&m);
         println!(

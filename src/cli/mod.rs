@@ -97,7 +97,7 @@ pub struct TabulateArgs {
     #[arg(long, default_value_t = 1.0)]
     pub eta: f64,
     /// The table file to write [default: the shipped one of --eta,
-    /// assets/profiles/halfspace.txt or assets/profiles/halfspace-eta<ETA>.txt].
+    /// `assets/profiles/halfspace.txt` or `assets/profiles/halfspace-eta{ETA}.txt`].
     #[arg(long)]
     pub out: Option<PathBuf>,
 }

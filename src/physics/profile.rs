@@ -7,9 +7,9 @@
 //!   material. All scattering orders (`Orders::All`), or orders >= 2 (`Orders::Multiple`)
 //!   where single scattering is computed per frame. Index-matched (eta = 1), the table over
 //!   the albedo that ships in `assets/profiles/halfspace.txt`, made by `translucent tabulate`
-//!   (see the README); behind a refractive boundary, the channel's own half-space with Fresnel
-//!   reflection and refraction at every crossing, simulated when first asked for
-//!   ([`boundary_exits`]).
+//!   (see the README); behind a refractive boundary, with Fresnel reflection and refraction at
+//!   every crossing, one such table per relative index of a grid (`halfspace-eta*.txt`), mixed
+//!   linearly in eta between them ([`Tabulated::behind_boundary`]).
 //!
 //! Both give R(r) in 1/mm^2 per unit incident power, its plane Laplacian, the fraction
 //! reflected within a radius, and the total.
