@@ -1,7 +1,8 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// B = (B^l + B^g) T, L = F_t(eta, w_o) B / pi, plus the surface's own reflection (SURFACE). B^l is filtered bilinearly over the covered
-// texels of the atlas only (alpha 1), so chart borders do not pull in gutter texels. Writes L
+// B = (B^l + B^g) T, L = F_t(eta, w_o) B / pi, plus the surface's own reflection (SURFACE).
+// B^l is filtered bilinearly over the covered texels of the atlas only (alpha 1), so chart
+// borders do not pull in gutter texels. Writes L
 // (linear) and its tone-mapped display value (exposure, sRGB curve); alpha marks coverage.
 #include "frame.glsl"
 #include "shadow.glsl"

@@ -16,8 +16,7 @@ use translucent::scene::{Overrides, Scene};
 /// The default scene under the paper's model, the classical dipole: the method against its
 /// exact integral. (Behind the skim milk's refractive boundary the default model is the
 /// half-space profile, whose single-scattering spike at r = 0 the reference's point sums
-/// resolve more slowly: the reference of a uniformly lit slab is 2 % low at the spacing that
-/// gives the dipole's within 1 %.)
+/// resolve more slowly: docs/results/exact-model.md.)
 fn bunny() -> (Scene, preprocess::Preprocessed) {
     let scene = Scene::load(
         None,

@@ -8,6 +8,7 @@
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 use std::path::Path;
+use translucent::scene::{desc::SceneDesc, mesh::Mesh, Overrides, Scene};
 
 /// `cases` cases from a fixed seed: the same cases, and the same time, on every run, so that CI
 /// is reproducible; `PROPTEST_RNG_SEED=N` explores others.
@@ -22,7 +23,6 @@ fn config(cases: u32) -> ProptestConfig {
         ..default
     }
 }
-use translucent::scene::{desc::SceneDesc, mesh::Mesh, Overrides, Scene};
 
 fn seeds(ext: &str) -> Vec<Vec<u8>> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz-seeds");

@@ -217,7 +217,7 @@ pub struct ReferenceArgs {
 /// Arguments of `truth`.
 #[derive(Debug, Args)]
 pub struct TruthArgs {
-    /// The scene and what replaces parts of it (the material needs eta = 1).
+    /// The scene and what replaces parts of it (any eta: a smooth dielectric boundary).
     #[command(flatten)]
     pub input: SceneArgs,
     /// Output folder.
@@ -266,8 +266,8 @@ pub struct ChartArgs {
     /// Cache folder for the preprocessing and the truth.
     #[arg(long)]
     pub cache: Option<PathBuf>,
-    /// Paths per pixel and channel of the volumetric truth (traced once per scene and cached;
-    /// scenes with eta = 1 only); 0 leaves the truth out.
+    /// Paths per pixel and channel of the volumetric truth (traced once per scene and cached);
+    /// 0 leaves the truth out.
     #[arg(long, default_value_t = 128)]
     pub truth_spp: u32,
     /// Models to chart besides the scene's, each in its default blending (optimized; simple
@@ -345,7 +345,7 @@ pub struct SceneArgs {
     /// Image height in pixels.
     #[arg(long)]
     pub height: Option<u32>,
-    /// Relative index of refraction replacing the material's (1 for `truth`).
+    /// Relative index of refraction replacing the material's (1: index-matched).
     #[arg(long)]
     pub eta: Option<f64>,
     /// Model of the material's response replacing the scene's.

@@ -51,9 +51,18 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
         ProgressStyle::with_template("{bar:40} {percent:>3}% elapsed {elapsed} ETA {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let t = truth::compute(&scene, &settings, &|f| {
+    let mut t = truth::compute(&scene, &settings, &|f| {
         bar.set_position((f * 1000.0) as u64)
     })?;
+    // `--surface off`: the subsurface light alone, as the renderer shows it then (the
+    // reflection is still written apart).
+    if !scene.surface.on {
+        for (v, s) in t.radiance.chunks_mut(4).zip(t.surface.chunks(4)) {
+            for c in 0..3 {
+                v[c] -= s[c];
+            }
+        }
+    }
     bar.finish_and_clear();
     let (mean, stderr) = t.object_mean();
     let noise: Vec<_> = [1, 2, 4].iter().map(|&k| t.noise_at(k)).collect();

@@ -11,7 +11,7 @@
 //!   every crossing, one such table per relative index of a grid (`halfspace-eta*.txt`), mixed
 //!   linearly in eta between them ([`Tabulated::behind_boundary`]).
 //!
-//! Both give R(r) in 1/mm^2 per unit incident power, its plane Laplacian, the fraction
+//! Both give R(r) in 1/mm^2 per unit entering power, its plane Laplacian, the fraction
 //! reflected within a radius, and the total.
 
 use super::dipole::Dipole;
@@ -57,6 +57,19 @@ const BOUNDARY_TABLES: [&str; 11] = [
     include_str!("../../assets/profiles/halfspace-eta2.5.txt"),
     include_str!("../../assets/profiles/halfspace-eta3.txt"),
 ];
+
+/// A hash of every shipped table's text: what a cached preprocessing made with a tabulated
+/// profile depends on.
+pub fn tables_hash() -> u64 {
+    static HASH: OnceLock<u64> = OnceLock::new();
+    *HASH.get_or_init(|| {
+        let mut h = crate::numeric::hash::Fnv::default();
+        for t in BOUNDARY_TABLES {
+            h.write(t.as_bytes());
+        }
+        h.finish()
+    })
+}
 
 /// The relative indices of refraction of the shipped tables, increasing from 1 (index-matched).
 pub fn boundary_etas() -> Vec<f64> {
@@ -387,12 +400,26 @@ impl Tabulated {
                 .map(|(x, y)| (1.0 - w) * x + w * y)
                 .collect()
         };
+        let total = (1.0 - w) * a.total + w * b.total;
+        // The lobes per unit flux: mixed with the flux each table leaves with.
+        let lobe = a
+            .lobe
+            .iter()
+            .zip(&b.lobe)
+            .map(|(x, y)| {
+                if total > 0.0 {
+                    ((1.0 - w) * a.total * x + w * b.total * y) / total
+                } else {
+                    (1.0 - w) * x + w * y
+                }
+            })
+            .collect();
         Tabulated::from_cumulative(
             a.sigma_t,
             a.radii.clone(),
             mix(&a.cumulative, &b.cumulative),
-            (1.0 - w) * a.total + w * b.total,
-            mix(&a.lobe, &b.lobe),
+            total,
+            lobe,
         )
     }
 
@@ -532,7 +559,8 @@ mod tests {
         for i in 0..etas.len() {
             let t = HalfSpaceTable::shipped_at(i);
             assert_eq!(t.albedos.len(), table_albedos().len());
-            assert_eq!(t.radii.len(), table_radii().len());
+            // The same radii in every table: the profiles mix index by index.
+            assert_eq!(t.radii, HalfSpaceTable::shipped().radii);
             assert_eq!(HalfSpaceTable::parse(&t.to_text()).unwrap(), *t);
             if i > 0 {
                 let before = HalfSpaceTable::shipped_at(i - 1);

@@ -33,6 +33,7 @@ pub fn key(mesh: &Mesh, material: &Material, settings: &Settings) -> u64 {
         h.write(&v.to_le_bytes());
     }
     h.write(material.model.name().as_bytes());
+    h.write(&crate::physics::profile::tables_hash().to_le_bytes());
     h.write(&bincode::serialize(settings).unwrap_or_default());
     h.finish()
 }

@@ -240,8 +240,10 @@ impl Scene {
             desc.mesh.segments = None;
         }
         if let Some(m) = &overrides.material {
+            // Another medium; the surface's roughness stays.
             desc.material = desc::MaterialDesc {
                 preset: Some(m.clone()),
+                roughness: desc.material.roughness,
                 ..Default::default()
             };
         }
@@ -673,6 +675,11 @@ impl Scene {
             on: *od.surface.get_or_insert(true),
             roughness,
         };
+        if roughness > 0.0 && environment.is_some() && surface.reflects(&material) {
+            notes.push(format!(
+                "[material] roughness = {roughness} gives the lamps highlights; the environment's reflection stays a mirror (and the volumetric truth's surface is smooth)"
+            ));
+        }
         let width = *od.width.get_or_insert(512);
         let height = *od.height.get_or_insert(512);
         if width == 0 || height == 0 {

@@ -582,9 +582,25 @@ impl Running {
             }
             Action::Eta(eta) => {
                 let m = self.wanted().material;
-                // The model stays where it applies at the new index; else the index's own.
-                let keep = (m.model.refracts() || eta == 1.0).then_some(m.model);
-                self.request_coefficients(m.sigma_s_prime, m.sigma_a, eta, keep, app)?;
+                if self.scene.model_reason.is_some() {
+                    // The default chose the model: it chooses again at the new index
+                    // (`default_model_for`).
+                    let material = Material::custom(m.sigma_s_prime, m.sigma_a, eta)
+                        .context("the material")?;
+                    let material = self.default_model_for(material, app.target_error)?;
+                    self.request_coefficients(
+                        m.sigma_s_prime,
+                        m.sigma_a,
+                        eta,
+                        Some(material.model),
+                        app,
+                    )?;
+                } else {
+                    // A model given stays where it applies at the new index; else the index's
+                    // own.
+                    let keep = (m.model.refracts() || eta == 1.0).then_some(m.model);
+                    self.request_coefficients(m.sigma_s_prime, m.sigma_a, eta, keep, app)?;
+                }
             }
             Action::Model(model) => {
                 let mut w = self.wanted();
