@@ -989,6 +989,10 @@ mod tests {
                 "roughness = 1.5 must lie between 0 (smooth) and 1",
             ),
             (
+                "[material]\npreset = \"marble\"\nroughness = nan",
+                "roughness = NaN must lie between 0 (smooth) and 1",
+            ),
+            (
                 "[material]\npreset = \"marble\"\nmodel = \"halfspace-single\"",
                 "index-matched medium (eta = 1), not eta = 1.5",
             ),
