@@ -57,11 +57,7 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
     // `--surface off`: the subsurface light alone, as the renderer shows it then (the
     // reflection is still written apart).
     if !scene.surface.on {
-        for (v, s) in t.radiance.chunks_mut(4).zip(t.surface.chunks(4)) {
-            for c in 0..3 {
-                v[c] -= s[c];
-            }
-        }
+        t.take_out_the_surface();
     }
     bar.finish_and_clear();
     let (mean, stderr) = t.object_mean();

@@ -524,6 +524,14 @@ pub struct Truth {
 }
 
 impl Truth {
+    /// Takes the surface's mirror reflection out of `radiance`: the subsurface light alone.
+    pub fn take_out_the_surface(&mut self) {
+        for (v, s) in self.radiance.chunks_mut(4).zip(self.surface.chunks(4)) {
+            for c in 0..3 {
+                v[c] -= s[c];
+            }
+        }
+    }
     /// Mean radiance over the covered pixels and its standard error, per channel.
     pub fn object_mean(&self) -> ([f64; 3], [f64; 3]) {
         let mut mean = [0.0; 3];
@@ -835,11 +843,7 @@ pub fn cached(
     }
     let mut t = compute(scene, settings, progress)?;
     if !scene.surface.reflects(&scene.material) {
-        for (v, s) in t.radiance.chunks_mut(4).zip(t.surface.chunks(4)) {
-            for c in 0..3 {
-                v[c] -= s[c];
-            }
-        }
+        t.take_out_the_surface();
     }
     output::create_dir(dir)?;
     output::write_exr(&image, t.width, t.height, &t.radiance)?;
