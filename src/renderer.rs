@@ -138,15 +138,15 @@ pub fn environment_transfer(
     scene: &Scene,
     pre: &Preprocessed,
     cache: Option<&std::path::Path>,
-) -> Option<crate::environment::prt::Transfer> {
+) -> Option<crate::preprocess::transfer::Transfer> {
     use crate::preprocess::cache;
     scene.environment.as_ref()?;
-    let key = crate::environment::prt::key(
+    let key = crate::preprocess::transfer::key(
         cache::key(&scene.mesh, &scene.material, &pre.settings),
         scene.prt,
     );
     if let Some(dir) = cache {
-        match cache::load::<crate::environment::prt::Transfer>(dir, key) {
+        match cache::load::<crate::preprocess::transfer::Transfer>(dir, key) {
             Ok(Some(t))
                 if t.coefficients.len()
                     == pre.atlas.texels.len()
@@ -162,8 +162,12 @@ pub fn environment_transfer(
             Err(e) => tracing::warn!("{e:#}; recomputing the environment transfer"),
         }
     }
-    let t =
-        crate::environment::prt::transfer(&scene.mesh, &pre.atlas, scene.material.eta, scene.prt);
+    let t = crate::preprocess::transfer::transfer(
+        &scene.mesh,
+        &pre.atlas,
+        scene.material.eta,
+        scene.prt,
+    );
     tracing::info!(
         "environment transfer: order {} ({} coefficients), {} rays per texel, {} texels: {:.2} s",
         t.settings.order,
@@ -270,7 +274,7 @@ impl Renderer {
         scene: &Scene,
         pre: &Preprocessed,
         options: &Options,
-        transfer: Option<&crate::environment::prt::Transfer>,
+        transfer: Option<&crate::preprocess::transfer::Transfer>,
     ) -> Result<SubsurfaceData> {
         // The uniforms take the order from the scene: the transfer must be the scene's.
         if let Some(t) = transfer {

@@ -14,9 +14,10 @@
 mod common;
 
 use std::path::Path;
-use translucent::environment::{accuracy::TexelReference, Environment};
+use translucent::environment::Environment;
 use translucent::metrics;
 use translucent::preprocess::{self, settings::SettingsOverrides};
+use translucent::reference::texels::TexelReference;
 use translucent::reference::{Reference, ReferenceSettings};
 use translucent::renderer::{Options, Renderer};
 use translucent::scene::{desc::SceneDesc, Overrides, Scene};

@@ -3,7 +3,8 @@
 use super::*;
 
 pub(super) fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
-    use crate::environment::{accuracy::TexelReference, sh};
+    use crate::environment::sh;
+    use crate::reference::texels::TexelReference;
     let scene = args.input.load()?;
     if scene.environment.is_none() {
         anyhow::bail!("the scene has no environment light ([[lights]] kind = \"environment\")");
@@ -53,12 +54,8 @@ pub(super) fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
         let transfer =
             crate::renderer::environment_transfer(&s, &pre, args.pre.cache_dir().as_deref())
                 .context("no transfer")?;
-        let cpu = crate::environment::accuracy::cpu_estimate(
-            &s,
-            &pre.atlas,
-            &transfer,
-            &reference.texels,
-        );
+        let cpu =
+            crate::reference::texels::cpu_estimate(&s, &pre.atlas, &transfer, &reference.texels);
         let cpu = reference.error_of_values(&cpu);
         let data = Renderer::upload_with(&gpu, &s, &pre, &options, Some(&transfer))?;
         let mut r = Renderer::with_data(&gpu, s.clone(), &data, options.clone())?;

@@ -17,7 +17,6 @@
 //! -Z, its centre along +Z. `w` points from the object towards the environment. A light's
 //! `rotate_deg` turns the map about +Y.
 
-pub mod accuracy;
 pub mod prt;
 pub mod sh;
 pub mod sky;
@@ -234,10 +233,10 @@ impl Environment {
         }
         let peak = |px: &[[f32; 3]]| px.iter().flatten().fold(0f32, |a, &c| a.max(c));
         let max = peak(&pixels) as f64;
-        if max > crate::scene::light::MAX_RADIANCE {
+        if max > crate::physics::MAX_RADIANCE {
             bail!(
                 "a pixel of radiance {max:e} exceeds {:e}: the passes' f32 sums would overflow",
-                crate::scene::light::MAX_RADIANCE
+                crate::physics::MAX_RADIANCE
             );
         }
         let (radiance, width, height) = if w > MAX_WORK_WIDTH {

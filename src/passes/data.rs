@@ -698,7 +698,7 @@ impl SubsurfaceData {
         pre: &Preprocessed,
         mode: Blend,
         global_layout: GlobalLayout,
-        transfer: Option<&crate::environment::prt::Transfer>,
+        transfer: Option<&crate::preprocess::transfer::Transfer>,
     ) -> GpuResult<SubsurfaceData> {
         let atlas = &pre.atlas;
         let ops = &pre.ops;

@@ -11,6 +11,7 @@ pub mod nodes;
 pub mod operators;
 pub mod settings;
 pub mod solver;
+pub mod transfer;
 pub mod walk;
 
 use crate::physics::Material;

@@ -21,6 +21,7 @@
 //! Its own error is measured by halving the spacing and theta ([`ReferenceSettings::refined`]).
 
 pub mod borders;
+pub mod texels;
 
 use crate::geometry::bvh::Bvh;
 use crate::physics::{fresnel_transmittance, profile::Profile};

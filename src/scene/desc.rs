@@ -312,7 +312,7 @@ mod tests {
             "{text}"
         );
         assert_eq!(SceneDesc::parse(&text).unwrap(), d);
-        let o = crate::preprocess::settings::SettingsOverrides::from(d.settings);
+        let o = crate::scene::settings::SettingsOverrides::from(d.settings);
         assert_eq!(
             (o.texel_mm, o.kernel_size, o.prune_tolerance),
             (Some(0.52), Some(7), None)

@@ -6,10 +6,7 @@ use glam::{DVec3, Vec3};
 /// The most lights a scene may have (the size of the light array in `glsl/frame.glsl`).
 pub const MAX_LIGHTS: usize = 8;
 
-/// Largest colour x intensity of a light: irradiance in the passes is multiplied by kernel
-/// sums, profile values and the exposure in f32; 1e20 leaves eighteen decades of headroom
-/// below f32's 3.4e38 and is far beyond any physical light.
-pub const MAX_RADIANCE: f64 = 1e20;
+pub use crate::physics::MAX_RADIANCE;
 
 /// A light, resolved.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -3,6 +3,7 @@
 pub mod desc;
 pub mod light;
 pub mod mesh;
+pub mod settings;
 pub mod shadow;
 
 use crate::physics::Material;

@@ -240,7 +240,7 @@ struct JobOutput {
     /// The preprocessing.
     pre: Preprocessed,
     /// With an environment light, the transfer over its atlas.
-    transfer: Option<crate::environment::prt::Transfer>,
+    transfer: Option<crate::preprocess::transfer::Transfer>,
     /// How the operators were made, for the status line.
     how: String,
 }
@@ -447,7 +447,7 @@ struct Running {
     environment_index: usize,
     /// The environment's transfer for the current preprocessing (kept across blending
     /// changes; recomputed with a new material's atlas).
-    transfer: Option<crate::environment::prt::Transfer>,
+    transfer: Option<crate::preprocess::transfer::Transfer>,
 }
 
 struct App {

@@ -2,7 +2,7 @@
 //! ray-traced one, computed without spherical harmonics, transfer vectors or shadow maps.
 //!
 //! The reference of texel t is `reference::environment_irradiance` at the texel's point and
-//! normal (`prt::texel_point`, where the transfer was computed): `rays` directions drawn by the
+//! normal (`preprocess::transfer::texel_point`, where the transfer was computed): `rays` directions drawn by the
 //! whole map's brightness, sun included, each with its shadow ray. Its own noise is measured by
 //! splitting the rays in two halves A and B (|A - B| / 2 per texel).
 //!
@@ -10,10 +10,10 @@
 //! sqrt(sum (E - E_ref)^2 / sum E_ref^2), over every `stride`-th covered texel whose centre a
 //! triangle surely covers (the others are filled by `dilate`, not lit by the pass).
 
-use super::prt::texel_point;
 use crate::geometry::bvh::Bvh;
 use crate::numeric::rng::Rng;
 use crate::preprocess::atlas::Atlas;
+use crate::preprocess::transfer::texel_point;
 use crate::scene::Scene;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -52,14 +52,8 @@ impl TexelReference {
                 let mut halves = [[0.0; 3]; 2];
                 for (h, out) in halves.iter_mut().enumerate() {
                     let mut rng = Rng::new(&[0x746578, t as u64, h as u64]);
-                    *out = crate::reference::environment_irradiance(
-                        scene,
-                        &bvh,
-                        (x, n, n),
-                        eps,
-                        half,
-                        &mut rng,
-                    );
+                    *out =
+                        super::environment_irradiance(scene, &bvh, (x, n, n), eps, half, &mut rng);
                 }
                 let [a, b] = halves;
                 (
@@ -122,7 +116,7 @@ const SUN_RAYS: u32 = 64;
 pub fn cpu_estimate(
     scene: &Scene,
     atlas: &Atlas,
-    transfer: &super::prt::Transfer,
+    transfer: &crate::preprocess::transfer::Transfer,
     texels: &[usize],
 ) -> Vec<[f64; 3]> {
     let bvh = Bvh::new(&scene.mesh.positions, &scene.mesh.indices);
@@ -142,7 +136,7 @@ pub fn cpu_estimate(
             if let Some(sun) = &env.sun {
                 let (x, n) = texel_point(atlas, t);
                 let axis = -light.direction.as_dvec3().normalize();
-                let (tu, tv) = super::prt::frame(axis);
+                let (tu, tv) = crate::preprocess::transfer::frame(axis);
                 let side = (SUN_RAYS as f64).sqrt() as u32;
                 let cos_max = sun.angular_radius.cos();
                 let mut rng = Rng::new(&[0x73756e, t as u64]);
