@@ -1,9 +1,75 @@
 //! `chart`: speed against accuracy over the settings and the models.
 
 use super::*;
+use crate::physics::Model;
+use crate::reference::{Reference, ReferenceSettings};
+
+/// Another model's scene (material under the model) and its exact reference, where there is one.
+type OtherScene = (Scene, Option<Reference>);
 
 pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
-    use crate::reference::{Reference, ReferenceSettings};
+    let (scene, exact) = load_scene(args)?;
+    output::create_dir(&args.out)?;
+    let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
+    println!("automatic setting:");
+    for r in &auto.reasons {
+        println!("  {r}");
+    }
+    let reference = exact_reference(&scene, exact, &args.out)?;
+    let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
+    let truth = chart_truth(&scene, args, &cache_dir)?;
+    anyhow::ensure!(
+        reference.is_some() || truth.is_some(),
+        "model {}: neither its exact model (not integrated on this mesh) nor the truth (none for this scene) to compare with",
+        scene.material.model.name()
+    );
+    write_truth(&args.out, &scene, truth.as_ref())?;
+    let gpu = Gpu::new(&GpuOptions {
+        validate: cli.validate,
+        device: cli.device.clone(),
+        ..Default::default()
+    })?;
+    let baselines = crate::chart::Baselines {
+        reference: reference.as_ref().map(|r| &r.radiance[..]),
+        truth: truth
+            .as_ref()
+            .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
+    };
+    let sweep = crate::chart::sweep(&auto.settings, args.quick);
+    let own = scene.material.model;
+    let others = other_models(&scene, args);
+    let other_scenes = other_model_scenes(&scene, &others, truth.is_some())?;
+    let runs = model_runs(&scene, &auto, args, baselines, &other_scenes)?;
+    let mut points = crate::chart::measure(
+        &gpu,
+        &crate::chart::Sweep {
+            scene: &scene,
+            auto: &auto,
+            settings: &sweep,
+            target_error: args.target_error,
+            cache_dir: &cache_dir,
+            frames: args.frames,
+        },
+        &runs,
+    )?;
+    print_points(&points);
+    check_validation(&gpu)?;
+    crate::chart::mark_pareto(&mut points);
+    write_chart(&args.out, &scene, &gpu, &points)?;
+    print_summary(
+        &points,
+        own,
+        reference.is_some(),
+        truth.is_some(),
+        &args.out,
+    );
+    Ok(())
+}
+
+/// Checks the arguments and loads the scene under its default model; returns it with whether
+/// the reference integrates that model exactly (refused where it does not and the chart has
+/// no truth either).
+fn load_scene(args: &ChartArgs) -> Result<(Scene, bool)> {
     frame_count("--frames", args.frames, 1)?;
     let mut scene = args.input.load()?;
     // The automatic point is the default model's, as `render` would render it.
@@ -18,74 +84,60 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             "{e}; and this chart has no truth (--truth-spp 0): give --truth-spp, or --model halfspace-single for a chart against the exact model"
         );
     }
-    output::create_dir(&args.out)?;
-    let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
-    println!("automatic setting:");
-    for r in &auto.reasons {
-        println!("  {r}");
-    }
-    let reference = match exact {
-        Ok(()) => {
-            let start = std::time::Instant::now();
-            let reference = Reference::compute(&scene, ReferenceSettings::for_scene(&scene));
-            println!(
-                "reference: {} samples, {:.1} s",
-                reference.samples,
-                start.elapsed().as_secs_f64()
-            );
-            output::write_exr(
-                &args.out.join("reference.exr"),
-                reference.width,
-                reference.height,
-                &reference.radiance,
-            )?;
-            Some(reference)
-        }
-        Err(_) => {
-            println!(
-                "model {}: against the truth alone (no exact-model reference on this mesh)",
-                scene.material.model.name()
-            );
-            None
-        }
-    };
-    let cache_dir = args.cache.clone().unwrap_or_else(cache::default_dir);
-    let truth = chart_truth(&scene, args, &cache_dir)?;
-    anyhow::ensure!(
-        reference.is_some() || truth.is_some(),
-        "model {}: neither its exact model (not integrated on this mesh) nor the truth (none for this scene) to compare with",
-        scene.material.model.name()
-    );
-    if let Some(t) = &truth {
+    Ok((scene, exact.is_ok()))
+}
+
+/// The exact-model reference of the scene's own model, timed and written as `reference.exr`
+/// in `out`; none (and a line saying so) where the reference does not integrate the model.
+fn exact_reference(scene: &Scene, exact: bool, out: &std::path::Path) -> Result<Option<Reference>> {
+    if exact {
+        let start = std::time::Instant::now();
+        let reference = Reference::compute(scene, ReferenceSettings::for_scene(scene));
+        println!(
+            "reference: {} samples, {:.1} s",
+            reference.samples,
+            start.elapsed().as_secs_f64()
+        );
         output::write_exr(
-            &args.out.join("truth.exr"),
+            &out.join("reference.exr"),
+            reference.width,
+            reference.height,
+            &reference.radiance,
+        )?;
+        Ok(Some(reference))
+    } else {
+        println!(
+            "model {}: against the truth alone (no exact-model reference on this mesh)",
+            scene.material.model.name()
+        );
+        Ok(None)
+    }
+}
+
+/// Writes the truth and its noise as `truth.exr` and `noise.exr` in `out`, where there is a
+/// truth.
+fn write_truth(
+    out: &std::path::Path,
+    scene: &Scene,
+    truth: Option<&crate::truth::TruthImages>,
+) -> Result<()> {
+    if let Some(t) = truth {
+        output::write_exr(
+            &out.join("truth.exr"),
             scene.width,
             scene.height,
             &t.radiance,
         )?;
-        output::write_exr(
-            &args.out.join("noise.exr"),
-            scene.width,
-            scene.height,
-            &t.noise,
-        )?;
+        output::write_exr(&out.join("noise.exr"), scene.width, scene.height, &t.noise)?;
     }
-    let gpu = Gpu::new(&GpuOptions {
-        validate: cli.validate,
-        device: cli.device.clone(),
-        ..Default::default()
-    })?;
-    let baselines = crate::chart::Baselines {
-        reference: reference.as_ref().map(|r| &r.radiance[..]),
-        truth: truth
-            .as_ref()
-            .map(|t| (&t.radiance[..], &t.noise[..], scene.width, scene.height)),
-    };
-    let sweep = crate::chart::sweep(&auto.settings, args.quick);
-    // The other models: each with its own scene (material under the model) and reference.
-    use crate::physics::Model;
+    Ok(())
+}
+
+/// The models charted besides the scene's own: those of `--models`, or by default every other
+/// model that applies to the scene.
+fn other_models(scene: &Scene, args: &ChartArgs) -> Vec<Model> {
     let own = scene.material.model;
-    let others: Vec<Model> = match &args.models {
+    match &args.models {
         Some(m) => m.iter().copied().filter(|m| *m != own).collect(),
         // The walks where they apply: eta = 1 (the material takes the model) and a closed
         // mesh (`preprocess::choose` refuses the rest).
@@ -103,9 +155,15 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
                 && (!m.walks() || scene.mesh.is_closed())
         })
         .collect(),
-    };
+    }
+}
+
+/// The other models: each with its own scene (material under the model) and reference, or
+/// against the truth alone (refused where the chart has none) where the reference does not
+/// integrate the model.
+fn other_model_scenes(scene: &Scene, others: &[Model], has_truth: bool) -> Result<Vec<OtherScene>> {
     let mut other_scenes = Vec::new();
-    for m in &others {
+    for m in others {
         let mut s = scene.clone();
         s.material = s
             .material
@@ -116,7 +174,7 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         s.resolved.material.model = Some(*m);
         if Reference::supports(*m, &s.mesh).is_err() {
             anyhow::ensure!(
-                truth.is_some(),
+                has_truth,
                 "--models {}: {} the model's only independent check is the volumetric truth, and this chart has none (--truth-spp 0)",
                 m.name(),
                 if m.walks() { "the walks' F is a Monte Carlo of the medium;" } else { "on this mesh (not convex) the light across the air is in F;" }
@@ -132,11 +190,23 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         println!("reference of model {}: {} samples", m.name(), r.samples);
         other_scenes.push((s, Some(r)));
     }
+    Ok(other_scenes)
+}
+
+/// The runs of the sweep: the scene's own model first, then one per other model, each against
+/// its own reference and the scene's truth.
+fn model_runs<'a>(
+    scene: &'a Scene,
+    auto: &preprocess::settings::Choice,
+    args: &ChartArgs,
+    baselines: crate::chart::Baselines<'a>,
+    other_scenes: &'a [OtherScene],
+) -> Result<Vec<crate::chart::ModelRun<'a>>> {
     // The scene's own model in every blending mode over the sweep; the walks (each point
     // walks again) in their own blending over their shorter sweep, as when they are another.
     let own_walks = scene.material.model.walks();
     let mut runs = vec![crate::chart::ModelRun {
-        scene: &scene,
+        scene,
         modes: if own_walks {
             vec![Blend::for_model(scene.material.model)]
         } else {
@@ -146,7 +216,7 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         against: baselines,
     }];
     let truth_baseline = runs[0].against.truth;
-    for (s, r) in &other_scenes {
+    for (s, r) in other_scenes {
         let model = s.material.model;
         // The walks' own automatic setting (their walk count), and their shorter sweep.
         let settings = if model.walks() {
@@ -166,19 +236,12 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             },
         });
     }
-    let mut points = crate::chart::measure(
-        &gpu,
-        &crate::chart::Sweep {
-            scene: &scene,
-            auto: &auto,
-            settings: &sweep,
-            target_error: args.target_error,
-            cache_dir: &cache_dir,
-            frames: args.frames,
-        },
-        &runs,
-    )?;
-    for p in &points {
+    Ok(runs)
+}
+
+/// Prints one line per measured point.
+fn print_points(points: &[crate::chart::Point]) {
+    for p in points {
         println!(
             "{:<12} {:<16} {:<10} {:>8.2} ms  {:>7.3} % RMS vs model  {:>7.3} % vs truth",
             p.setting,
@@ -189,10 +252,18 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
             100.0 * p.rel_rms_truth
         );
     }
-    check_validation(&gpu)?;
-    crate::chart::mark_pareto(&mut points);
-    output::write_atomic(&args.out.join("chart.csv"), |p| {
-        Ok(std::fs::write(p, crate::chart::csv(&points))?)
+}
+
+/// Writes `chart.csv` and the plots (`chart.svg`, `chart.png`) in `out`, titled with the
+/// scene's mesh and material and the device's name.
+fn write_chart(
+    out: &std::path::Path,
+    scene: &Scene,
+    gpu: &Gpu,
+    points: &[crate::chart::Point],
+) -> Result<()> {
+    output::write_atomic(&out.join("chart.csv"), |p| {
+        Ok(std::fs::write(p, crate::chart::csv(points))?)
     })?;
     let name = scene
         .resolved
@@ -207,13 +278,24 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
         .clone()
         .unwrap_or_else(|| "mesh".into());
     crate::chart::plot(
-        &args.out,
+        out,
         &format!(
             "{mesh} in {name}: error against frame time ({})",
             gpu.info.name
         ),
-        &points,
-    )?;
+        points,
+    )
+}
+
+/// Prints the automatic setting's point of the scene's own model (optimized blending) and
+/// the files written to `out`.
+fn print_summary(
+    points: &[crate::chart::Point],
+    own: Model,
+    has_reference: bool,
+    has_truth: bool,
+    out: &std::path::Path,
+) {
     if let Some(a) = points
         .iter()
         .find(|p| p.auto && p.mode == "optimized" && p.model == own.name())
@@ -232,19 +314,14 @@ pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     }
     println!(
         "wrote chart.csv, chart.svg, chart.png{}{} to {}",
-        if reference.is_some() {
-            ", reference.exr"
-        } else {
-            ""
-        },
-        if truth.is_some() {
+        if has_reference { ", reference.exr" } else { "" },
+        if has_truth {
             ", truth.exr, noise.exr"
         } else {
             ""
         },
-        args.out.display()
+        out.display()
     );
-    Ok(())
 }
 
 /// The chart's volumetric truth: traced once per scene (and sample count) and cached; none

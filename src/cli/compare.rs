@@ -2,6 +2,20 @@
 
 use super::*;
 
+/// The images compared: the render, the reference and its noise, all of one size.
+struct Images {
+    /// Width in pixels.
+    w: u32,
+    /// Height in pixels.
+    h: u32,
+    /// The render, RGBA.
+    a: Vec<f32>,
+    /// The reference, RGBA.
+    b: Vec<f32>,
+    /// The reference's per-pixel standard deviation, RGBA, if given.
+    noise: Option<Vec<f32>>,
+}
+
 pub(super) fn compare(args: &CompareArgs) -> Result<()> {
     use crate::metrics;
     if !(args.full_scale.is_finite() && args.full_scale > 0.0) {
@@ -11,6 +25,30 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
         );
     }
     output::check_targets(&args.out, &["error.exr", "error.png", "error.json"])?;
+    let Images { w, h, a, b, noise } = read_images(args)?;
+    let (report, per_pixel) = metrics::compare(&a, &b, None);
+    if report.pixels == 0 {
+        bail!("no pixel is covered in both images");
+    }
+    refuse_black_reference(&a, &b, &args.reference)?;
+    output::create_dir(&args.out)?;
+    write_error_images(args, w, h, &per_pixel)?;
+    let binned: Vec<metrics::BinnedError> = [1, 2, 4]
+        .iter()
+        .map(|&k| metrics::compare_binned(&a, &b, noise.as_deref(), w, h, k))
+        .collect();
+    let mut json = serde_json::to_value(&report)?;
+    json["binned"] = serde_json::to_value(&binned)?;
+    output::write_atomic(&args.out.join("error.json"), |p| {
+        Ok(std::fs::write(p, serde_json::to_string_pretty(&json)?)?)
+    })?;
+    print_summary(&report, &binned, noise.is_some());
+    Ok(())
+}
+
+/// Reads the render, the reference and the noise image; refuses values that are not finite
+/// and images of different sizes.
+fn read_images(args: &CompareArgs) -> Result<Images> {
     let (w, h, a) = output::read_exr(&args.render)?;
     let (w2, h2, b) = output::read_exr(&args.reference)?;
     finite_image(&args.render, &a)?;
@@ -31,10 +69,12 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
             Some(n)
         }
     };
-    let (report, per_pixel) = metrics::compare(&a, &b, None);
-    if report.pixels == 0 {
-        bail!("no pixel is covered in both images");
-    }
+    Ok(Images { w, h, a, b, noise })
+}
+
+/// Refuses a reference (`b`, read from `path`) that is black in a channel wherever both
+/// images are covered.
+fn refuse_black_reference(a: &[f32], b: &[f32], path: &std::path::Path) -> Result<()> {
     // A relative error against a black reference channel is undefined (it once printed
     // 1e152 %).
     for (c, name) in ["red", "green", "blue"].iter().enumerate() {
@@ -47,11 +87,15 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
         if sum <= 0.0 {
             bail!(
                 "the reference {} is black in {name} wherever both images are covered: no relative error can be measured against it",
-                args.reference.display()
+                path.display()
             );
         }
     }
-    output::create_dir(&args.out)?;
+    Ok(())
+}
+
+/// Writes the per-pixel relative error as `error.exr` (grey) and `error.png` (false colour).
+fn write_error_images(args: &CompareArgs, w: u32, h: u32, per_pixel: &[f32]) -> Result<()> {
     let grey: Vec<f32> = per_pixel
         .iter()
         .flat_map(|&e| {
@@ -67,17 +111,17 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
         &args.out.join("error.png"),
         w,
         h,
-        &metrics::false_colour(&per_pixel, args.full_scale),
-    )?;
-    let binned: Vec<metrics::BinnedError> = [1, 2, 4]
-        .iter()
-        .map(|&k| metrics::compare_binned(&a, &b, noise.as_deref(), w, h, k))
-        .collect();
-    let mut json = serde_json::to_value(&report)?;
-    json["binned"] = serde_json::to_value(&binned)?;
-    output::write_atomic(&args.out.join("error.json"), |p| {
-        Ok(std::fs::write(p, serde_json::to_string_pretty(&json)?)?)
-    })?;
+        &crate::metrics::false_colour(per_pixel, args.full_scale),
+    )
+}
+
+/// Prints the error per channel and after each binning (with the reference's noise removed
+/// where `noise` was given).
+fn print_summary(
+    report: &crate::metrics::ErrorReport,
+    binned: &[crate::metrics::BinnedError],
+    noise: bool,
+) {
     println!("{} pixels compared", report.pixels);
     for (name, c) in ["red", "green", "blue"].iter().zip(&report.channels) {
         println!(
@@ -95,8 +139,8 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
             100.0 * v[2]
         )
     };
-    for e in &binned {
-        if noise.is_some() {
+    for e in binned {
+        if noise {
             println!(
                 "{0}x{0} bins ({1}): relative RMS {2} with the reference's noise ({3}) removed; measured {4}",
                 e.bin,
@@ -114,5 +158,4 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
             );
         }
     }
-    Ok(())
 }

@@ -6,32 +6,10 @@ use super::*;
 pub(super) const MAX_REFERENCE_SAMPLES: f64 = 5e7;
 
 pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
-    use crate::metrics;
-    use crate::reference::{Reference, ReferenceSettings};
+    use crate::reference::Reference;
     let mut scene = args.input.load()?;
     apply_default_for_reference(&mut scene, preprocess::DEFAULT_TARGET_ERROR)?;
-    let mut settings = ReferenceSettings::for_scene(&scene);
-    if let Some(s) = args.spacing_mm {
-        if !(s.is_finite() && s > 0.0) {
-            bail!("--spacing-mm {s} must be a finite positive length");
-        }
-        // Every sample is stored (position, normal, irradiance): bounded before allocating
-        // (0.0001 mm on the bunny once aborted allocating 960 GB).
-        let samples = scene.mesh.surface_area() / (s * s);
-        if samples > MAX_REFERENCE_SAMPLES {
-            bail!(
-                "--spacing-mm {s} gives {samples:.2e} surface samples, more than {MAX_REFERENCE_SAMPLES:.0e}: use at least {:.4} mm",
-                (scene.mesh.surface_area() / MAX_REFERENCE_SAMPLES).sqrt()
-            );
-        }
-        settings.spacing_mm = s;
-    }
-    if let Some(t) = args.theta {
-        if !(t > 0.0 && t < 1.0) {
-            bail!("--theta {t} must lie in (0, 1)");
-        }
-        settings.theta = t;
-    }
+    let settings = reference_settings(args, &scene)?;
     output::check_targets(
         &args.out,
         &[
@@ -58,29 +36,13 @@ pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
         &r.radiance,
         scene.exposure,
     )?;
-    let mut csv = String::from("x,y,z,B_r,B_g,B_b\n");
-    for (p, b) in scene.mesh.positions.iter().zip(&r.vertex_b) {
-        csv.push_str(&format!(
-            "{},{},{},{:e},{:e},{:e}\n",
-            p.x, p.y, p.z, b[0], b[1], b[2]
-        ));
-    }
-    output::write_atomic(&out.join("vertices.csv"), |p| Ok(std::fs::write(p, &csv)?))?;
+    write_vertices(out, &scene, &r)?;
     let mut info = serde_json::json!({
         "spacing_mm": settings.spacing_mm, "theta": settings.theta, "samples": r.samples,
         "lit_samples": r.lit_samples, "seconds": seconds,
     });
     if args.refine {
-        let fine = Reference::compute(&scene, settings.refined());
-        let (e, _) = metrics::compare(&r.radiance, &fine.radiance, None);
-        println!(
-            "refined (spacing {:.3} mm, theta {:.3}): the answer moves by {:.3} % RMS, {:.3} % at the 99th percentile",
-            settings.spacing_mm / 2.0,
-            settings.theta / 2.0,
-            100.0 * e.rel_rms,
-            100.0 * e.channels.iter().map(|c| c.p99).fold(0.0, f64::max)
-        );
-        info["refinement"] = serde_json::to_value(&e)?;
+        info["refinement"] = refine(&scene, settings, &r)?;
     }
     output::write_atomic(&out.join("reference.json"), |p| {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
@@ -90,4 +52,70 @@ pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// The reference's settings for `scene` with `--spacing-mm` and `--theta` applied, each
+/// refused outside its range (the spacing also where it gives too many samples).
+fn reference_settings(
+    args: &ReferenceArgs,
+    scene: &Scene,
+) -> Result<crate::reference::ReferenceSettings> {
+    let mut settings = crate::reference::ReferenceSettings::for_scene(scene);
+    if let Some(s) = args.spacing_mm {
+        if !(s.is_finite() && s > 0.0) {
+            bail!("--spacing-mm {s} must be a finite positive length");
+        }
+        // Every sample is stored (position, normal, irradiance): bounded before allocating
+        // (0.0001 mm on the bunny once aborted allocating 960 GB).
+        let samples = scene.mesh.surface_area() / (s * s);
+        if samples > MAX_REFERENCE_SAMPLES {
+            bail!(
+                "--spacing-mm {s} gives {samples:.2e} surface samples, more than {MAX_REFERENCE_SAMPLES:.0e}: use at least {:.4} mm",
+                (scene.mesh.surface_area() / MAX_REFERENCE_SAMPLES).sqrt()
+            );
+        }
+        settings.spacing_mm = s;
+    }
+    if let Some(t) = args.theta {
+        if !(t > 0.0 && t < 1.0) {
+            bail!("--theta {t} must lie in (0, 1)");
+        }
+        settings.theta = t;
+    }
+    Ok(settings)
+}
+
+/// Writes `vertices.csv` in `out`: B at every mesh vertex.
+fn write_vertices(
+    out: &std::path::Path,
+    scene: &Scene,
+    r: &crate::reference::Reference,
+) -> Result<()> {
+    let mut csv = String::from("x,y,z,B_r,B_g,B_b\n");
+    for (p, b) in scene.mesh.positions.iter().zip(&r.vertex_b) {
+        csv.push_str(&format!(
+            "{},{},{},{:e},{:e},{:e}\n",
+            p.x, p.y, p.z, b[0], b[1], b[2]
+        ));
+    }
+    output::write_atomic(&out.join("vertices.csv"), |p| Ok(std::fs::write(p, &csv)?))
+}
+
+/// Computes the reference again with half the spacing and theta of `settings` (those of `r`)
+/// and prints how far the answer moves; returns that error for `reference.json`.
+fn refine(
+    scene: &Scene,
+    settings: crate::reference::ReferenceSettings,
+    r: &crate::reference::Reference,
+) -> Result<serde_json::Value> {
+    let fine = crate::reference::Reference::compute(scene, settings.refined());
+    let (e, _) = crate::metrics::compare(&r.radiance, &fine.radiance, None);
+    println!(
+        "refined (spacing {:.3} mm, theta {:.3}): the answer moves by {:.3} % RMS, {:.3} % at the 99th percentile",
+        settings.spacing_mm / 2.0,
+        settings.theta / 2.0,
+        100.0 * e.rel_rms,
+        100.0 * e.channels.iter().map(|c| c.p99).fold(0.0, f64::max)
+    );
+    Ok(serde_json::to_value(&e)?)
 }

@@ -2,21 +2,22 @@
 
 use super::*;
 
+/// The traced image's figures that `truth.json` and the summary report.
+struct Figures {
+    /// The medium traced.
+    medium: crate::truth::Medium,
+    /// The noise after each binning.
+    noise: Vec<crate::truth::BinnedNoise>,
+    /// The object's mean radiance per channel.
+    mean: [f64; 3],
+    /// The standard error of `mean`.
+    stderr: [f64; 3],
+}
+
 pub(super) fn truth(args: &TruthArgs) -> Result<()> {
-    use crate::truth::{self, TruthSettings};
+    use crate::truth;
     let scene = args.input.load()?;
-    let settings = TruthSettings {
-        spp: if args.time.is_some() {
-            u32::MAX
-        } else {
-            args.spp
-        },
-        time_s: args.time,
-        seed: args.seed,
-        g: args.g,
-        min_order: args.min_order,
-        max_order: args.max_order.unwrap_or(u32::MAX),
-    };
+    let settings = truth_settings(args);
     // Refuse before creating anything.
     truth::validate(&scene, &settings)?;
     output::check_targets(
@@ -31,6 +32,43 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
     )?;
     output::create_dir(&args.out)?;
     let medium = truth::Medium::new(&scene.material, args.g);
+    print_plan(args, &scene, &medium);
+    let t = trace(&scene, &settings)?;
+    let (mean, stderr) = t.object_mean();
+    let noise: Vec<_> = [1, 2, 4].iter().map(|&k| t.noise_at(k)).collect();
+    let figures = Figures {
+        medium,
+        noise,
+        mean,
+        stderr,
+    };
+    let out = &args.out;
+    // The surface's reflection alone, where there is one (a refractive boundary).
+    let refractive = scene.material.eta != 1.0;
+    write_images(out, &scene, &t, refractive)?;
+    write_info(args, &scene, &t, &figures)?;
+    print_summary(&t, &figures, refractive, out);
+    Ok(())
+}
+
+/// The tracer's settings from the arguments (`--time`: no cap on the paths).
+fn truth_settings(args: &TruthArgs) -> crate::truth::TruthSettings {
+    crate::truth::TruthSettings {
+        spp: if args.time.is_some() {
+            u32::MAX
+        } else {
+            args.spp
+        },
+        time_s: args.time,
+        seed: args.seed,
+        g: args.g,
+        min_order: args.min_order,
+        max_order: args.max_order.unwrap_or(u32::MAX),
+    }
+}
+
+/// Prints what is traced: the image size, the medium and the paths or the time.
+fn print_plan(args: &TruthArgs, scene: &Scene, medium: &crate::truth::Medium) {
     println!(
         "truth: {}x{}, sigma_t {:.4} / {:.4} / {:.4} 1/mm, albedo {:.5} / {:.5} / {:.5}, g {}, {}",
         scene.width,
@@ -47,26 +85,35 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
             None => format!("{} paths per pixel and channel", args.spp),
         }
     );
+}
+
+/// Traces the truth behind a progress bar; with `--surface off`, the subsurface light alone.
+fn trace(scene: &Scene, settings: &crate::truth::TruthSettings) -> Result<crate::truth::Truth> {
+    use crate::truth;
     let bar = ProgressBar::new(1000).with_style(
         ProgressStyle::with_template("{bar:40} {percent:>3}% elapsed {elapsed} ETA {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let mut t = truth::compute(&scene, &settings, &|f| {
-        bar.set_position((f * 1000.0) as u64)
-    })?;
+    let mut t = truth::compute(scene, settings, &|f| bar.set_position((f * 1000.0) as u64))?;
     // `--surface off`: the subsurface light alone, as the renderer shows it then (the
     // reflection is still written apart).
     if !scene.surface.on {
         t.take_out_the_surface();
     }
     bar.finish_and_clear();
-    let (mean, stderr) = t.object_mean();
-    let noise: Vec<_> = [1, 2, 4].iter().map(|&k| t.noise_at(k)).collect();
-    let out = &args.out;
+    Ok(t)
+}
+
+/// Writes `truth.exr`, `truth.png` and `noise.exr` in `out`, and `truth_surface.exr` where
+/// the boundary is `refractive`.
+fn write_images(
+    out: &std::path::Path,
+    scene: &Scene,
+    t: &crate::truth::Truth,
+    refractive: bool,
+) -> Result<()> {
     output::write_radiance(out, "truth", t.width, t.height, &t.radiance, scene.exposure)?;
     output::write_exr(&out.join("noise.exr"), t.width, t.height, &t.noise)?;
-    // The surface's reflection alone, where there is one (a refractive boundary).
-    let refractive = scene.material.eta != 1.0;
     if refractive {
         output::write_exr(
             &out.join("truth_surface.exr"),
@@ -75,6 +122,22 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
             &t.surface,
         )?;
     }
+    Ok(())
+}
+
+/// Writes `truth.json`: the tracing's counts, the arguments and the figures.
+fn write_info(
+    args: &TruthArgs,
+    scene: &Scene,
+    t: &crate::truth::Truth,
+    figures: &Figures,
+) -> Result<()> {
+    let Figures {
+        medium,
+        noise,
+        mean,
+        stderr,
+    } = figures;
     let info = serde_json::json!({
         "spp": t.spp, "seconds": t.seconds, "events": t.events, "paths": t.paths,
         "events_per_second": t.events_per_second(), "truncated_paths": t.truncated_paths,
@@ -84,9 +147,25 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
         "sigma_t": medium.sigma_t, "albedo": medium.albedo,
         "noise": noise, "object_mean": mean, "object_mean_stderr": stderr,
     });
-    output::write_atomic(&out.join("truth.json"), |p| {
+    output::write_atomic(&args.out.join("truth.json"), |p| {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
-    })?;
+    })
+}
+
+/// Prints the tracing's counts, the noise after each binning, the object's mean and the
+/// files written to `out`.
+fn print_summary(
+    t: &crate::truth::Truth,
+    figures: &Figures,
+    refractive: bool,
+    out: &std::path::Path,
+) {
+    let Figures {
+        noise,
+        mean,
+        stderr,
+        ..
+    } = figures;
     println!(
         "{} paths per pixel and channel over {} pixels in {:.1} s: {:.3e} collisions ({:.2} M/s), {} paths cut, {} refracted connections dropped",
         t.spp,
@@ -97,7 +176,7 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
         t.truncated_paths,
         t.capped_connections
     );
-    for n in &noise {
+    for n in noise {
         println!(
             "noise after {0}x{0} binning: {1:.2} / {2:.2} / {3:.2} % RMS",
             n.bin,
@@ -124,5 +203,4 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
         },
         out.display()
     );
-    Ok(())
 }
