@@ -11,7 +11,6 @@
 use crate::gpu::Gpu;
 use crate::metrics;
 use crate::preprocess::{
-    self,
     operators::Blend,
     settings::{Choice, SettingsOverrides},
     Preprocessed,
@@ -200,8 +199,14 @@ pub fn measure(
     let scene = sweep.scene;
     let quiet = |_: &str, _: u64, _: u64| {};
     {
-        let (pre, _) = preprocess::prepare(scene, sweep.auto, Some(sweep.cache_dir), &quiet)?;
-        let mut r = Renderer::new(gpu, scene.clone(), &pre, Options::default())?;
+        let p = crate::pipeline::load_or_build(scene, sweep.auto, Some(sweep.cache_dir), &quiet)?;
+        let mut r = Renderer::new(
+            gpu,
+            scene.clone(),
+            &p.pre,
+            p.transfer.as_ref(),
+            Options::default(),
+        )?;
         let mut previous = f64::INFINITY;
         for block in 0..WARMUP_BLOCKS {
             let mut t = Vec::with_capacity(WARMUP_BLOCK);
@@ -229,13 +234,16 @@ pub fn measure(
         for run in runs {
             let scene = run.scene;
             for (label, o) in run.settings.as_deref().unwrap_or(sweep.settings) {
-                let choice = preprocess::choose(scene, o, sweep.target_error)?;
-                let (pre, _) = preprocess::prepare(scene, &choice, Some(sweep.cache_dir), &quiet)?;
+                let choice = crate::pipeline::choose(scene, o, sweep.target_error)?;
+                let prepared =
+                    crate::pipeline::load_or_build(scene, &choice, Some(sweep.cache_dir), &quiet)?;
+                let pre = &prepared.pre;
                 for &mode in &run.modes {
                     let mut r = Renderer::new(
                         gpu,
                         scene.clone(),
-                        &pre,
+                        pre,
+                        prepared.transfer.as_ref(),
                         Options {
                             mode,
                             ..Default::default()
@@ -257,7 +265,7 @@ pub fn measure(
                         let mut p = point(
                             label,
                             mode,
-                            &pre,
+                            pre,
                             choice.settings.node_spacing_mm,
                             &out.radiance,
                             &run.against,

@@ -24,6 +24,7 @@ pub mod numeric;
 pub mod output;
 pub mod passes;
 pub mod physics;
+pub mod pipeline;
 pub mod preprocess;
 pub mod reference;
 pub mod renderer;

@@ -16,7 +16,7 @@ use crate::passes::{
     frame::{FrameUniforms, MaterialUniforms},
     PassName,
 };
-use crate::preprocess::{operators::Blend, Preprocessed};
+use crate::preprocess::{operators::Blend, transfer::Transfer, Preprocessed};
 use crate::scene::{Light, Scene};
 use anyhow::{Context, Result};
 use ash::vk;
@@ -132,58 +132,6 @@ fn write_environment_map(buffer: &Buffer, scene: &Scene) -> Result<()> {
     Ok(())
 }
 
-/// The environment's per-texel transfer for `scene` (None without an environment light),
-/// loaded from `cache` or computed (and stored there), timed and logged.
-pub fn environment_transfer(
-    scene: &Scene,
-    pre: &Preprocessed,
-    cache: Option<&std::path::Path>,
-) -> Option<crate::preprocess::transfer::Transfer> {
-    use crate::preprocess::cache;
-    scene.environment.as_ref()?;
-    let key = crate::preprocess::transfer::key(
-        cache::key(&scene.mesh, &scene.material, &pre.settings),
-        scene.prt,
-    );
-    if let Some(dir) = cache {
-        match cache::load::<crate::preprocess::transfer::Transfer>(dir, key) {
-            Ok(Some(t))
-                if t.coefficients.len()
-                    == pre.atlas.texels.len()
-                        * crate::environment::sh::coefficients(t.settings.order) =>
-            {
-                tracing::info!(
-                    "environment transfer loaded from {}",
-                    cache::path(dir, key).display()
-                );
-                return Some(t);
-            }
-            Ok(_) => {}
-            Err(e) => tracing::warn!("{e:#}; recomputing the environment transfer"),
-        }
-    }
-    let t = crate::preprocess::transfer::transfer(
-        &scene.mesh,
-        &pre.atlas,
-        scene.material.eta,
-        scene.prt,
-    );
-    tracing::info!(
-        "environment transfer: order {} ({} coefficients), {} rays per texel, {} texels: {:.2} s",
-        t.settings.order,
-        crate::environment::sh::coefficients(t.settings.order),
-        t.settings.rays,
-        pre.atlas.texels.len(),
-        t.seconds
-    );
-    if let Some(dir) = cache {
-        if let Err(e) = cache::store(dir, key, &t) {
-            tracing::warn!("cannot store the environment transfer in the cache: {e:#}");
-        }
-    }
-    Some(t)
-}
-
 /// A scene on the GPU with its compiled frame graph.
 pub struct Renderer {
     gpu: Arc<Gpu>,
@@ -229,52 +177,29 @@ fn read_back<T: bytemuck::Pod>(buffer: &Buffer, count: usize) -> Result<Vec<T>> 
 }
 
 impl Renderer {
-    /// [`Renderer::new`] with the environment's transfer from the preprocessing cache `cache`
-    /// (computed and stored there when missing).
-    pub fn cached(
-        gpu: &Arc<Gpu>,
-        scene: Scene,
-        pre: &Preprocessed,
-        options: Options,
-        cache: Option<&std::path::Path>,
-    ) -> Result<Renderer> {
-        let transfer = environment_transfer(&scene, pre, cache);
-        let data = Self::upload_with(gpu, &scene, pre, &options, transfer.as_ref())?;
-        Self::with_data(gpu, scene, &data, options)
-    }
-
-    /// Uploads the scene's preprocessing and builds the frame graph.
+    /// Uploads the scene's preprocessing (and under an environment light its transfer,
+    /// `pipeline::environment_transfer`) and builds the frame graph.
     pub fn new(
         gpu: &Arc<Gpu>,
         scene: Scene,
         pre: &Preprocessed,
+        transfer: Option<&Transfer>,
         options: Options,
     ) -> Result<Renderer> {
-        let data = Self::upload(gpu, &scene, pre, &options)?;
+        let data = Self::upload(gpu, &scene, pre, transfer, &options)?;
         Self::with_data(gpu, scene, &data, options)
     }
 
     /// Checks that the device can hold the scene's data, then uploads it (what
     /// [`Renderer::new`] does before building the graph; the viewer keeps it across resizes).
-    /// With an environment light, the transfer is computed first ([`environment_transfer`]).
+    /// `transfer` is the environment's over `pre`'s atlas, required with an environment light
+    /// and refused without one.
     pub fn upload(
         gpu: &Arc<Gpu>,
         scene: &Scene,
         pre: &Preprocessed,
+        transfer: Option<&Transfer>,
         options: &Options,
-    ) -> Result<SubsurfaceData> {
-        let transfer = environment_transfer(scene, pre, None);
-        Self::upload_with(gpu, scene, pre, options, transfer.as_ref())
-    }
-
-    /// [`Renderer::upload`] with the environment's transfer given (computed once for several
-    /// renderers, or kept across material changes that keep eta).
-    pub fn upload_with(
-        gpu: &Arc<Gpu>,
-        scene: &Scene,
-        pre: &Preprocessed,
-        options: &Options,
-        transfer: Option<&crate::preprocess::transfer::Transfer>,
     ) -> Result<SubsurfaceData> {
         // The uniforms take the order from the scene: the transfer must be the scene's.
         if let Some(t) = transfer {

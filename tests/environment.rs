@@ -40,6 +40,7 @@ fn illumination(scene: &Scene, pre: &preprocess::Preprocessed) -> (Vec<[f32; 4]>
             &gpu,
             scene.clone(),
             pre,
+            translucent::pipeline::environment_transfer(&scene, pre, None).as_ref(),
             Options {
                 capture: true,
                 ..Default::default()
@@ -350,7 +351,14 @@ fn turning_the_environment_needs_no_preprocessing_and_equals_rotate_deg() {
     let pre = common::preprocess(&scene, SettingsOverrides::default());
     let gpu = common::gpu();
     let (frames, builds) = {
-        let mut r = Renderer::new(&gpu, scene.clone(), &pre, Options::default()).unwrap();
+        let mut r = Renderer::new(
+            &gpu,
+            scene.clone(),
+            &pre,
+            translucent::pipeline::environment_transfer(&scene, &pre, None).as_ref(),
+            Options::default(),
+        )
+        .unwrap();
         let before = preprocess::builds();
         let mut images = Vec::new();
         for angle in [0.0f32, 45.0, 90.0] {
@@ -508,20 +516,20 @@ fn the_transfer_is_cached_with_the_preprocessing() {
     scene.width = 64;
     scene.height = 64;
     let pre = common::preprocess(&scene, SettingsOverrides::default());
-    let first = translucent::renderer::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
+    let first = translucent::pipeline::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
     let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
     assert_eq!(files.len(), 1, "the transfer was not stored");
-    let again = translucent::renderer::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
+    let again = translucent::pipeline::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
     assert_eq!(first.coefficients, again.coefficients);
     assert_eq!(again.seconds, first.seconds, "recomputed instead of loaded");
     // Another order is another entry; a corrupt entry is recomputed, not used.
     let mut other = scene.clone();
     other.prt.order = 2;
-    let o = translucent::renderer::environment_transfer(&other, &pre, Some(&dir)).unwrap();
+    let o = translucent::pipeline::environment_transfer(&other, &pre, Some(&dir)).unwrap();
     assert_eq!(o.coefficients.len(), pre.atlas.texels.len() * 4);
     // The uniforms take the order from the scene: a transfer of another order is refused.
     let gpu = common::gpu();
-    let wrong = match Renderer::upload_with(&gpu, &scene, &pre, &Options::default(), Some(&o)) {
+    let wrong = match Renderer::upload(&gpu, &scene, &pre, Some(&o), &Options::default()) {
         Ok(_) => panic!("a transfer of order 2 was uploaded for a scene of order 4"),
         Err(e) => format!("{e:#}"),
     };
@@ -530,7 +538,7 @@ fn the_transfer_is_cached_with_the_preprocessing() {
     for f in std::fs::read_dir(&dir).unwrap() {
         std::fs::write(f.unwrap().path(), b"garbage").unwrap();
     }
-    let fresh = translucent::renderer::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
+    let fresh = translucent::pipeline::environment_transfer(&scene, &pre, Some(&dir)).unwrap();
     assert_eq!(fresh.coefficients, first.coefficients);
 }
 

@@ -61,7 +61,7 @@ fn estimate_bounds_the_requirements() {
     for (text, what) in &cases {
         let scene = common::scene(text);
         let choice =
-            translucent::preprocess::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
+            translucent::pipeline::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
         let e = translucent::preprocess::estimate(&scene.mesh, &scene.material, &choice.settings);
         let start = std::time::Instant::now();
         let pre = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);

@@ -62,6 +62,7 @@ fn capture_with(
             &gpu,
             scene.clone(),
             pre,
+            translucent::pipeline::environment_transfer(&scene, pre, None).as_ref(),
             Options {
                 mode,
                 capture: true,
@@ -488,7 +489,14 @@ fn moving_the_light_changes_the_image_without_preprocessing() {
     let builds = translucent::preprocess::builds();
     let gpu = common::gpu();
     {
-        let mut r = Renderer::new(&gpu, s.clone(), &pre, Options::default()).unwrap();
+        let mut r = Renderer::new(
+            &gpu,
+            s.clone(),
+            &pre,
+            translucent::pipeline::environment_transfer(&s, &pre, None).as_ref(),
+            Options::default(),
+        )
+        .unwrap();
         let mut images = Vec::new();
         for k in 0..4 {
             let lights = r.orbit_lights(std::f32::consts::FRAC_PI_2 * k as f32);
@@ -525,7 +533,14 @@ fn a_still_light_skips_the_light_passes() {
     let pre = common::preprocess(&s, coarse(1.5));
     let gpu = common::gpu();
     {
-        let mut r = Renderer::new(&gpu, s.clone(), &pre, Options::default()).unwrap();
+        let mut r = Renderer::new(
+            &gpu,
+            s.clone(),
+            &pre,
+            translucent::pipeline::environment_transfer(&s, &pre, None).as_ref(),
+            Options::default(),
+        )
+        .unwrap();
         let names = r.pass_names();
         let lights = r.orbit_lights(0.0);
         let first = r.frame_incremental(&lights).unwrap();
@@ -619,7 +634,14 @@ fn the_interface_is_drawn_over_the_display() {
             }),
             ..Default::default()
         };
-        let mut r = Renderer::new(&gpu, s.clone(), &pre, options).unwrap();
+        let mut r = Renderer::new(
+            &gpu,
+            s.clone(),
+            &pre,
+            translucent::pipeline::environment_transfer(&s, &pre, None).as_ref(),
+            options,
+        )
+        .unwrap();
         let names = r.pass_names();
         let pos = |n: &str| names.iter().position(|x| x == n).unwrap();
         let (window_pass, ui, readback) = (pos("window"), pos("ui"), pos("readback"));
@@ -1010,7 +1032,14 @@ fn oblique_light_leaves_with_the_half_spaces_lobe() {
             capture: true,
             ..Default::default()
         };
-        let mut r = Renderer::new(&gpu, oblique.clone(), &pre, options).unwrap();
+        let mut r = Renderer::new(
+            &gpu,
+            oblique.clone(),
+            &pre,
+            translucent::pipeline::environment_transfer(&oblique, &pre, None).as_ref(),
+            options,
+        )
+        .unwrap();
         [&oblique, &normal].map(|s| orders_beyond_single(&mut r, &s.lights))
     };
     common::assert_no_validation_messages(&gpu);
@@ -1086,7 +1115,14 @@ fn the_exit_lobe_leans_along_the_walks_drift() {
         ..Default::default()
     };
     let frames = [&pre, &leaning].map(|p| {
-        let mut r = Renderer::new(&gpu, box_.clone(), p, options()).unwrap();
+        let mut r = Renderer::new(
+            &gpu,
+            box_.clone(),
+            p,
+            translucent::pipeline::environment_transfer(&box_, p, None).as_ref(),
+            options(),
+        )
+        .unwrap();
         orders_beyond_single(&mut r, &box_.lights)
     });
     common::assert_no_validation_messages(&gpu);

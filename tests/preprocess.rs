@@ -259,13 +259,13 @@ fn bunny_pruning_stays_within_tolerance() {
         texel_mm: Some(1.0),
         ..Default::default()
     };
-    let choice = translucent::preprocess::choose(&scene, &o, 0.02).unwrap();
+    let choice = translucent::pipeline::choose(&scene, &o, 0.02).unwrap();
     let p = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
     let tol = p.settings.prune_tolerance;
     assert!(p.ops.prune.max_dropped <= tol + 1e-12, "{:?}", p.ops.prune);
     assert!(p.ops.prune.kept_entries <= p.ops.prune.dense_entries);
     // Recompute each row's dropped mass independently from an unpruned build.
-    let full_choice = translucent::preprocess::choose(
+    let full_choice = translucent::pipeline::choose(
         &scene,
         &SettingsOverrides {
             prune_tolerance: Some(0.0),
@@ -339,22 +339,24 @@ fn cache_round_trips_and_rejects_corrupt_or_stale_files() {
         Scene::from_desc(scene_desc, std::path::Path::new(""), &Overrides::default()).unwrap();
     let key = cache::key(&scene.mesh, &scene.material, &choice.settings);
     std::fs::write(cache::path(&dir, key), b"garbage").unwrap();
-    let (_, outcome) =
-        translucent::preprocess::prepare(&scene, &choice, Some(&dir), &quiet).unwrap();
+    let outcome = translucent::pipeline::load_or_build(&scene, &choice, Some(&dir), &quiet)
+        .unwrap()
+        .cache;
     assert!(
         matches!(
             outcome,
-            translucent::preprocess::CacheOutcome::Built {
+            translucent::pipeline::CacheOutcome::Built {
                 replaced: Some(_),
                 stored: Some(_)
             }
         ),
         "{outcome:?}"
     );
-    let (_, outcome) =
-        translucent::preprocess::prepare(&scene, &choice, Some(&dir), &quiet).unwrap();
+    let outcome = translucent::pipeline::load_or_build(&scene, &choice, Some(&dir), &quiet)
+        .unwrap()
+        .cache;
     assert!(
-        matches!(outcome, translucent::preprocess::CacheOutcome::Hit(_)),
+        matches!(outcome, translucent::pipeline::CacheOutcome::Hit(_)),
         "{outcome:?}"
     );
     // No temporary files remain.
@@ -421,7 +423,7 @@ fn shadow_traffic_counts_every_layer() {
     let directional = scene("kind = \"directional\"\ndirection = [0.0, -1.0, 0.0]");
     let point = scene("kind = \"point\"\nposition = [0.0, 40.0, 0.0]");
     let choice =
-        translucent::preprocess::choose(&directional, &SettingsOverrides::default(), 0.02).unwrap();
+        translucent::pipeline::choose(&directional, &SettingsOverrides::default(), 0.02).unwrap();
     let pre = Preprocessed::build(&directional.mesh, &directional.material, &choice, &quiet);
     for (s, layers) in [(&directional, 1), (&point, 6)] {
         let size = shadow_map_size(s, pre.atlas.texel_mm).0 as u64;
@@ -443,7 +445,7 @@ fn preprocessing_is_deterministic() {
     )
     .unwrap();
     let choice =
-        translucent::preprocess::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
+        translucent::pipeline::choose(&scene, &SettingsOverrides::default(), 0.02).unwrap();
     let build = || {
         let mut p = Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet);
         p.ops.seconds = [0.0; 3];

@@ -21,7 +21,7 @@ fn single_error(name: &str, truth_dir: &str) -> [f64; 3] {
         capture: true,
         ..Default::default()
     };
-    let mut r = Renderer::new(&gpu, scene, &pre, options).unwrap();
+    let mut r = Renderer::new(&gpu, scene, &pre, None, options).unwrap();
     let out = r.render(1).unwrap();
     let c = r.captured(0, 0).unwrap().unwrap();
     common::assert_no_validation_messages(&gpu);
@@ -122,7 +122,14 @@ fn the_pass_measures_the_view_rays_length_inside() {
         ..Default::default()
     };
     let (w, h) = (scene.width, scene.height);
-    let mut r = Renderer::new(&gpu, scene.clone(), &pre, options).unwrap();
+    let mut r = Renderer::new(
+        &gpu,
+        scene.clone(),
+        &pre,
+        translucent::pipeline::environment_transfer(&scene, &pre, None).as_ref(),
+        options,
+    )
+    .unwrap();
     let out = r.render(1).unwrap();
     let c = r.captured(0, 0).unwrap().unwrap();
     common::assert_no_validation_messages(&gpu);

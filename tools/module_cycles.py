@@ -6,8 +6,11 @@ is its folder's module). An edge A -> B is a path `crate::B...` (or `super::...`
 A's code outside comments and unit tests, B the longest module the path names. Edges between a module and its
 own ancestors or descendants are left out: a parent declares its children and re-exports their
 items, and a child may use what its parent defines; a cycle is a circle between modules that
-neither contains. Prints the edges with --list; prints every strongly connected set of two or
-more modules and exits 1 where there is one.
+neither contains. The same check runs again on the folders under src/ (each top-level module with
+everything below it): `scene` -> `preprocess` and `preprocess` -> `scene` through any of their
+files is a circle between floors even where no two files form one. Prints the edges with
+--list; prints every strongly connected set of two or more modules or folders and exits 1
+where there is one.
 
     python3 tools/module_cycles.py [--list] [SRC]
 """
@@ -115,8 +118,27 @@ def main(argv):
     cycles = [g for g in strongly_connected(modules, edges) if len(g) > 1]
     for g in cycles:
         print("cycle: " + " <-> ".join(name(m) for m in g))
-    print(f"{len(modules)} modules, {sum(len(v) for v in edges.values())} imports, {len(cycles)} cycles")
-    return 1 if cycles else 0
+    # Folders: the top-level modules, each standing for everything below it.
+    folders = {m[:1] for m in modules if m}
+    folder_edges, through = {}, {}
+    for a, targets in edges.items():
+        for b in targets:
+            if a[:1] and b[:1] and a[:1] != b[:1]:
+                folder_edges.setdefault(a[:1], set()).add(b[:1])
+                through.setdefault((a[:1], b[:1]), []).append(f"{name(a)} -> {name(b)}")
+    folder_cycles = [g for g in strongly_connected(folders, folder_edges) if len(g) > 1]
+    for g in folder_cycles:
+        print("folder cycle: " + " <-> ".join(name(m) for m in g))
+        members = set(g)
+        for a in g:
+            for b in sorted(folder_edges.get(a, ())):
+                if b in members:
+                    print(f"  {name(a)} -> {name(b)}: {', '.join(sorted(through[(a, b)]))}")
+    print(
+        f"{len(modules)} modules, {sum(len(v) for v in edges.values())} imports, {len(cycles)} cycles; "
+        f"{len(folders)} folders, {sum(len(v) for v in folder_edges.values())} imports, {len(folder_cycles)} cycles"
+    )
+    return 1 if cycles or folder_cycles else 0
 
 
 if __name__ == "__main__":

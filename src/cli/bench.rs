@@ -8,14 +8,16 @@ pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     let scene = args.input.load()?;
     output::create_dir(&args.out)?;
     let mut scene = scene;
-    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, false)?;
+    let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, false)?;
+    let pre = &prepared.pre;
     let mode = args
         .mode
         .unwrap_or_else(|| Blend::for_model(scene.material.model));
-    let mut renderer = Renderer::cached(
+    let mut renderer = Renderer::new(
         &gpu,
         scene.clone(),
-        &pre,
+        pre,
+        prepared.transfer.as_ref(),
         Options {
             mode,
             global_layout: args.global_layout,
@@ -24,7 +26,6 @@ pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
             readback_on_request: true,
             ..Default::default()
         },
-        args.pre.cache_dir().as_deref(),
     )?;
     let global_variant = renderer.global_variant();
     let total = args.warmup + args.frames;
@@ -47,9 +48,9 @@ pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     let largest = (256u64 << 20).min(gpu.info.device_local_bytes / 16);
     let copies = crate::bench::measure_device_copy(&gpu, largest, 7)?;
     check_validation(&gpu)?;
-    let memory = crate::passes::data::Requirements::of(&scene, &pre, mode);
+    let memory = crate::passes::data::Requirements::of(&scene, pre, mode);
     let mut b =
-        crate::bench::BenchReport::new(&report, &scene, &pre, bandwidth, copies, memory, mode);
+        crate::bench::BenchReport::new(&report, &scene, pre, bandwidth, copies, memory, mode);
     b.global_variant = global_variant.to_string();
     output::write_atomic(&args.out.join("bench.json"), |p| {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&b)?)?)

@@ -6,9 +6,10 @@ pub(super) fn borders(args: &BordersArgs) -> Result<()> {
     use crate::reference::{borders, ReferenceSettings};
     let mut scene = args.input.load()?;
     apply_default_for_reference(&mut scene, args.pre.target_error)?;
-    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
+    let choice = pipeline::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     let quiet = |_: &str, _: u64, _: u64| {};
-    let (pre, _) = preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &quiet)?;
+    let pre =
+        pipeline::load_or_build(&scene, &choice, args.pre.cache_dir().as_deref(), &quiet)?.pre;
     output::create_dir(&args.out)?;
     let reference =
         borders::TexelReference::compute(&scene, &pre, ReferenceSettings::for_scene(&scene));

@@ -10,7 +10,7 @@ type OtherScene = (Scene, Option<Reference>);
 pub(super) fn chart(cli: &Cli, args: &ChartArgs) -> Result<()> {
     let (scene, exact) = load_scene(args)?;
     output::create_dir(&args.out)?;
-    let auto = preprocess::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
+    let auto = pipeline::choose(&scene, &SettingsOverrides::default(), args.target_error)?;
     println!("automatic setting:");
     for r in &auto.reasons {
         println!("  {r}");
@@ -73,7 +73,7 @@ fn load_scene(args: &ChartArgs) -> Result<(Scene, bool)> {
     frame_count("--frames", args.frames, 1)?;
     let mut scene = args.input.load()?;
     // The automatic point is the default model's, as `render` would render it.
-    preprocess::model::apply_default(&mut scene, args.target_error)?;
+    pipeline::model::apply_default(&mut scene, args.target_error)?;
     // Every model is compared with its exact model where the reference integrates it, and
     // with the truth alone where it does not (the walks; the light across the air on an
     // object that is not convex), which needs the truth.
@@ -140,7 +140,7 @@ fn other_models(scene: &Scene, args: &ChartArgs) -> Vec<Model> {
     match &args.models {
         Some(m) => m.iter().copied().filter(|m| *m != own).collect(),
         // The walks where they apply: eta = 1 (the material takes the model) and a closed
-        // mesh (`preprocess::choose` refuses the rest).
+        // mesh (`pipeline::choose` refuses the rest).
         None => [
             Model::Dipole,
             Model::Halfspace,
@@ -220,7 +220,7 @@ fn model_runs<'a>(
         let model = s.material.model;
         // The walks' own automatic setting (their walk count), and their shorter sweep.
         let settings = if model.walks() {
-            let own = preprocess::choose(s, &SettingsOverrides::default(), args.target_error)
+            let own = pipeline::choose(s, &SettingsOverrides::default(), args.target_error)
                 .with_context(|| format!("--models {}", model.name()))?;
             Some(crate::chart::walk_sweep(&own.settings, args.quick))
         } else {

@@ -16,8 +16,9 @@ use crate::gpu::{list_devices, Gpu, GpuOptions};
 use crate::graph::timing::TimingReport;
 use crate::output;
 use crate::passes::compute::GlobalLayout;
+use crate::pipeline::{self, CacheOutcome, Prepared};
 use crate::preprocess::operators::Blend;
-use crate::preprocess::{self, cache, settings::SettingsOverrides, CacheOutcome};
+use crate::preprocess::{self, cache, settings::SettingsOverrides};
 use crate::renderer::{Options, Renderer};
 use crate::scene::{Overrides, Scene};
 use anyhow::{bail, Context, Result};
@@ -436,6 +437,15 @@ impl PreprocessArgs {
     fn cache_dir(&self) -> Option<PathBuf> {
         (!self.no_cache).then(|| self.cache.clone().unwrap_or_else(cache::default_dir))
     }
+
+    /// What these flags ask of the pipeline.
+    fn request(&self) -> pipeline::Request {
+        pipeline::Request {
+            overrides: self.overrides(),
+            target_error: self.target_error,
+            cache: self.cache_dir(),
+        }
+    }
 }
 
 /// Arguments of `precompute`.
@@ -552,7 +562,7 @@ fn open_and_prepare(
     scene: &mut Scene,
     pre: &PreprocessArgs,
     verbose: bool,
-) -> Result<(std::sync::Arc<Gpu>, preprocess::Preprocessed)> {
+) -> Result<(std::sync::Arc<Gpu>, Prepared)> {
     let gpu = Gpu::new(&GpuOptions {
         validate: cli.validate,
         device: cli.device.clone(),
@@ -562,37 +572,36 @@ fn open_and_prepare(
     Ok((gpu, p))
 }
 
-/// The default model applied to `scene` (`preprocess::model::apply_default`), then its
-/// settings chosen and printed (when `verbose`), and its preprocessing made or loaded.
+/// `scene`'s plan (`pipeline::plan`: the default model applied, the settings chosen), printed
+/// when `verbose`, checked against the device, then its preprocessing made or loaded.
 fn prepare_verbose(
     gpu: &Gpu,
     scene: &mut Scene,
     pre: &PreprocessArgs,
     verbose: bool,
-) -> Result<preprocess::Preprocessed> {
-    preprocess::model::apply_default(scene, pre.target_error)?;
+) -> Result<Prepared> {
+    let request = pre.request();
+    let plan = pipeline::plan(scene, &request)?;
     let scene = &*scene;
-    let choice = preprocess::choose(scene, &pre.overrides(), pre.target_error)?;
-    let estimate = preprocess::estimate(&scene.mesh, &scene.material, &choice.settings);
     if verbose {
-        for r in &choice.reasons {
+        for r in &plan.choice.reasons {
             println!("# {r}");
         }
-        println!("# {}", estimate.describe());
+        println!("# {}", plan.estimate.describe());
         if scene.environment.is_some() {
             println!(
                 "# environment transfer: about {:.1} s ({} texels x {} rays; cached with the preprocessing)",
-                crate::environment::prt::estimate_seconds(estimate.texels, scene.prt),
-                estimate.texels,
+                crate::environment::prt::estimate_seconds(plan.estimate.texels, scene.prt),
+                plan.estimate.texels,
                 scene.prt.rays
             );
         }
     }
-    estimate.check(&gpu.info)?;
+    plan.estimate.check(&gpu.info)?;
     let bars = Bars::new();
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
-    let (p, outcome) = preprocess::prepare(scene, &choice, pre.cache_dir().as_deref(), &progress)?;
-    if let (true, CacheOutcome::Hit(path)) = (verbose, &outcome) {
+    let p = pipeline::load_or_build(scene, &plan.choice, request.cache.as_deref(), &progress)?;
+    if let (true, CacheOutcome::Hit(path)) = (verbose, &p.cache) {
         println!("# preprocessing loaded from {}", path.display());
     }
     Ok(p)
@@ -615,8 +624,8 @@ fn image_options(mode: Blend) -> Options {
 /// a model the exact reference cannot integrate, so that it never checks another model than
 /// `render` renders.
 fn apply_default_for_reference(scene: &mut Scene, target_error: f64) -> Result<()> {
-    let default = preprocess::model::is_default(scene);
-    preprocess::model::apply_default(scene, target_error)?;
+    let default = pipeline::model::is_default(scene);
+    pipeline::model::apply_default(scene, target_error)?;
     if let Err(e) = crate::reference::Reference::supports(scene.material.model, &scene.mesh) {
         if default {
             bail!(

@@ -7,14 +7,14 @@ pub(super) fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
         frame_count("--reweigh", times, 1)?;
     }
     let mut scene = args.input.load()?;
-    preprocess::model::apply_default(&mut scene, args.pre.target_error)?;
+    let request = args.pre.request();
+    let plan = pipeline::plan(&mut scene, &request)?;
     if args.reweigh.is_some() && !crate::passes::reweigh::Reweigher::supports(&scene.material) {
         bail!(
             "--reweigh: model '{}' fills F by random walks, which cannot be re-weighted",
             scene.material.model.name()
         );
     }
-    let choice = preprocess::choose(&scene, &args.pre.overrides(), args.pre.target_error)?;
     println!(
         "mesh: {} vertices, {} triangles, {:.0} mm^2",
         scene.mesh.positions.len(),
@@ -22,18 +22,16 @@ pub(super) fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
         scene.mesh.surface_area()
     );
     println!("settings (from the material and the object's size):");
-    for r in &choice.reasons {
+    for r in &plan.choice.reasons {
         println!("  {r}");
     }
-    println!(
-        "{}",
-        preprocess::estimate(&scene.mesh, &scene.material, &choice.settings).describe()
-    );
+    println!("{}", plan.estimate.describe());
     let bars = Bars::new();
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
-    let (pre, outcome) =
-        preprocess::prepare(&scene, &choice, args.pre.cache_dir().as_deref(), &progress)?;
-    match &outcome {
+    let prepared =
+        pipeline::load_or_build(&scene, &plan.choice, request.cache.as_deref(), &progress)?;
+    let pre = &prepared.pre;
+    match &prepared.cache {
         CacheOutcome::Disabled => println!("cache: off"),
         CacheOutcome::Hit(p) => println!("cache: loaded {}", p.display()),
         CacheOutcome::Built { stored, replaced } => {

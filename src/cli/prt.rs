@@ -21,7 +21,8 @@ pub(super) fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
     }
     frame_count("--frames", args.frames, 1)?;
     let mut scene = scene;
-    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
+    let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
+    let pre = &prepared.pre;
     output::create_dir(&args.out)?;
     let reference = TexelReference::compute(&scene, &pre.atlas, args.stride, args.reference_rays);
     println!(
@@ -52,12 +53,12 @@ pub(super) fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
             ..Default::default()
         };
         let transfer =
-            crate::renderer::environment_transfer(&s, &pre, args.pre.cache_dir().as_deref())
+            crate::pipeline::environment_transfer(&s, pre, args.pre.cache_dir().as_deref())
                 .context("no transfer")?;
         let cpu =
             crate::reference::texels::cpu_estimate(&s, &pre.atlas, &transfer, &reference.texels);
         let cpu = reference.error_of_values(&cpu);
-        let data = Renderer::upload_with(&gpu, &s, &pre, &options, Some(&transfer))?;
+        let data = Renderer::upload(&gpu, &s, pre, Some(&transfer), &options)?;
         let mut r = Renderer::with_data(&gpu, s.clone(), &data, options.clone())?;
         let illum = r
             .pass_names()
@@ -75,7 +76,7 @@ pub(super) fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
         let e = reference.error_of(&pre.atlas, &cap.irradiance);
         let ms = crate::graph::timing::Stats::of(&times).median_ms;
         let k = sh::coefficients(order);
-        let mib = crate::passes::data::counts(&s, &pre, options.mode)
+        let mib = crate::passes::data::counts(&s, pre, options.mode)
             .bytes(crate::layout::Item::EnvironmentTransfer) as f64
             / (1u64 << 20) as f64;
         let pct = |v: [f64; 3]| {

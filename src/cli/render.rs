@@ -46,19 +46,19 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     .collect();
     let mut set = output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)?;
     let mut scene = scene;
-    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
+    let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
     // The scene as rendered: the default model, which the saved scene names.
     let resolved = scene.resolved.to_toml();
     let scene_warnings = scene.warnings.clone();
     let mode = args
         .mode
         .unwrap_or_else(|| Blend::for_model(scene.material.model));
-    let mut renderer = Renderer::cached(
+    let mut renderer = Renderer::new(
         &gpu,
         scene,
-        &pre,
+        &prepared.pre,
+        prepared.transfer.as_ref(),
         image_options(mode),
-        args.pre.cache_dir().as_deref(),
     )?;
     let mut timings = Vec::with_capacity(args.frames);
     for f in 0..args.frames {

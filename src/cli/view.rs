@@ -34,7 +34,7 @@ pub(super) fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
         .collect::<Result<Vec<_>>>()?;
     let event_loop = crate::viewer::connect()?;
     let mut scene = scene;
-    let (gpu, pre) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
+    let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
     check_validation(&gpu)?;
     drop(gpu);
     let mode = args
@@ -45,7 +45,7 @@ pub(super) fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
         event_loop,
         crate::viewer::ViewConfig {
             scene,
-            pre,
+            prepared,
             overrides,
             reweigh: args.reweigh,
             settle: std::time::Duration::from_millis(args.settle_ms),

@@ -40,7 +40,7 @@ impl Model {
     /// scene's geometry or lights: the tabulated profile, with per-frame single scattering
     /// where that applies (eta = 1), of every order behind a refractive boundary: the
     /// material's model before a command applies the default's decision, which also weighs
-    /// the mesh, the lights and the target error (`preprocess::model::decide`).
+    /// the mesh, the lights and the target error (`pipeline::model::decide`).
     pub fn for_eta(eta: f64) -> Model {
         if eta == 1.0 {
             Model::HalfspaceSingle

@@ -199,7 +199,7 @@ pub(super) fn transfer(
 /// incidence:
 /// - `source`: what a node sends across the air, every order, over what F gives it:
 ///   1 / (1 - s), s single scattering's share under cosine-weighted light
-///   ([`super::model::single_share`]);
+///   ([`crate::physics::incidence::single_share`]);
 /// - `receiver`: what a node gives back, every order, under the cosine-distributed light
 ///   that arrives across the air, over what F gives back at its normal incidence: the
 ///   half-space's reflectance under cosine-weighted light over its orders >= 2 at normal
@@ -224,7 +224,7 @@ impl Scales {
                 receiver: [1.0; 3],
             };
         }
-        let share = super::model::single_share(material);
+        let share = crate::physics::incidence::single_share(material);
         let receiver = material.albedo().map(|albedo| {
             if albedo <= 0.0 {
                 return 1.0;

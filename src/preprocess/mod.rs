@@ -6,7 +6,6 @@ pub mod air;
 pub mod apply;
 pub mod atlas;
 pub mod cache;
-pub mod model;
 pub mod nodes;
 pub mod operators;
 pub mod settings;
@@ -15,7 +14,7 @@ pub mod transfer;
 pub mod walk;
 
 use crate::physics::Material;
-use crate::scene::{mesh::Mesh, Scene};
+use crate::scene::mesh::Mesh;
 use atlas::Atlas;
 use nodes::Nodes;
 use operators::Operators;
@@ -23,7 +22,7 @@ use operators::Operators;
 /// Progress callback: (stage name, done, total).
 pub type Progress<'a> = &'a (dyn Fn(&str, u64, u64) + Sync);
 use serde::{Deserialize, Serialize};
-use settings::{Choice, ObjectScale, Settings, SettingsOverrides};
+use settings::{Choice, Settings};
 use std::time::Instant;
 
 thread_local! {
@@ -69,123 +68,6 @@ pub struct Preprocessed {
     pub ops: Operators,
     /// Time per stage (of the run that built this, not of a cache load).
     pub times: StageTimes,
-}
-
-/// Scene-derived scales for [`settings::derive`].
-pub fn object_scale(scene: &Scene, target_error: f64, max_texels: f64) -> ObjectScale {
-    let (center, _) = scene.bounds();
-    let dist = scene.camera.position.distance(center) as f64;
-    let pixel_mm = 2.0 * dist * (0.5 * scene.camera.fov_y as f64).tan() / scene.height as f64;
-    ObjectScale {
-        area_mm2: scene.mesh.surface_area(),
-        pixel_mm,
-        max_texels,
-        target_error,
-    }
-}
-
-/// Chooses the settings for a scene: `overrides` (the command line's), then the scene file's
-/// `[settings]`, the rest derived.
-pub fn choose(
-    scene: &Scene,
-    overrides: &SettingsOverrides,
-    target_error: f64,
-) -> anyhow::Result<Choice> {
-    if !(target_error.is_finite() && target_error > 0.0 && target_error < 1.0) {
-        anyhow::bail!(
-            "--target-error = {target_error} must lie strictly between 0 and 1 (a fraction: 0.02 is 2 %)"
-        );
-    }
-    settings::validate(overrides)?;
-    let overrides = &overrides.or(scene.settings);
-    if scene.material.model.walks() && !scene.mesh.is_closed() {
-        anyhow::bail!(
-            "model {} walks inside the object, and this mesh is not closed (an open surface has no inside: a walk leaving through a hole would never return); use a closed mesh or another model",
-            scene.material.model.name()
-        );
-    }
-    if scene.material.model.crosses_air() && !scene.mesh.is_closed() {
-        anyhow::bail!(
-            "model {} carries light across the air between parts of the object, and this mesh is not closed (an open surface has no inside and outside to tell the air by); use a closed mesh or halfspace-single",
-            scene.material.model.name()
-        );
-    }
-    let mut choice = settings::derive(
-        &scene.material,
-        &object_scale(scene, target_error, DEFAULT_MAX_TEXELS),
-        overrides,
-    );
-    if scene.material.model.walks() {
-        choice.settings.walk_lights = walk::entry_lights(&scene.lights);
-        choice
-            .reasons
-            .push(walk::entry_reason(&choice.settings.walk_lights));
-    }
-    // The model is the material's; said with the derived settings, with why.
-    let m = &scene.material;
-    // Where the default chose the model (`model::apply_default`), its reason.
-    let boundary = model::behind_boundary_reason(m.eta);
-    let why = scene.model_reason.as_deref().unwrap_or_else(|| {
-        match (m.model, m.model == crate::physics::Model::for_eta(m.eta)) {
-            (crate::physics::Model::HalfspaceSingle, true) => {
-                "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1)"
-            }
-            (crate::physics::Model::Halfspace, false)
-                if scene.environment.is_some()
-                    && scene.resolved.material.model.is_none()
-                    && m.eta == 1.0 =>
-            {
-                "exact half-space profile of every order (eta = 1; under an environment the per-frame single scattering would see its sun alone)"
-            }
-            (crate::physics::Model::Halfspace, true) => boundary.as_str(),
-            (_, _) => "given",
-        }
-    });
-    choice
-        .reasons
-        .push(format!("model {}: {why}", m.model.name()));
-    if let Some(f) = m.incidence_factors() {
-        let at = |mu: f64| f.map(|f| crate::physics::incidence::interpolate(&f, mu));
-        let (a, b) = (at(0.5), at(0.1));
-        choice.reasons.push(format!(
-            "oblique incidence: orders >= 2 x {:.2} / {:.2} / {:.2} at 60 degrees, x {:.2} / {:.2} / {:.2} near grazing (cos 0.1) of normal incidence (the half-space's, H function)",
-            a[0], a[1], a[2], b[0], b[1], b[2]
-        ));
-    }
-    // Not a preprocessing setting, but chosen from the texel like them: said here with them.
-    let (_, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
-    choice.reasons.push(why);
-    if let Some(env) = &scene.environment {
-        let p = scene.prt;
-        choice.reasons.push(format!(
-            "environment {} ({} x {} work map): {}; the rest as spherical harmonics of order {} ({} coefficients{}), {} rays per texel ({})",
-            env.source,
-            env.width,
-            env.height,
-            match &env.sun {
-                Some(s) => format!(
-                    "sun {:.2} deg across at elevation {:.1} deg (lit as a directional light with a soft shadow map)",
-                    2.0 * s.angular_radius.to_degrees(),
-                    s.direction.y.clamp(-1.0, 1.0).asin().to_degrees()
-                ),
-                None => "no sun (no compact region 50x brighter than the mean)".to_string(),
-            },
-            p.order,
-            crate::environment::sh::coefficients(p.order),
-            if p.order == crate::environment::prt::DEFAULT_ORDER {
-                ": the first at the ray-traced reference's noise on the bunny under the sky"
-            } else {
-                ", given"
-            },
-            p.rays,
-            if p.rays == crate::environment::prt::DEFAULT_RAYS {
-                "16 x 16 stratified"
-            } else {
-                "given"
-            }
-        ));
-    }
-    Ok(choice)
 }
 
 /// What a preprocessing run will produce and cost, estimated from the mesh and the settings
@@ -383,58 +265,6 @@ impl Estimate {
         }
         Ok(())
     }
-}
-
-/// What happened with the cache.
-#[derive(Debug, Clone, PartialEq)]
-pub enum CacheOutcome {
-    /// No cache folder was given.
-    Disabled,
-    /// Loaded from this file.
-    Hit(std::path::PathBuf),
-    /// Built; stored at the path (if storing worked); `replaced` says why an existing file was
-    /// not used.
-    Built {
-        /// Where the result was stored.
-        stored: Option<std::path::PathBuf>,
-        /// Why a cache file present for this key was rejected.
-        replaced: Option<String>,
-    },
-}
-
-/// Loads the preprocessing for `scene` from `cache_dir` or builds (and stores) it.
-pub fn prepare(
-    scene: &Scene,
-    choice: &Choice,
-    cache_dir: Option<&std::path::Path>,
-    progress: Progress<'_>,
-) -> anyhow::Result<(Preprocessed, CacheOutcome)> {
-    // Before anything is allocated, in every command and in the viewer.
-    estimate(&scene.mesh, &scene.material, &choice.settings).check_host()?;
-    let Some(dir) = cache_dir else {
-        return Ok((
-            Preprocessed::build(&scene.mesh, &scene.material, choice, progress),
-            CacheOutcome::Disabled,
-        ));
-    };
-    let key = cache::key(&scene.mesh, &scene.material, &choice.settings);
-    let replaced = match cache::load(dir, key) {
-        Ok(Some(p)) => return Ok((p, CacheOutcome::Hit(cache::path(dir, key)))),
-        Ok(None) => None,
-        Err(e) => {
-            tracing::warn!("{e:#}; rebuilding");
-            Some(format!("{e:#}"))
-        }
-    };
-    let built = Preprocessed::build(&scene.mesh, &scene.material, choice, progress);
-    let stored = match cache::store(dir, key, &built) {
-        Ok(p) => Some(p),
-        Err(e) => {
-            tracing::warn!("cannot store the preprocessing in the cache: {e:#}");
-            None
-        }
-    };
-    Ok((built, CacheOutcome::Built { stored, replaced }))
 }
 
 impl Preprocessed {

@@ -199,7 +199,7 @@ pub struct MaterialDesc {
     /// Relative index of refraction.
     pub eta: Option<f64>,
     /// The model of the material's response (`physics::Model`); by default the one the scene
-    /// calls for (`preprocess::model::decide`).
+    /// calls for (`pipeline::model::decide`).
     pub model: Option<crate::physics::Model>,
     /// Roughness of the surface in [0, 1] (GGX, alpha = roughness^2): 0 is a smooth
     /// dielectric, whose mirror image of a lamp has no extent; above it lamps give highlights.

@@ -46,10 +46,10 @@ use crate::gpu::{Gpu, GpuOptions, WindowTarget};
 use crate::graph::timing::{FrameTiming, TimingReport};
 use crate::output;
 use crate::passes::data::SubsurfaceData;
-use crate::passes::reweigh::{Geometry, Reweigher};
 use crate::passes::ui::{SharedUi, UiLayer};
 use crate::physics::material::{Material, PRESETS};
-use crate::preprocess::{self, operators::Blend, settings::SettingsOverrides, Preprocessed};
+use crate::pipeline::{self, KeptReweigher, Prepared, Request};
+use crate::preprocess::{operators::Blend, settings::SettingsOverrides};
 use crate::renderer::{Options, Renderer, WindowOutput};
 use crate::scene::desc::LightKind;
 use crate::scene::{Camera, Light, Scene, MAX_LIGHTS};
@@ -74,8 +74,8 @@ use winit::window::{Window, WindowId};
 pub struct ViewConfig {
     /// The scene (its material is the starting one).
     pub scene: Scene,
-    /// The scene's preprocessing.
-    pub pre: Preprocessed,
+    /// The scene's preprocessing and environment transfer.
+    pub prepared: Prepared,
     /// Settings given on the command line and in the scene file (a material preset's
     /// settings start from these; an edit of the coefficients keeps the settings in use).
     pub overrides: SettingsOverrides,
@@ -231,134 +231,6 @@ pub enum Reweigh {
     Off,
 }
 
-/// The device's re-weighting, kept between edits with the settings its geometry was made
-/// for.
-type KeptReweigher = (crate::preprocess::settings::Settings, Reweigher);
-
-/// What a material's background run produces.
-struct JobOutput {
-    /// The preprocessing.
-    pre: Preprocessed,
-    /// With an environment light, the transfer over its atlas.
-    transfer: Option<crate::preprocess::transfer::Transfer>,
-    /// How the operators were made, for the status line.
-    how: String,
-}
-
-/// Whether preprocessings with settings `a` and `b` have the same atlas, nodes and operator
-/// entries: all settings but the walks' count, which shapes no geometry (it is 0 but for
-/// `volume`).
-fn same_geometry(
-    a: &crate::preprocess::settings::Settings,
-    b: &crate::preprocess::settings::Settings,
-) -> bool {
-    let geometry =
-        |s: &crate::preprocess::settings::Settings| crate::preprocess::settings::Settings {
-            walk_paths: 0,
-            walk_lights: [None; crate::scene::MAX_LIGHTS],
-            ..*s
-        };
-    geometry(a) == geometry(b)
-}
-
-/// A material's preprocessing on the viewer's background thread: from the cache when it
-/// holds it; else, where the settings are the shown ones and the model's F integrates its
-/// profile, the shown atlas and nodes with every entry re-weighted for the new material (on
-/// the device with `device`'s `(true, ..)`, keeping its pass in `kept`; on the CPU with
-/// `(false, ..)`): the same operators as a fresh preprocessing, without its atlas and nodes;
-/// else (or without `device`) the whole preprocessing.
-fn prepare_in_background(
-    scene: &Scene,
-    overrides: &SettingsOverrides,
-    target_error: f64,
-    cache: Option<&std::path::Path>,
-    shown: &Preprocessed,
-    device: Option<(bool, &Arc<Gpu>, &mut Option<KeptReweigher>)>,
-    report: crate::preprocess::operators::Progress<'_>,
-) -> Result<JobOutput> {
-    use crate::preprocess::{cache as store, operators::Operators, CacheOutcome, StageTimes};
-    let choice = preprocess::choose(scene, overrides, target_error)?;
-    let material = &scene.material;
-    let same = same_geometry(&choice.settings, &shown.settings) && Reweigher::supports(material);
-    let reweigh = device.filter(|_| same);
-    // The cache first, as `preprocess::prepare` looks (which the other way calls).
-    let hit = match (&reweigh, cache) {
-        (Some(_), Some(dir)) => {
-            let key = store::key(&scene.mesh, material, &choice.settings);
-            store::load::<Preprocessed>(dir, key).unwrap_or_else(|e| {
-                tracing::warn!("{e:#}; re-weighting");
-                None
-            })
-        }
-        _ => None,
-    };
-    let (pre, how) = match (hit, reweigh) {
-        (Some(pre), _) => (pre, "from the cache".to_string()),
-        (None, None) => {
-            let (pre, outcome) = preprocess::prepare(scene, &choice, cache, report)?;
-            let how = match outcome {
-                CacheOutcome::Hit(_) => "from the cache",
-                _ => "preprocessed",
-            };
-            (pre, how.to_string())
-        }
-        (None, Some((on_device, gpu, kept))) => {
-            let clock = Instant::now();
-            let s = &shown.settings;
-            let (ops, how) = if on_device {
-                let mut r = match kept.take() {
-                    Some((k, r)) if same_geometry(&k, s) => r,
-                    _ => {
-                        report("re-weighting: the geometry to the device", 0, 1);
-                        Reweigher::new(gpu, Geometry::of(shown))?
-                    }
-                };
-                report("re-weighting on the device", 0, 1);
-                let weighed = r.weights(material);
-                *kept = Some((*s, r));
-                let w = weighed?;
-                let ops = Operators::from_weights(
-                    &shown.atlas,
-                    &shown.nodes,
-                    material,
-                    s,
-                    w.weights,
-                    report,
-                );
-                let how = format!(
-                    "re-weighted on the device: pass {:.1} ms, operators {:.2} s",
-                    w.device_ms,
-                    clock.elapsed().as_secs_f64()
-                );
-                (ops, how)
-            } else {
-                let ops =
-                    Operators::build(&scene.mesh, &shown.atlas, &shown.nodes, material, s, report);
-                let how = format!(
-                    "re-weighted on the CPU: operators {:.2} s",
-                    clock.elapsed().as_secs_f64()
-                );
-                (ops, how)
-            };
-            let pre = Preprocessed {
-                settings: choice.settings,
-                reasons: choice.reasons,
-                atlas: shown.atlas.clone(),
-                nodes: shown.nodes.clone(),
-                ops,
-                times: StageTimes {
-                    operators_s: clock.elapsed().as_secs_f64(),
-                    ..Default::default()
-                },
-            };
-            (pre, how)
-        }
-    };
-    report("environment transfer", 0, 1);
-    let transfer = crate::renderer::environment_transfer(scene, &pre, cache);
-    Ok(JobOutput { pre, transfer, how })
-}
-
 /// A material with the settings given for it: what a preprocessing run is for.
 #[derive(Debug, Clone, PartialEq)]
 struct Wanted {
@@ -382,7 +254,7 @@ struct Job {
     wanted: Wanted,
     started: Instant,
     progress: Arc<Mutex<(String, u64, u64)>>,
-    handle: JoinHandle<(Result<JobOutput>, Option<KeptReweigher>)>,
+    handle: JoinHandle<(Result<(Prepared, String)>, Option<KeptReweigher>)>,
 }
 
 /// The window and everything that draws into it.
@@ -391,8 +263,9 @@ struct Running {
     renderer: Option<Renderer>,
     swapchain: Swapchain,
     data: SubsurfaceData,
-    /// The shown preprocessing (shared with a background run that re-weights its operators).
-    pre: Arc<Preprocessed>,
+    /// The shown preprocessing and environment transfer (shared with a background run that
+    /// re-weights its operators).
+    prepared: Arc<Prepared>,
     scene: Scene,
     gpu: Arc<Gpu>,
     window: Window,
@@ -445,9 +318,6 @@ struct Running {
     environments: Vec<Arc<crate::environment::Environment>>,
     /// The one shown.
     environment_index: usize,
-    /// The environment's transfer for the current preprocessing (kept across blending
-    /// changes; recomputed with a new material's atlas).
-    transfer: Option<crate::preprocess::transfer::Transfer>,
 }
 
 struct App {
@@ -522,12 +392,12 @@ impl Running {
         self.renderer = None;
         self.global = None;
         let options = renderer_options(self.mode, self.linear(), &self.ui_layer, None);
-        self.data = Renderer::upload_with(
+        self.data = Renderer::upload(
             &self.gpu,
             &self.scene,
-            &self.pre,
+            &self.prepared.pre,
+            self.prepared.transfer.as_ref(),
             &options,
-            self.transfer.as_ref(),
         )?;
         self.rebuild()
     }
@@ -741,7 +611,7 @@ impl Running {
         }
         // The walks' F answers the lamps where they were when it was walked: said, not hidden,
         // once a light moves away from there.
-        let walked = &self.pre.settings.walk_lights;
+        let walked = &self.prepared.pre.settings.walk_lights;
         let now = crate::preprocess::walk::entry_lights(&self.rig.lights(&self.view));
         let moved = |a: &Option<Light>, b: &Option<Light>| match (a, b) {
             (Some(a), Some(b)) => {
@@ -815,7 +685,7 @@ impl Running {
     }
 
     /// `material` under the model `render` would give the shown scene with it
-    /// (`preprocess::model::decide`) where the scene's model was the default's; its own
+    /// (`pipeline::model::decide`) where the scene's model was the default's; its own
     /// where the scene or the command line named one.
     fn default_model_for(&self, material: Material, target_error: f64) -> Result<Material> {
         if self.scene.model_reason.is_none() {
@@ -823,7 +693,7 @@ impl Running {
         }
         let mut scene = self.scene_for(material);
         scene.resolved.material.model = None;
-        Ok(match preprocess::model::decide(&scene, target_error) {
+        Ok(match pipeline::model::decide(&scene, target_error) {
             Some((model, _)) => material.with_model(model)?,
             None => material,
         })
@@ -834,7 +704,7 @@ impl Running {
     /// atlas and nodes, re-weighted for the new material.
     fn pinned(&self, w: &Wanted, app: &AppSettings) -> Result<SettingsOverrides> {
         if *w == self.current {
-            return Ok(self.pre.settings.pinned());
+            return Ok(self.prepared.pre.settings.pinned());
         }
         // Pinned by an earlier edit (every step of a drag after its first): `choose` would
         // give them back unchanged, so no scene is copied and nothing derived per frame.
@@ -849,7 +719,7 @@ impl Running {
             return Ok(*o);
         }
         Ok(
-            preprocess::choose(&self.scene_for(w.material), o, app.target_error)?
+            pipeline::choose(&self.scene_for(w.material), o, app.target_error)?
                 .settings
                 .pinned(),
         )
@@ -932,9 +802,12 @@ impl Running {
     fn start_job(&mut self, wanted: Wanted, asked: Instant, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
         let scene = self.scene_for(wanted.material);
-        let (target, cache) = (app.target_error, app.cache.clone());
-        let overrides = wanted.overrides;
-        let shown = self.pre.clone();
+        let request = Request {
+            overrides: wanted.overrides,
+            target_error: app.target_error,
+            cache: app.cache.clone(),
+        };
+        let shown = self.prepared.clone();
         let gpu = self.gpu.clone();
         let device = match app.reweigh {
             Reweigh::Device => Some(true),
@@ -949,12 +822,9 @@ impl Running {
                     *g = (stage.to_string(), done, total);
                 }
             };
-            let out = prepare_in_background(
+            let out = shown.for_material(
                 &scene,
-                &overrides,
-                target,
-                cache.as_deref(),
-                &shown,
+                &request,
                 device.map(|d| (d, &gpu, &mut kept)),
                 &report,
             );
@@ -989,7 +859,7 @@ impl Running {
         };
         self.reweigher = kept;
         match out {
-            Ok(out) => {
+            Ok((prepared, how)) => {
                 let w = job.wanted;
                 self.scene.material = w.material;
                 let md = &mut self.scene.resolved.material;
@@ -1004,22 +874,18 @@ impl Running {
                 };
                 md.model = Some(w.material.model);
                 self.current = w;
-                self.pre = Arc::new(out.pre);
-                self.transfer = out.transfer;
+                self.prepared = Arc::new(prepared);
                 // The device's copy of an atlas no longer shown is let go (its run has ended).
                 if self
                     .reweigher
                     .as_ref()
-                    .is_some_and(|(s, _)| !same_geometry(s, &self.pre.settings))
+                    .is_some_and(|(s, _)| !pipeline::same_geometry(s, &self.prepared.pre.settings))
                 {
                     self.reweigher = None;
                 }
                 self.reupload()?;
-                self.status = format!("{label} ready in {seconds:.1} s ({})", out.how);
-                println!(
-                    "view: {label} shown {seconds:.2} s after it was asked for ({})",
-                    out.how
-                );
+                self.status = format!("{label} ready in {seconds:.1} s ({how})");
+                println!("view: {label} shown {seconds:.2} s after it was asked for ({how})");
             }
             Err(e) => {
                 tracing::error!("preprocessing {label} failed: {e:#}");
@@ -1198,7 +1064,7 @@ impl Running {
 
     /// What the panel shows this frame.
     fn snapshot(&self) -> panel::Snapshot {
-        let s = &self.pre.settings;
+        let s = &self.prepared.pre.settings;
         let wanted = self.wanted();
         let progress = self.job.as_ref().map(|j| {
             let (stage, done, total) = j.progress.lock().map(|g| g.clone()).unwrap_or_default();
@@ -1254,7 +1120,7 @@ impl Running {
             mode: self.mode,
             texel_mm: s.texel_mm,
             kernel_size: s.kernel_size,
-            nodes: self.pre.nodes.positions.len(),
+            nodes: self.prepared.pre.nodes.positions.len(),
             node_spacing_mm: s.node_spacing_mm,
             prune_tolerance: s.prune_tolerance,
             overrides: wanted.overrides,
@@ -1433,7 +1299,7 @@ impl Running {
             "light_pitch_deg": self.view.light_pitch,
             "environment_yaw_deg": self.view.environment_yaw,
             "environment": self.scene.environment.as_ref().map(|e| e.source.clone()),
-            "settings": &self.pre.settings,
+            "settings": &self.prepared.pre.settings,
         });
         output::write_atomic(&out.join(format!("{name}.json")), |p| {
             Ok(std::fs::write(p, serde_json::to_string_pretty(&state)?)?)
@@ -1602,17 +1468,12 @@ impl App {
             Some(gpu.info.max_image_dimension_2d as usize),
         );
         let options = renderer_options(config.mode, linear, &ui_layer, None);
-        let transfer = crate::renderer::environment_transfer(
-            &config.scene,
-            &config.pre,
-            config.cache.as_deref(),
-        );
-        let data = Renderer::upload_with(
+        let data = Renderer::upload(
             &gpu,
             &config.scene,
-            &config.pre,
+            &config.prepared.pre,
+            config.prepared.transfer.as_ref(),
             &options,
-            transfer.as_ref(),
         )?;
         let mut environments: Vec<Arc<crate::environment::Environment>> =
             config.scene.environment.iter().cloned().collect();
@@ -1636,7 +1497,7 @@ impl App {
             swapchain,
             data,
             rig: Rig::new(&config.scene),
-            pre: Arc::new(config.pre),
+            prepared: Arc::new(config.prepared),
             scene: config.scene,
             gpu,
             window,
@@ -1671,7 +1532,6 @@ impl App {
             frames: 0,
             environments,
             environment_index: 0,
-            transfer,
         };
         running.rebuild()?;
         println!(
@@ -1916,51 +1776,4 @@ pub fn run(event_loop: EventLoop<()>, config: ViewConfig) -> Result<()> {
     }
     println!("view: closed after {frames} frames");
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::same_geometry;
-    use crate::preprocess::settings::Settings;
-
-    #[test]
-    fn only_the_walk_count_leaves_the_geometry() {
-        let a = Settings {
-            texel_mm: 0.5,
-            kernel_size: 7,
-            node_spacing_mm: 1.8,
-            prune_tolerance: 0.01,
-            chart_angle_deg: 60.0,
-            walk_paths: 0,
-            walk_lights: [None; crate::scene::MAX_LIGHTS],
-        };
-        assert!(same_geometry(
-            &a,
-            &Settings {
-                walk_paths: 4096,
-                ..a
-            }
-        ));
-        for b in [
-            Settings { texel_mm: 0.6, ..a },
-            Settings {
-                kernel_size: 9,
-                ..a
-            },
-            Settings {
-                node_spacing_mm: 2.0,
-                ..a
-            },
-            Settings {
-                prune_tolerance: 0.02,
-                ..a
-            },
-            Settings {
-                chart_angle_deg: 45.0,
-                ..a
-            },
-        ] {
-            assert!(!same_geometry(&a, &b), "{b:?}");
-        }
-    }
 }

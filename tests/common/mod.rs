@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::sync::Arc;
 use translucent::gpu::{Gpu, GpuOptions};
-use translucent::preprocess::{self, settings::SettingsOverrides, Preprocessed};
+use translucent::preprocess::{settings::SettingsOverrides, Preprocessed};
 use translucent::renderer::{Options, RenderOutput, Renderer};
 use translucent::scene::Scene;
 
@@ -25,7 +25,7 @@ pub fn scene(text: &str) -> Scene {
 
 /// Preprocesses `scene` (no cache) with the given overrides of the derived settings.
 pub fn preprocess(scene: &Scene, overrides: SettingsOverrides) -> Preprocessed {
-    let choice = preprocess::choose(scene, &overrides, 0.02).unwrap();
+    let choice = translucent::pipeline::choose(scene, &overrides, 0.02).unwrap();
     Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet)
 }
 
@@ -33,7 +33,14 @@ pub fn preprocess(scene: &Scene, overrides: SettingsOverrides) -> Preprocessed {
 pub fn render(scene: &Scene, pre: &Preprocessed, options: Options, frames: usize) -> RenderOutput {
     let gpu = gpu();
     let out = {
-        let mut r = Renderer::new(&gpu, scene.clone(), pre, options).expect("renderer");
+        let mut r = Renderer::new(
+            &gpu,
+            scene.clone(),
+            pre,
+            translucent::pipeline::environment_transfer(&scene, pre, None).as_ref(),
+            options,
+        )
+        .expect("renderer");
         r.render(frames).expect("render")
     };
     assert_no_validation_messages(&gpu);

@@ -25,28 +25,9 @@
 //!
 //! A user who wants a faster frame names a model (`--model halfspace`, `--model dipole`).
 
-use crate::physics::incidence::{cosine_weighted_mean, HFunction};
+use crate::physics::incidence::single_share;
 use crate::physics::{Material, Model};
 use crate::scene::Scene;
-
-/// Per channel, the fraction of the light a half-space of this material gives back that is
-/// single scattering, under light from the whole hemisphere weighted by its cosine: the
-/// quantity the `single` pass carries apart from the profile.
-pub fn single_share(material: &Material) -> [f64; 3] {
-    material.albedo().map(|albedo| {
-        if albedo <= 0.0 {
-            return 0.0;
-        }
-        let h = HFunction::new(albedo);
-        let single = cosine_weighted_mean(|mu| h.single(mu));
-        let all = h.diffuse_reflectance();
-        if all > 0.0 {
-            single / all
-        } else {
-            0.0
-        }
-    })
-}
 
 /// Why the single-scattering pass is left out for `material` at `target_error`, when its
 /// share of the light ([`single_share`]) is below the target in every channel; None where the
@@ -134,7 +115,7 @@ pub fn use_model(scene: &mut Scene, model: Model, why: String) -> anyhow::Result
 /// everywhere, and the oblique exit lobe does not weigh it). None where one of these fails,
 /// eta is not 1 or the model is given.
 pub fn volume_reason(scene: &Scene) -> Option<String> {
-    let lamps = super::walk::entry_lights(&scene.lights)
+    let lamps = crate::preprocess::walk::entry_lights(&scene.lights)
         .iter()
         .flatten()
         .count();
@@ -154,41 +135,6 @@ pub fn volume_reason(scene: &Scene) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// At normal incidence single scattering is (w / 2) (1 - ln 2) of a reflectance
-    /// 1 - H(1) sqrt(1 - w); at grazing incidence w / 2 of 1 - sqrt(1 - w) (H(0) = 1). The
-    /// cosine-weighted hemisphere's share lies between (oblique light scatters back sooner).
-    #[test]
-    fn single_share_is_bounded_by_normal_and_grazing_incidence() {
-        let skim = Material::preset("skimmilk").unwrap();
-        let share = single_share(&skim);
-        for (c, &s) in share.iter().enumerate() {
-            let t = skim.sigma_s_prime[c] + skim.sigma_a[c];
-            let w = skim.sigma_s_prime[c] / t;
-            let h = HFunction::new(w);
-            let normal = h.single(1.0) / h.reflectance(1.0);
-            let grazing = (w / 2.0) / (1.0 - (1.0 - w).sqrt());
-            assert!(
-                normal < s && s < grazing,
-                "channel {c}: {normal} < {s} < {grazing}"
-            );
-        }
-        // Chandrasekhar's H(1) = 2.9078 at albedo -> 1: single 0.1534 of 1 - 2.9078 sqrt(1e-4)
-        // = 0.9709 at normal incidence.
-        let h = HFunction::new(1.0 - 1e-4);
-        assert!((h.single(1.0) / h.reflectance(1.0) - 0.1534 / 0.9709).abs() < 1e-3);
-        // The hemisphere's share where all light comes back (albedo 1): single scattering's
-        // int_0^1 (1 - mu ln(1 + 1/mu)) mu dmu = (2/3) (1 - ln 2).
-        let white = Material::custom([1.0; 3], [1e-9; 3], 1.0).unwrap();
-        let limit = 2.0 / 3.0 * (1.0 - std::f64::consts::LN_2);
-        for s in single_share(&white) {
-            assert!((s - limit).abs() < 2e-3, "{s} vs {limit}");
-        }
-        // Ketchup's green and blue are mostly single scattering.
-        let ketchup = Material::preset("ketchup").unwrap();
-        let k = single_share(&ketchup);
-        assert!(k[1] > 0.9 && k[2] > 0.9, "{k:?}");
-    }
 
     #[test]
     fn the_pass_is_left_out_only_below_the_target_in_every_channel() {
