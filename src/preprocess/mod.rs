@@ -6,6 +6,7 @@ pub mod air;
 pub mod apply;
 pub mod atlas;
 pub mod cache;
+mod near_field;
 pub mod nodes;
 pub mod operators;
 pub mod settings;

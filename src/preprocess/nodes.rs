@@ -77,10 +77,18 @@ fn closest_barycentric(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
     [1.0 - v - w, v, w]
 }
 
-impl Nodes {
-    /// Builds the nodes for `mesh` with a target spacing (mm).
-    pub fn build(mesh: &Mesh, spacing_mm: f64) -> Nodes {
-        // Weld by position so that seams of normals or texture coordinates do not split nodes.
+/// The render mesh welded by position: per render vertex its welded vertex, and the welded
+/// mesh's positions and indices.
+struct Welded {
+    of: Vec<u32>,
+    positions: Vec<Vec3>,
+    indices: Vec<u32>,
+}
+
+impl Welded {
+    /// Welds `mesh` by position, so that seams of normals or texture coordinates do not split
+    /// nodes.
+    fn new(mesh: &Mesh) -> Welded {
         let weld = mesh.welded();
         let mut compact = vec![u32::MAX; mesh.positions.len()];
         let mut welded_of = Vec::with_capacity(mesh.positions.len());
@@ -99,44 +107,48 @@ impl Nodes {
             .iter()
             .map(|&i| welded_of[i as usize])
             .collect();
-        // The mesh's resolution: its mean edge, or the spacing its vertex count implies
-        // (area per vertex 0.866 e^2 on an even mesh), whichever is finer. A mesh of long
-        // polygons (a 2000-gon disc, a 1000-segment cylinder) has long edges across and
-        // vertices crowded along them: by the mean edge it was "coarse enough", and every
-        // one of its 1000-2000 vertices became a node (F 85 % dense, minutes of fitting).
-        let density = (mesh.surface_area() / (0.866 * welded_positions.len().max(1) as f64)).sqrt();
-        let edge = mean_edge(&welded_positions, &welded_indices);
-        let resolution = edge.min(density);
-        let normals_of = |ids: &[u32]| -> Vec<Vec3> {
-            let mut acc = vec![Vec3::ZERO; welded_positions.len()];
-            for (v, &w) in welded_of.iter().enumerate() {
-                acc[w as usize] += mesh.normals[v];
-            }
-            ids.iter()
-                .map(|&w| acc[w as usize].normalize_or_zero())
-                .collect()
-        };
-
-        // Fine enough already (or as coarse as the material allows): every welded vertex is a node.
-        let ratio = resolution / spacing_mm;
-        if ratio >= 0.8 {
-            let all: Vec<u32> = (0..welded_positions.len() as u32).collect();
-            return Nodes {
-                positions: welded_positions.clone(),
-                normals: normals_of(&all),
-                prolong: welded_of.iter().map(|&w| vec![(w, 1.0)]).collect(),
-                simplified: false,
-                spacing_mm: edge,
-            };
+        Welded {
+            of: welded_of,
+            positions: welded_positions,
+            indices: welded_indices,
         }
+    }
 
+    /// The normals of welded vertices `ids`: the normalised sum of their render vertices'
+    /// normals.
+    fn normals(&self, mesh: &Mesh, ids: &[u32]) -> Vec<Vec3> {
+        let mut acc = vec![Vec3::ZERO; self.positions.len()];
+        for (v, &w) in self.of.iter().enumerate() {
+            acc[w as usize] += mesh.normals[v];
+        }
+        ids.iter()
+            .map(|&w| acc[w as usize].normalize_or_zero())
+            .collect()
+    }
+}
+
+/// The simplified proxy mesh: node ids of the welded vertices it keeps, each node's welded
+/// vertex and position, its triangles in node ids, and its mean edge.
+struct Proxy {
+    node_of: HashMap<u32, u32>,
+    node_welded: Vec<u32>,
+    positions: Vec<Vec3>,
+    tris: Vec<[u32; 3]>,
+    spacing: f64,
+}
+
+impl Proxy {
+    /// Simplifies the welded mesh to about `ratio`^2 of its triangles.
+    fn new(welded: &Welded, ratio: f64) -> Proxy {
+        let welded_positions = &welded.positions;
+        let welded_indices = &welded.indices;
         let target_indices =
             ((welded_indices.len() as f64) * ratio * ratio).max(12.0) as usize / 3 * 3;
         let adapter =
-            meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&welded_positions), 12, 0)
+            meshopt::VertexDataAdapter::new(bytemuck::cast_slice(welded_positions), 12, 0)
                 .expect("positions are 12-byte vertices");
         let simplified = meshopt::simplify(
-            &welded_indices,
+            welded_indices,
             &adapter,
             target_indices,
             1.0,
@@ -158,111 +170,196 @@ impl Nodes {
             .iter()
             .map(|&w| welded_positions[w as usize])
             .collect();
-        let normals = normals_of(&node_welded);
         let tris: Vec<[u32; 3]> = simplified
             .chunks(3)
             .map(|t| [node_of[&t[0]], node_of[&t[1]], node_of[&t[2]]])
             .collect();
-        let node_spacing = mean_edge(&welded_positions, &simplified);
+        let node_spacing = mean_edge(welded_positions, &simplified);
+        Proxy {
+            node_of,
+            node_welded,
+            positions,
+            tris,
+            spacing: node_spacing,
+        }
+    }
+}
 
-        // Uniform grid of proxy triangles for closest-point queries.
-        let cell = (2.0 * node_spacing).max(1e-6);
-        let key = |p: DVec3| {
-            (
-                (p.x / cell).floor() as i64,
-                (p.y / cell).floor() as i64,
-                (p.z / cell).floor() as i64,
-            )
+/// A cell of the proxy's grid.
+type Cell = (i64, i64, i64);
+
+/// Uniform grid of proxy triangles for closest-point queries (cells two node spacings wide),
+/// with the triangles' normals.
+struct Grid {
+    cell: f64,
+    cells: HashMap<Cell, Vec<u32>>,
+    tri_normals: Vec<DVec3>,
+}
+
+impl Grid {
+    /// The grid of `proxy`'s triangles.
+    fn new(proxy: &Proxy) -> Grid {
+        let (positions, tris) = (&proxy.positions, &proxy.tris);
+        let mut grid = Grid {
+            cell: (2.0 * proxy.spacing).max(1e-6),
+            cells: HashMap::new(),
+            tri_normals: Vec::new(),
         };
-        let mut grid: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
         for (ti, t) in tris.iter().enumerate() {
             let ps = t.map(|n| positions[n as usize].as_dvec3());
             let (lo, hi) = (
-                key(ps[0].min(ps[1]).min(ps[2])),
-                key(ps[0].max(ps[1]).max(ps[2])),
+                grid.key(ps[0].min(ps[1]).min(ps[2])),
+                grid.key(ps[0].max(ps[1]).max(ps[2])),
             );
             for x in lo.0..=hi.0 {
                 for y in lo.1..=hi.1 {
                     for z in lo.2..=hi.2 {
-                        grid.entry((x, y, z)).or_default().push(ti as u32);
+                        grid.cells.entry((x, y, z)).or_default().push(ti as u32);
                     }
                 }
             }
         }
-        let tri_normals: Vec<DVec3> = tris
+        grid.tri_normals = tris
             .iter()
             .map(|t| {
                 let ps = t.map(|n| positions[n as usize].as_dvec3());
                 (ps[1] - ps[0]).cross(ps[2] - ps[0]).normalize_or_zero()
             })
             .collect();
-        let welded_normals = normals_of(&(0..welded_positions.len() as u32).collect::<Vec<_>>());
-        let weights_of_welded: Vec<Vec<(u32, f32)>> = (0..welded_positions.len())
-            .into_par_iter()
-            .map(|w| {
-                if let Some(&n) = node_of.get(&(w as u32)) {
-                    return vec![(n, 1.0)];
-                }
-                let p = welded_positions[w].as_dvec3();
-                let pn = welded_normals[w].as_dvec3();
-                let c = key(p);
-                let mut best: Option<(f64, u32, [f64; 3])> = None;
-                for reach in 1..=4i64 {
-                    for x in c.0 - reach..=c.0 + reach {
-                        for y in c.1 - reach..=c.1 + reach {
-                            for z in c.2 - reach..=c.2 + reach {
-                                for &ti in grid.get(&(x, y, z)).into_iter().flatten() {
-                                    if tri_normals[ti as usize].dot(pn) < 0.2 {
-                                        continue;
-                                    }
-                                    let ps =
-                                        tris[ti as usize].map(|n| positions[n as usize].as_dvec3());
-                                    let b = closest_barycentric(p, ps[0], ps[1], ps[2]);
-                                    let q = ps[0] * b[0] + ps[1] * b[1] + ps[2] * b[2];
-                                    let d = q.distance_squared(p);
-                                    if best.is_none_or(|(bd, _, _)| d < bd) {
-                                        best = Some((d, ti, b));
-                                    }
-                                }
+        grid
+    }
+
+    /// The cell that holds `p`.
+    fn key(&self, p: DVec3) -> Cell {
+        let cell = self.cell;
+        (
+            (p.x / cell).floor() as i64,
+            (p.y / cell).floor() as i64,
+            (p.z / cell).floor() as i64,
+        )
+    }
+
+    /// The closest point to `p` on the proxy triangles facing the way of `pn` (the cosine
+    /// between the normals at least 0.2) in the cells around `p`, one ring of cells further at
+    /// a time up to four: (squared distance, triangle, barycentric weights).
+    fn closest_facing(&self, proxy: &Proxy, p: DVec3, pn: DVec3) -> Option<(f64, u32, [f64; 3])> {
+        let (positions, tris) = (&proxy.positions, &proxy.tris);
+        let c = self.key(p);
+        let mut best: Option<(f64, u32, [f64; 3])> = None;
+        for reach in 1..=4i64 {
+            for x in c.0 - reach..=c.0 + reach {
+                for y in c.1 - reach..=c.1 + reach {
+                    for z in c.2 - reach..=c.2 + reach {
+                        for &ti in self.cells.get(&(x, y, z)).into_iter().flatten() {
+                            if self.tri_normals[ti as usize].dot(pn) < 0.2 {
+                                continue;
+                            }
+                            let ps = tris[ti as usize].map(|n| positions[n as usize].as_dvec3());
+                            let b = closest_barycentric(p, ps[0], ps[1], ps[2]);
+                            let q = ps[0] * b[0] + ps[1] * b[1] + ps[2] * b[2];
+                            let d = q.distance_squared(p);
+                            if best.is_none_or(|(bd, _, _)| d < bd) {
+                                best = Some((d, ti, b));
                             }
                         }
                     }
-                    if best.is_some() {
-                        break;
-                    }
                 }
-                match best {
-                    Some((_, ti, b)) => tris[ti as usize]
-                        .iter()
-                        .zip(b)
-                        .filter(|(_, w)| *w > 1e-6)
-                        .map(|(n, w)| (*n, w as f32))
-                        .collect(),
-                    None => {
-                        // No facing proxy triangle nearby: tie to the nearest node.
-                        let nearest = positions
-                            .iter()
-                            .enumerate()
-                            .min_by(|a, b| {
-                                a.1.distance_squared(p.as_vec3())
-                                    .total_cmp(&b.1.distance_squared(p.as_vec3()))
-                            })
-                            .map(|(i, _)| i as u32)
-                            .unwrap_or(0);
-                        vec![(nearest, 1.0)]
-                    }
-                }
-            })
+            }
+            if best.is_some() {
+                break;
+            }
+        }
+        best
+    }
+}
+
+/// The prolongation of welded vertex `w` (normal `welded_normals[w]`): itself where it is a
+/// node, else the barycentric weights of its closest point on a facing proxy triangle nearby,
+/// else the nearest node.
+fn welded_weights(
+    w: usize,
+    welded: &Welded,
+    welded_normals: &[Vec3],
+    proxy: &Proxy,
+    grid: &Grid,
+) -> Vec<(u32, f32)> {
+    let (positions, tris) = (&proxy.positions, &proxy.tris);
+    if let Some(&n) = proxy.node_of.get(&(w as u32)) {
+        return vec![(n, 1.0)];
+    }
+    let p = welded.positions[w].as_dvec3();
+    let pn = welded_normals[w].as_dvec3();
+    match grid.closest_facing(proxy, p, pn) {
+        Some((_, ti, b)) => tris[ti as usize]
+            .iter()
+            .zip(b)
+            .filter(|(_, w)| *w > 1e-6)
+            .map(|(n, w)| (*n, w as f32))
+            .collect(),
+        None => {
+            // No facing proxy triangle nearby: tie to the nearest node.
+            let nearest = positions
+                .iter()
+                .enumerate()
+                .min_by(|a, b| {
+                    a.1.distance_squared(p.as_vec3())
+                        .total_cmp(&b.1.distance_squared(p.as_vec3()))
+                })
+                .map(|(i, _)| i as u32)
+                .unwrap_or(0);
+            vec![(nearest, 1.0)]
+        }
+    }
+}
+
+impl Nodes {
+    /// Builds the nodes for `mesh` with a target spacing (mm).
+    pub fn build(mesh: &Mesh, spacing_mm: f64) -> Nodes {
+        // Weld by position so that seams of normals or texture coordinates do not split nodes.
+        let welded = Welded::new(mesh);
+        // The mesh's resolution: its mean edge, or the spacing its vertex count implies
+        // (area per vertex 0.866 e^2 on an even mesh), whichever is finer. A mesh of long
+        // polygons (a 2000-gon disc, a 1000-segment cylinder) has long edges across and
+        // vertices crowded along them: by the mean edge it was "coarse enough", and every
+        // one of its 1000-2000 vertices became a node (F 85 % dense, minutes of fitting).
+        let density = (mesh.surface_area() / (0.866 * welded.positions.len().max(1) as f64)).sqrt();
+        let edge = mean_edge(&welded.positions, &welded.indices);
+        let resolution = edge.min(density);
+
+        // Fine enough already (or as coarse as the material allows): every welded vertex is a node.
+        let ratio = resolution / spacing_mm;
+        if ratio >= 0.8 {
+            let all: Vec<u32> = (0..welded.positions.len() as u32).collect();
+            return Nodes {
+                positions: welded.positions.clone(),
+                normals: welded.normals(mesh, &all),
+                prolong: welded.of.iter().map(|&w| vec![(w, 1.0)]).collect(),
+                simplified: false,
+                spacing_mm: edge,
+            };
+        }
+
+        let proxy = Proxy::new(&welded, ratio);
+        let normals = welded.normals(mesh, &proxy.node_welded);
+        let grid = Grid::new(&proxy);
+        let welded_normals = welded.normals(
+            mesh,
+            &(0..welded.positions.len() as u32).collect::<Vec<_>>(),
+        );
+        let weights_of_welded: Vec<Vec<(u32, f32)>> = (0..welded.positions.len())
+            .into_par_iter()
+            .map(|w| welded_weights(w, &welded, &welded_normals, &proxy, &grid))
             .collect();
         Nodes {
-            positions,
+            positions: proxy.positions,
             normals,
-            prolong: welded_of
+            prolong: welded
+                .of
                 .iter()
                 .map(|&w| weights_of_welded[w as usize].clone())
                 .collect(),
             simplified: true,
-            spacing_mm: node_spacing,
+            spacing_mm: proxy.spacing,
         }
     }
 }

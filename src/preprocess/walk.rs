@@ -32,7 +32,7 @@
 //! two agree). Paths are independent streams keyed by (seed, node, channel), so the result
 //! does not depend on the number of threads.
 
-use crate::geometry::bvh::Bvh;
+use crate::geometry::bvh::{Bvh, Hit};
 use crate::numeric::rng::Rng;
 use crate::physics::{Material, Rgb};
 use crate::scene::desc::LightKind;
@@ -305,6 +305,47 @@ const PILOT_MIN_PATHS: u32 = 8;
 /// with the ball.
 const BALL_FREE_PATHS: f64 = 16.0;
 
+/// Per thread, the scratch of one source's walks: the deposit per receiver, whether a
+/// receiver holds one, and the receivers that do.
+type Scratch = (Vec<Deposit>, Vec<bool>, Vec<u32>);
+
+/// Empty scratch for `n` nodes.
+fn scratch(n: usize) -> Scratch {
+    (
+        vec![[0.0f64; DEPOSIT]; n],
+        vec![false; n],
+        Vec::<u32>::new(),
+    )
+}
+
+/// One source's running tallies: the counters (paths, collisions, cut, re-entries) and the
+/// weight that left per channel; per channel the walks' summed entry weights (their count
+/// along the normal) and the source's share in the exit lobes, its mean irradiance under the
+/// lamps (1 without lamps; 0 where no lamp's ray reaches it: it sends no light).
+struct Tally {
+    counters: [u64; 4],
+    left: [f64; 3],
+    weights: [f64; 3],
+    lobe: [f64; 3],
+}
+
+/// What every walk of one [`walk_response`] shares.
+struct Walker<'a> {
+    mesh: &'a Mesh,
+    nodes: &'a Nodes,
+    surface: Surface,
+    /// The reduced medium, isotropic: the truth's with g = 0.
+    medium: crate::truth::Medium,
+    lamps: &'a [Light],
+    /// Exits count after this many scattering events or more.
+    min_order: u32,
+    /// Nodes.
+    n: usize,
+    /// Sources walked, for the progress.
+    done: std::sync::atomic::AtomicU64,
+    progress: super::Progress<'a>,
+}
+
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
 /// walks did, `paths` paths per node and channel, counting exits after `min_order` or more
 /// scattering events.
@@ -317,151 +358,201 @@ pub fn walk_response(
     lamps: &[Light],
     progress: super::Progress<'_>,
 ) -> (Walked, WalkReport) {
-    let n = nodes.positions.len();
-    let surface = Surface::new(mesh, nodes);
-    let (sources, bvh, eps) = (&surface.sources, &surface.bvh, surface.eps);
-    // The reduced medium, isotropic: the truth's with g = 0.
-    let medium = crate::truth::Medium::new(material, 0.0);
-    let done = std::sync::atomic::AtomicU64::new(0);
-    // Per source p: its column (receiver, deposit) and the counters.
-    let walk_source = |(acc, seen, touched): &mut (Vec<Deposit>, Vec<bool>, Vec<u32>),
-                       (p, paths): (usize, u32)|
-     -> Column {
-        let mut counters = [0u64; 4]; // paths, events, truncated, re-entries
-        let mut left = [0.0; 3];
-        // Per channel: the walks' summed entry weights (their count along the normal).
-        let mut weights = [0.0f64; 3];
-        // Per channel: the source's share in the exit lobes, its mean irradiance under
-        // the lamps (1 without lamps; 0 where no lamp's ray reaches it: it sends no
-        // light).
-        let mut lobe = [if lamps.is_empty() { 1.0 } else { 0.0 }; 3];
-        if sources.area(p) > 0.0 {
+    let walker = Walker {
+        mesh,
+        nodes,
+        surface: Surface::new(mesh, nodes),
+        medium: crate::truth::Medium::new(material, 0.0),
+        lamps,
+        min_order,
+        n: nodes.positions.len(),
+        done: std::sync::atomic::AtomicU64::new(0),
+        progress,
+    };
+    let estimated_seconds = walker.pilot(paths);
+    let (rows, exits, report) = walker.walk_all(paths, estimated_seconds);
+    (with_exit_lobes(rows, &exits), report)
+}
+
+impl Walker<'_> {
+    /// Source `p`'s walks, `paths` per channel: its column (receiver, deposit) and tallies.
+    fn walk_source(&self, scratch: &mut Scratch, (p, paths): (usize, u32)) -> Column {
+        let mut tally = Tally {
+            counters: [0u64; 4],
+            left: [0.0; 3],
+            weights: [0.0f64; 3],
+            lobe: [if self.lamps.is_empty() { 1.0 } else { 0.0 }; 3],
+        };
+        if self.surface.sources.area(p) > 0.0 {
             for c in 0..3 {
-                let (sigma_t, albedo) = (medium.sigma_t[c], medium.albedo[c]);
-                let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
-                // Along the lamps where the scene has any; without the shadow ray
-                // where no lamp's ray reaches this node; along the normal where it
-                // faces away from every lamp, or the scene has none.
-                for (along_lamps, shadows) in [(true, true), (true, false), (false, false)] {
-                    if (along_lamps && lamps.is_empty()) || weights[c] > 0.0 {
-                        continue;
-                    }
-                    let first = along_lamps && shadows;
-                    for _ in 0..paths {
-                        let (tri, b) = sources.sample(p, &mut rng);
-                        let [v0, v1, v2] = triangle(mesh, tri);
-                        let normal = surface.outward_normal(mesh, tri);
-                        let at = v0 * b[0] + v1 * b[1] + v2 * b[2];
-                        let (mut d, weight) = if along_lamps {
-                            match surface.entry(lamps, at, normal, c, shadows, &mut rng) {
-                                Some(entry) => entry,
-                                None => continue,
-                            }
-                        } else {
-                            (-normal, 1.0)
-                        };
-                        counters[0] += 1;
-                        weights[c] += weight;
-                        let mut x = at + d * eps;
-                        let mut order = 0u32;
-                        let mut events = 0u64;
-                        // A ball that no surface enters (centre, radius squared): a flight
-                        // that ends inside it cannot meet the surface and needs no ray cast.
-                        // It changes no walk, only what a walk costs.
-                        let mut ball = (x, 0.0f64);
-                        loop {
-                            let s = -(1.0 - rng.uniform()).ln() / sigma_t;
-                            let end = x + d * s;
-                            // Both ends inside the (convex) ball: the flight meets no surface.
-                            let mut inside = x.distance_squared(ball.0) < ball.1
-                                && end.distance_squared(ball.0) < ball.1;
-                            if !inside {
-                                // A new ball about the flight's start: within it no ray cast.
-                                let r = bvh.distance_within(x, BALL_FREE_PATHS / sigma_t);
-                                // Rounding: a margin far above f64's relative precision.
-                                let r = r * (1.0 - 1e-9) - eps;
-                                if r > 0.0 {
-                                    ball = (x, r * r);
-                                    inside = s < r;
-                                }
-                            }
-                            if let Some(hit) = (!inside).then(|| bvh.intersect(x, d, s)).flatten() {
-                                if order >= min_order {
-                                    left[c] += weight;
-                                    let normal =
-                                        surface.outward_normal(mesh, hit.triangle as usize);
-                                    let cos = normal.dot(d);
-                                    let mu = cos.clamp(0.0, 1.0);
-                                    // Along the surface it leaves through.
-                                    let along = d - normal * cos;
-                                    for (q, w) in corner_weights(mesh, nodes, hit.triangle as usize)
-                                    {
-                                        let phi = hit.bary[0] * w[0]
-                                            + hit.bary[1] * w[1]
-                                            + hit.bary[2] * w[2];
-                                        if !seen[q as usize] {
-                                            seen[q as usize] = true;
-                                            touched.push(q);
-                                        }
-                                        let a = &mut acc[q as usize];
-                                        a[c] += phi * weight;
-                                        a[3 + c] += phi * mu * weight;
-                                        for (j, x) in along.to_array().iter().enumerate() {
-                                            a[6 + 3 * c + j] += phi * x * weight;
-                                        }
-                                    }
-                                }
-                                // On through the air (eta = 1: straight on): into the
-                                // object again where the line meets it, gone otherwise.
-                                // A hit within a few eps is the exit's own edge
-                                // (rounding), and one through a face turned away
-                                // is not an entry: neither is taken.
-                                let out = x + d * (hit.t + eps);
-                                match bvh.intersect(out, d, f64::INFINITY) {
-                                    Some(h)
-                                        if h.t > 10.0 * eps
-                                            && surface
-                                                .outward_normal(mesh, h.triangle as usize)
-                                                .dot(d)
-                                                < 0.0 =>
-                                    {
-                                        x = out + d * (h.t + eps);
-                                        ball = (x, 0.0);
-                                        counters[3] += 1;
-                                        continue;
-                                    }
-                                    _ => break,
-                                }
-                            }
-                            x = end;
-                            order += 1;
-                            events += 1;
-                            if rng.uniform() >= albedo {
-                                break;
-                            }
-                            if events >= MAX_WALK_EVENTS {
-                                counters[2] += 1;
-                                break;
-                            }
-                            let (u1, u2) = (rng.uniform(), rng.uniform());
-                            let cos = 1.0 - 2.0 * u1;
-                            let sin = (1.0 - cos * cos).max(0.0).sqrt();
-                            let phi = 2.0 * PI * u2;
-                            d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
-                        }
-                        counters[1] += events;
-                    }
-                    if first {
-                        lobe[c] = weights[c] / paths.max(1) as f64;
-                    }
-                }
+                self.walk_channel(scratch, (p, paths), c, &mut tally);
             }
         }
+        self.column(scratch, p, tally)
+    }
+
+    /// Channel `c` of source `p`'s walks, from its own random stream: along the lamps where
+    /// the scene has any; without the shadow ray where no lamp's ray reaches this node; along
+    /// the normal where it faces away from every lamp, or the scene has none.
+    fn walk_channel(
+        &self,
+        scratch: &mut Scratch,
+        (p, paths): (usize, u32),
+        c: usize,
+        tally: &mut Tally,
+    ) {
+        let (mesh, surface, lamps) = (self.mesh, &self.surface, self.lamps);
+        let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
+        for (along_lamps, shadows) in [(true, true), (true, false), (false, false)] {
+            if (along_lamps && lamps.is_empty()) || tally.weights[c] > 0.0 {
+                continue;
+            }
+            let first = along_lamps && shadows;
+            for _ in 0..paths {
+                let (tri, b) = surface.sources.sample(p, &mut rng);
+                let [v0, v1, v2] = triangle(mesh, tri);
+                let normal = surface.outward_normal(mesh, tri);
+                let at = v0 * b[0] + v1 * b[1] + v2 * b[2];
+                let (d, weight) = if along_lamps {
+                    match surface.entry(lamps, at, normal, c, shadows, &mut rng) {
+                        Some(entry) => entry,
+                        None => continue,
+                    }
+                } else {
+                    (-normal, 1.0)
+                };
+                tally.counters[0] += 1;
+                tally.weights[c] += weight;
+                self.trace(scratch, &mut rng, c, (at, d, weight), tally);
+            }
+            if first {
+                tally.lobe[c] = tally.weights[c] / paths.max(1) as f64;
+            }
+        }
+    }
+
+    /// One walk of channel `c` entering at `at` along `d` with weight `weight`: free flights
+    /// and isotropic scattering until it is absorbed, cut or gone, its exits after `min_order`
+    /// or more events deposited in `scratch`, through the air into the object again where the
+    /// line meets it.
+    fn trace(
+        &self,
+        scratch: &mut Scratch,
+        rng: &mut Rng,
+        c: usize,
+        (at, mut d, weight): (DVec3, DVec3, f64),
+        tally: &mut Tally,
+    ) {
+        let (mesh, surface) = (self.mesh, &self.surface);
+        let (bvh, eps) = (&surface.bvh, surface.eps);
+        let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
+        let mut x = at + d * eps;
+        let mut order = 0u32;
+        let mut events = 0u64;
+        // A ball that no surface enters (centre, radius squared): a flight
+        // that ends inside it cannot meet the surface and needs no ray cast.
+        // It changes no walk, only what a walk costs.
+        let mut ball = (x, 0.0f64);
+        loop {
+            let s = -(1.0 - rng.uniform()).ln() / sigma_t;
+            let end = x + d * s;
+            // Both ends inside the (convex) ball: the flight meets no surface.
+            let mut inside =
+                x.distance_squared(ball.0) < ball.1 && end.distance_squared(ball.0) < ball.1;
+            if !inside {
+                // A new ball about the flight's start: within it no ray cast.
+                let r = bvh.distance_within(x, BALL_FREE_PATHS / sigma_t);
+                // Rounding: a margin far above f64's relative precision.
+                let r = r * (1.0 - 1e-9) - eps;
+                if r > 0.0 {
+                    ball = (x, r * r);
+                    inside = s < r;
+                }
+            }
+            if let Some(hit) = (!inside).then(|| bvh.intersect(x, d, s)).flatten() {
+                if order >= self.min_order {
+                    tally.left[c] += weight;
+                    self.deposit(scratch, &hit, d, c, weight);
+                }
+                // On through the air (eta = 1: straight on): into the
+                // object again where the line meets it, gone otherwise.
+                // A hit within a few eps is the exit's own edge
+                // (rounding), and one through a face turned away
+                // is not an entry: neither is taken.
+                let out = x + d * (hit.t + eps);
+                match bvh.intersect(out, d, f64::INFINITY) {
+                    Some(h)
+                        if h.t > 10.0 * eps
+                            && surface.outward_normal(mesh, h.triangle as usize).dot(d) < 0.0 =>
+                    {
+                        x = out + d * (h.t + eps);
+                        ball = (x, 0.0);
+                        tally.counters[3] += 1;
+                        continue;
+                    }
+                    _ => break,
+                }
+            }
+            x = end;
+            order += 1;
+            events += 1;
+            if rng.uniform() >= albedo {
+                break;
+            }
+            if events >= MAX_WALK_EVENTS {
+                tally.counters[2] += 1;
+                break;
+            }
+            let (u1, u2) = (rng.uniform(), rng.uniform());
+            let cos = 1.0 - 2.0 * u1;
+            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+            let phi = 2.0 * PI * u2;
+            d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+        }
+        tally.counters[1] += events;
+    }
+
+    /// Adds a walk of channel `c` and weight `weight` that leaves through `hit` along `d` to
+    /// every node q of the triangle it leaves through: w phi_q, that weighted by the exit
+    /// cosine, and by the exit direction's components along the surface.
+    fn deposit(
+        &self,
+        (acc, seen, touched): &mut Scratch,
+        hit: &Hit,
+        d: DVec3,
+        c: usize,
+        weight: f64,
+    ) {
+        let normal = self
+            .surface
+            .outward_normal(self.mesh, hit.triangle as usize);
+        let cos = normal.dot(d);
+        let mu = cos.clamp(0.0, 1.0);
+        // Along the surface it leaves through.
+        let along = d - normal * cos;
+        for (q, w) in corner_weights(self.mesh, self.nodes, hit.triangle as usize) {
+            let phi = hit.bary[0] * w[0] + hit.bary[1] * w[1] + hit.bary[2] * w[2];
+            if !seen[q as usize] {
+                seen[q as usize] = true;
+                touched.push(q);
+            }
+            let a = &mut acc[q as usize];
+            a[c] += phi * weight;
+            a[3 + c] += phi * mu * weight;
+            for (j, x) in along.to_array().iter().enumerate() {
+                a[6 + 3 * c + j] += phi * x * weight;
+            }
+        }
+    }
+
+    /// Source `p`'s column out of `scratch` (which it leaves empty) and its tallies, scaled to
+    /// A_p of flux spread over the walks by their weights.
+    fn column(&self, (acc, seen, touched): &mut Scratch, p: usize, tally: Tally) -> Column {
         touched.sort_unstable();
         // A_p of flux spread over the walks by their weights.
         let scale: [f64; 3] = std::array::from_fn(|c| {
-            if weights[c] > 0.0 {
-                sources.area(p) / weights[c]
+            if tally.weights[c] > 0.0 {
+                self.surface.sources.area(p) / tally.weights[c]
             } else {
                 0.0
             }
@@ -474,87 +565,102 @@ pub fn walk_response(
                 (q, std::array::from_fn(|i| v[i] * scale[deposit_channel(i)]))
             })
             .collect();
-        let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let k = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         if k.is_multiple_of(64) {
-            progress("walks", k, n as u64);
+            (self.progress)("walks", k, self.n as u64);
         }
         (
             column,
-            counters,
-            std::array::from_fn(|c| left[c] * scale[c]),
-            lobe,
+            tally.counters,
+            std::array::from_fn(|c| tally.left[c] * scale[c]),
+            tally.lobe,
         )
-    };
-    let scratch = || {
-        (
-            vec![[0.0f64; DEPOSIT]; n],
-            vec![false; n],
-            Vec::<u32>::new(),
-        )
-    };
-    // The time of the walks, from a pilot on this machine as it runs now: a strided sample of
-    // the sources with an eighth of their walks, timed and scaled up (where it is a small part
-    // of the work). Its columns are dropped.
-    let mut estimated_seconds = 0.0;
-    if n >= 4 * PILOT_SOURCES {
-        let pilot_step = n / PILOT_SOURCES;
-        let pilot_paths = (paths / 8).max(PILOT_MIN_PATHS).min(paths);
-        let clock = std::time::Instant::now();
-        let pilot: Vec<Column> = (0..n)
-            .step_by(pilot_step)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map_init(scratch, |s, p| walk_source(s, (p, pilot_paths)))
-            .collect();
-        let pilot_seconds = clock.elapsed().as_secs_f64();
-        estimated_seconds = pilot_seconds * n as f64 / pilot.len().max(1) as f64 * paths as f64
-            / pilot_paths.max(1) as f64;
-        done.store(0, std::sync::atomic::Ordering::Relaxed);
-        tracing::info!(
-            "walks: about {estimated_seconds:.1} s on this machine now ({paths} paths per node and channel on {n} nodes; a pilot of {} nodes with {pilot_paths} took {pilot_seconds:.2} s)",
-            pilot.len()
-        );
     }
-    let clock = std::time::Instant::now();
-    let mut report = WalkReport {
-        paths_per_node: paths,
-        estimated_seconds,
-        ..WalkReport::default()
-    };
-    let mut rows: Vec<Vec<(u32, Rgb)>> = vec![Vec::new(); n];
-    // Per receiver: what left through its support, and that weighted by the exit cosine and
-    // by the exit direction along the surface, each source weighted by its lobe weight.
-    let mut exits = vec![[0.0f64; DEPOSIT]; n];
-    let mut entered = 0.0;
-    for start in (0..n).step_by(SOURCE_BLOCK) {
-        let block: Vec<Column> = (start..(start + SOURCE_BLOCK).min(n))
-            .into_par_iter()
-            .map_init(scratch, |s, p| walk_source(s, (p, paths)))
-            .collect();
-        for (i, (column, counters, left, lobe)) in block.into_iter().enumerate() {
-            let p = start + i;
-            report.paths += counters[0];
-            report.events += counters[1];
-            report.truncated += counters[2];
-            report.reentries += counters[3];
-            entered += sources.area(p);
-            for c in 0..3 {
-                report.left[c] += left[c];
-            }
-            for (q, v) in column {
-                for (i, (e, x)) in exits[q as usize].iter_mut().zip(v).enumerate() {
-                    *e += x * lobe[deposit_channel(i)];
+
+    /// The time of the walks, from a pilot on this machine as it runs now: a strided sample of
+    /// the sources with an eighth of their walks, timed and scaled up (where it is a small part
+    /// of the work). Its columns are dropped. 0 where there are too few nodes for one.
+    fn pilot(&self, paths: u32) -> f64 {
+        let n = self.n;
+        let mut estimated_seconds = 0.0;
+        if n >= 4 * PILOT_SOURCES {
+            let pilot_step = n / PILOT_SOURCES;
+            let pilot_paths = (paths / 8).max(PILOT_MIN_PATHS).min(paths);
+            let clock = std::time::Instant::now();
+            let pilot: Vec<Column> = (0..n)
+                .step_by(pilot_step)
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map_init(|| scratch(n), |s, p| self.walk_source(s, (p, pilot_paths)))
+                .collect();
+            let pilot_seconds = clock.elapsed().as_secs_f64();
+            estimated_seconds = pilot_seconds * n as f64 / pilot.len().max(1) as f64 * paths as f64
+                / pilot_paths.max(1) as f64;
+            self.done.store(0, std::sync::atomic::Ordering::Relaxed);
+            tracing::info!(
+                "walks: about {estimated_seconds:.1} s on this machine now ({paths} paths per node and channel on {n} nodes; a pilot of {} nodes with {pilot_paths} took {pilot_seconds:.2} s)",
+                pilot.len()
+            );
+        }
+        estimated_seconds
+    }
+
+    /// Walks every source, [`SOURCE_BLOCK`] at a time in parallel, and sums the columns in
+    /// node order: F's rows, per receiver the exits weighted by the sources' lobe weights, and
+    /// the report.
+    fn walk_all(&self, paths: u32, estimated_seconds: f64) -> (Rows, Vec<Deposit>, WalkReport) {
+        let n = self.n;
+        let sources = &self.surface.sources;
+        let clock = std::time::Instant::now();
+        let mut report = WalkReport {
+            paths_per_node: paths,
+            estimated_seconds,
+            ..WalkReport::default()
+        };
+        let mut rows: Rows = vec![Vec::new(); n];
+        // Per receiver: what left through its support, and that weighted by the exit cosine and
+        // by the exit direction along the surface, each source weighted by its lobe weight.
+        let mut exits = vec![[0.0f64; DEPOSIT]; n];
+        let mut entered = 0.0;
+        for start in (0..n).step_by(SOURCE_BLOCK) {
+            let block: Vec<Column> = (start..(start + SOURCE_BLOCK).min(n))
+                .into_par_iter()
+                .map_init(|| scratch(n), |s, p| self.walk_source(s, (p, paths)))
+                .collect();
+            for (i, (column, counters, left, lobe)) in block.into_iter().enumerate() {
+                let p = start + i;
+                report.paths += counters[0];
+                report.events += counters[1];
+                report.truncated += counters[2];
+                report.reentries += counters[3];
+                entered += sources.area(p);
+                for c in 0..3 {
+                    report.left[c] += left[c];
                 }
-                let aq = sources.area(q as usize);
-                if aq > 0.0 {
-                    rows[q as usize].push((p as u32, Rgb([v[0] / aq, v[1] / aq, v[2] / aq])));
+                for (q, v) in column {
+                    for (i, (e, x)) in exits[q as usize].iter_mut().zip(v).enumerate() {
+                        *e += x * lobe[deposit_channel(i)];
+                    }
+                    let aq = sources.area(q as usize);
+                    if aq > 0.0 {
+                        rows[q as usize].push((p as u32, Rgb([v[0] / aq, v[1] / aq, v[2] / aq])));
+                    }
                 }
             }
         }
+        (self.progress)("walks", n as u64, n as u64);
+        report.seconds = clock.elapsed().as_secs_f64();
+        report.left = report.left.map(|l| l / entered.max(1e-300));
+        (rows, exits, report)
     }
-    progress("walks", n as u64, n as u64);
-    report.seconds = clock.elapsed().as_secs_f64();
-    report.left = report.left.map(|l| l / entered.max(1e-300));
+}
+
+/// F's rows by receiver: (source, value per channel).
+type Rows = Vec<Vec<(u32, Rgb)>>;
+
+/// The walks' result from F's rows and the lobe-weighted exits per receiver: the exit lobes'
+/// slopes and drifts.
+fn with_exit_lobes(rows: Rows, exits: &[Deposit]) -> Walked {
     let slopes: Vec<[f32; 3]> = exits
         .iter()
         .map(|e| std::array::from_fn(|c| exit_slope(e[3 + c], e[c])))
@@ -572,14 +678,11 @@ pub fn walk_response(
             })
         })
         .collect();
-    (
-        Walked {
-            rows,
-            slopes,
-            drifts,
-        },
-        report,
-    )
+    Walked {
+        rows,
+        slopes,
+        drifts,
+    }
 }
 
 /// The drift a of the exit lobe 1 + k (mu - 2/3) + a . w (w the exit direction, a along the
