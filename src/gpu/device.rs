@@ -483,6 +483,140 @@ pub fn choose_device(devices: &[DeviceInfo], wanted: Option<&str>) -> GpuResult<
     }
 }
 
+/// The validation layer's messenger and the debug-utils functions that destroy it.
+type Messenger = Option<(debug_utils::Instance, vk::DebugUtilsMessengerEXT)>;
+
+/// Creates the messenger that counts the validation layer's warnings and errors into
+/// `validation`, where `enabled` (debug utils present and validation asked for).
+fn create_debug_messenger(
+    entry: &ash::Entry,
+    instance: &ash::Instance,
+    enabled: bool,
+    validation: &Arc<ValidationLog>,
+) -> GpuResult<Messenger> {
+    Ok(if enabled {
+        let loader = debug_utils::Instance::new(entry, instance);
+        let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+            .message_severity(
+                vk::DebugUtilsMessageSeverityFlagsEXT::ERROR
+                    | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                    | vk::DebugUtilsMessageSeverityFlagsEXT::INFO,
+            )
+            .message_type(
+                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+            )
+            .pfn_user_callback(Some(debug_callback))
+            .user_data(Arc::as_ptr(validation) as *mut c_void);
+        let messenger = unsafe { loader.create_debug_utils_messenger(&info, None) }
+            .vk("vkCreateDebugUtilsMessengerEXT")?;
+        Some((loader, messenger))
+    } else {
+        None
+    })
+}
+
+/// Destroys the messenger, if there is one.
+fn destroy_messenger(m: &Messenger) {
+    if let Some((l, m)) = m {
+        unsafe { l.destroy_debug_utils_messenger(*m, None) };
+    }
+}
+
+/// The physical device `options` names (or the best usable one) and its description.
+fn pick_physical_device(
+    instance: &ash::Instance,
+    options: &GpuOptions,
+) -> GpuResult<(vk::PhysicalDevice, DeviceInfo)> {
+    let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
+    let infos: Vec<DeviceInfo> = pds
+        .iter()
+        .enumerate()
+        .map(|(i, pd)| describe(instance, i, *pd).0)
+        .collect();
+    let index = choose_device(&infos, options.device.as_deref())?;
+    let physical = pds[index];
+    let info = infos[index].clone();
+    Ok((physical, info))
+}
+
+/// The first queue family of `physical` with graphics and compute that can present to the
+/// surface (any, headless); refused, naming what is missing, where there is none or where a
+/// window needs `VK_KHR_swapchain` and the device lacks it.
+fn find_queue_family(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+    info: &DeviceInfo,
+    surface_loader: &surface::Instance,
+    surface_raw: Option<vk::SurfaceKHR>,
+) -> GpuResult<u32> {
+    let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
+    let presents = |family: usize| match surface_raw {
+        None => true,
+        Some(s) => unsafe {
+            surface_loader.get_physical_device_surface_support(physical, family as u32, s)
+        }
+        .unwrap_or(false),
+    };
+    let queue_family = families.iter().enumerate().position(|(i, f)| {
+        f.queue_flags
+            .contains(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE)
+            && presents(i)
+    });
+    let has_swapchain = unsafe { instance.enumerate_device_extension_properties(physical) }
+        .map(|exts| {
+            exts.iter()
+                .any(|e| e.extension_name_as_c_str().ok() == Some(swapchain::NAME))
+        })
+        .unwrap_or(false);
+    let missing = match (queue_family, surface_raw.is_some() && !has_swapchain) {
+        (None, _) if surface_raw.is_some() => {
+            Some("a graphics + compute queue that can present to this window".to_string())
+        }
+        (None, _) => Some("a graphics + compute queue".to_string()),
+        (_, true) => Some("VK_KHR_swapchain".to_string()),
+        _ => None,
+    };
+    if let Some(feature) = missing {
+        return Err(GpuError::MissingFeature {
+            device: info.name.clone(),
+            feature,
+        });
+    }
+    Ok(queue_family.unwrap_or(0) as u32)
+}
+
+/// Creates the logical device with one queue of `queue_family`, synchronization2 and dynamic
+/// rendering, and `VK_KHR_swapchain` where it presents to a window.
+fn create_logical_device(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+    queue_family: u32,
+    presents: bool,
+) -> GpuResult<ash::Device> {
+    let device_exts = [swapchain::NAME.as_ptr()];
+
+    let priorities = [1.0f32];
+    let queue_info = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(queue_family)
+        .queue_priorities(&priorities)];
+    let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
+        .synchronization2(true)
+        .dynamic_rendering(true);
+    let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
+    let mut features = vk::PhysicalDeviceFeatures2::default();
+    let mut device_info = vk::DeviceCreateInfo::default()
+        .queue_create_infos(&queue_info)
+        .push_next(&mut features)
+        .push_next(&mut f12)
+        .push_next(&mut f13);
+    if presents {
+        device_info = device_info.enabled_extension_names(&device_exts);
+    }
+    unsafe { instance.create_device(physical, &device_info, None) }.vk("vkCreateDevice")
+}
+
 impl Gpu {
     /// Opens the device chosen by `options` (headless: no surface, no window).
     pub fn new(options: &GpuOptions) -> GpuResult<Arc<Gpu>> {
@@ -529,123 +663,38 @@ impl Gpu {
         options: &GpuOptions,
     ) -> GpuResult<Arc<Gpu>> {
         let validation = Arc::new(ValidationLog::default());
-        let debug_messenger = if has_debug_utils && options.validate {
-            let loader = debug_utils::Instance::new(&entry, instance);
-            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-                .message_severity(
-                    vk::DebugUtilsMessageSeverityFlagsEXT::ERROR
-                        | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                        | vk::DebugUtilsMessageSeverityFlagsEXT::INFO,
-                )
-                .message_type(
-                    vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-                )
-                .pfn_user_callback(Some(debug_callback))
-                .user_data(Arc::as_ptr(&validation) as *mut c_void);
-            let messenger = unsafe { loader.create_debug_utils_messenger(&info, None) }
-                .vk("vkCreateDebugUtilsMessengerEXT")?;
-            Some((loader, messenger))
-        } else {
-            None
-        };
-        let destroy_messenger =
-            |m: &Option<(debug_utils::Instance, vk::DebugUtilsMessengerEXT)>| {
-                if let Some((l, m)) = m {
-                    unsafe { l.destroy_debug_utils_messenger(*m, None) };
-                }
-            };
+        let debug_messenger = create_debug_messenger(
+            &entry,
+            instance,
+            has_debug_utils && options.validate,
+            &validation,
+        )?;
 
-        let pds = match unsafe { instance.enumerate_physical_devices() } {
-            Ok(p) => p,
-            Err(e) => {
-                destroy_messenger(&debug_messenger);
-                return Err(GpuError::Vk {
-                    call: "vkEnumeratePhysicalDevices",
-                    result: e,
-                });
-            }
-        };
-        let infos: Vec<DeviceInfo> = pds
-            .iter()
-            .enumerate()
-            .map(|(i, pd)| describe(instance, i, *pd).0)
-            .collect();
-        let index = match choose_device(&infos, options.device.as_deref()) {
-            Ok(i) => i,
+        let (physical, info) = match pick_physical_device(instance, options) {
+            Ok(chosen) => chosen,
             Err(e) => {
                 destroy_messenger(&debug_messenger);
                 return Err(e);
             }
         };
-        let physical = pds[index];
-        let info = infos[index].clone();
-        let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
         let surface_loader = surface::Instance::new(&entry, instance);
-        let presents = |family: usize| match surface_raw {
-            None => true,
-            Some(s) => unsafe {
-                surface_loader.get_physical_device_surface_support(physical, family as u32, s)
-            }
-            .unwrap_or(false),
-        };
-        let queue_family = families.iter().enumerate().position(|(i, f)| {
-            f.queue_flags
-                .contains(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE)
-                && presents(i)
-        });
-        let has_swapchain = unsafe { instance.enumerate_device_extension_properties(physical) }
-            .map(|exts| {
-                exts.iter()
-                    .any(|e| e.extension_name_as_c_str().ok() == Some(swapchain::NAME))
-            })
-            .unwrap_or(false);
-        let missing = match (queue_family, surface_raw.is_some() && !has_swapchain) {
-            (None, _) if surface_raw.is_some() => {
-                Some("a graphics + compute queue that can present to this window".to_string())
-            }
-            (None, _) => Some("a graphics + compute queue".to_string()),
-            (_, true) => Some("VK_KHR_swapchain".to_string()),
-            _ => None,
-        };
-        if let Some(feature) = missing {
-            destroy_messenger(&debug_messenger);
-            return Err(GpuError::MissingFeature {
-                device: info.name.clone(),
-                feature,
-            });
-        }
-        let queue_family = queue_family.unwrap_or(0) as u32;
-        let device_exts = [swapchain::NAME.as_ptr()];
+        let queue_family =
+            match find_queue_family(instance, physical, &info, &surface_loader, surface_raw) {
+                Ok(family) => family,
+                Err(e) => {
+                    destroy_messenger(&debug_messenger);
+                    return Err(e);
+                }
+            };
 
-        let priorities = [1.0f32];
-        let queue_info = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(queue_family)
-            .queue_priorities(&priorities)];
-        let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
-            .synchronization2(true)
-            .dynamic_rendering(true);
-        let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
-        let mut features = vk::PhysicalDeviceFeatures2::default();
-        let mut device_info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queue_info)
-            .push_next(&mut features)
-            .push_next(&mut f12)
-            .push_next(&mut f13);
-        if surface_raw.is_some() {
-            device_info = device_info.enabled_extension_names(&device_exts);
-        }
-        let device = match unsafe { instance.create_device(physical, &device_info, None) } {
-            Ok(d) => d,
-            Err(e) => {
-                destroy_messenger(&debug_messenger);
-                return Err(GpuError::Vk {
-                    call: "vkCreateDevice",
-                    result: e,
-                });
-            }
-        };
+        let device =
+            match create_logical_device(instance, physical, queue_family, surface_raw.is_some()) {
+                Ok(d) => d,
+                Err(e) => {
+                    destroy_messenger(&debug_messenger);
+                    return Err(e);
+                }
+            };
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
         let allocator = Allocator::new(&AllocatorCreateDesc {
             instance: instance.clone(),

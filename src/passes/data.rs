@@ -702,48 +702,10 @@ impl SubsurfaceData {
     ) -> GpuResult<SubsurfaceData> {
         let atlas = &pre.atlas;
         let ops = &pre.ops;
-        let mesh = &scene.mesh;
         let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
         let (texel_tex, node_tex) = texture_means(scene, pre);
 
-        let vertices: Vec<AtlasVertex> = atlas
-            .vertex_mesh
-            .iter()
-            .zip(&atlas.vertex_uv)
-            .map(|(&v, uv)| {
-                let v = v as usize;
-                let mut nodes = [0u32; 3];
-                let mut weights = [0f32; 3];
-                let mut exit_slope = [0f32; 3];
-                let mut exit_drift = [[0f32; 3]; 3];
-                for (k, (n, w)) in pre.nodes.prolong[v].iter().take(3).enumerate() {
-                    nodes[k] = *n;
-                    weights[k] = *w;
-                    if let Some(s) = ops.exit_slopes.get(*n as usize) {
-                        for c in 0..3 {
-                            exit_slope[c] += w * s[c];
-                        }
-                    }
-                    if let Some(d) = ops.exit_drifts.get(*n as usize) {
-                        for (e, d) in exit_drift.iter_mut().zip(d) {
-                            for j in 0..3 {
-                                e[j] += w * d[j];
-                            }
-                        }
-                    }
-                }
-                AtlasVertex {
-                    position: mesh.positions[v].to_array(),
-                    normal: mesh.normals[v].to_array(),
-                    uv: mesh.uvs[v].to_array(),
-                    atlas: [uv.x as f32, uv.y as f32],
-                    nodes,
-                    weights,
-                    exit_slope,
-                    exit_drift,
-                }
-            })
-            .collect();
+        let vertices = atlas_vertices(scene, pre);
         let vertices = upload(
             gpu,
             Item::AtlasVertices,
@@ -758,178 +720,23 @@ impl SubsurfaceData {
         )?;
 
         let packed: Vec<u32> = atlas.texels.iter().map(|t| t.x | (t.y << 16)).collect();
-        let texels = upload(gpu, Item::CoveredTexels, &packed, texel_usage)?;
-        let sure = atlas.centres_surely_covered();
-        let to_dilate: Vec<u32> = packed
-            .iter()
-            .zip(&sure)
-            .filter(|(_, &s)| !s)
-            .map(|(&p, _)| p)
-            .collect();
-        let dilate_count = to_dilate.len() as u32;
-        let dilate_texels = upload(gpu, Item::DilateTexels, &to_dilate, texel_usage)?;
-        let mut chart_ids = vec![0u32; (atlas.width * atlas.height) as usize];
-        for t in &atlas.texels {
-            chart_ids[(t.y * atlas.width + t.x) as usize] = t.chart + 1;
-        }
-        let charts = Arc::new(Image::from_pixels(
-            gpu,
-            Item::ChartIds.name(),
-            Item::ChartIds.format(),
-            atlas.width,
-            atlas.height,
-            bytemuck::cast_slice(&chart_ids),
-        )?);
+        let covered = upload_covered_texels(gpu, pre, &packed)?;
 
-        let kk = (ops.kernel_size * ops.kernel_size) as usize;
-        let (use_local, direct) = match mode {
-            Blend::Local => (true, None),
-            Blend::Global => (false, None),
-            Blend::Simple => (true, Some(&ops.direct_simple)),
-            Blend::Optimized => (true, Some(&ops.direct_optimized)),
-        };
-        // Half precision: 6 bytes a tap instead of 12 for the pass that streams the most data
-        // per texel; kernel weights span a few decades, well inside f16's normal range, and the
-        // rounding (2^-11 relative) is far below the method's error (see the accuracy tests).
-        // Two taps per 16-byte fetch, and beta (which weighs the same texel as the window's
-        // centre tap) added to the centre tap: the pass's cost on lavapipe follows its fetch
-        // count, and this halves the kernel fetches (k*k + 1 -> ceil(k*k / 2)).
-        let h = crate::gpu::half::to_f16;
-        let pairs = kernel_pairs(ops.kernel_size) as usize;
-        let centre = kk / 2;
-        let mut kernels: Vec<[u16; 8]> = vec![[0; 8]; atlas.texels.len() * pairs];
-        for (t, entries) in kernels.chunks_exact_mut(pairs).enumerate() {
-            let inv = texel_tex[t].map(|x| 1.0 / x);
-            let beta = direct.map(|d| d[t]).unwrap_or([0.0; 3]);
-            for j in 0..kk {
-                let mut w = if use_local {
-                    ops.kernels[t * kk + j]
-                } else {
-                    [0.0; 3]
-                };
-                if j == centre {
-                    w = [w[0] + beta[0], w[1] + beta[1], w[2] + beta[2]];
-                }
-                let slot = &mut entries[j / 2][3 * (j % 2)..3 * (j % 2) + 3];
-                for c in 0..3 {
-                    slot[c] = h(w[c] * inv[c] as f32);
-                }
-            }
-        }
+        let kernels = kernel_entries(pre, mode, &texel_tex);
         let kernels = upload(gpu, Item::Kernels, &kernels, texel_usage)?;
-        let mut seam_rows = vec![0u32];
-        let mut seam_entries: Vec<[f32; 4]> = Vec::new();
-        for t in 0..atlas.texels.len() {
-            if mode.seam_taps() {
-                let inv = texel_tex[t].map(|x| 1.0 / x);
-                for (src, w) in ops.seams.row(t) {
-                    seam_entries.push([
-                        f32::from_bits(packed[src as usize]),
-                        w[0] * inv[0] as f32,
-                        w[1] * inv[1] as f32,
-                        w[2] * inv[2] as f32,
-                    ]);
-                }
-            }
-            seam_rows.push(seam_entries.len() as u32);
-        }
+        let (seam_rows, seam_entries) = seam_taps(pre, mode, &packed, &texel_tex);
         let seam_rows = upload(gpu, Item::SeamRows, &seam_rows, texel_usage)?;
         let seam_entries = upload(gpu, Item::SeamEntries, &seam_entries, texel_usage)?;
 
         let gather_rows = upload(gpu, Item::GatherRows, &ops.gather.row_start, texel_usage)?;
-        let gather_entries: Vec<[f32; 2]> = ops
-            .gather
-            .cols
-            .iter()
-            .zip(&ops.gather.vals)
-            .map(|(&t, &w)| [f32::from_bits(packed[t as usize]), w])
-            .collect();
+        let gather_entries = gather_texel_entries(pre, &packed);
         let gather_entries = upload(gpu, Item::GatherEntries, &gather_entries, texel_usage)?;
 
-        // Two entries per 16-byte fetch, weights in half precision: the pass's cost on
-        // lavapipe follows its fetches (3 instead of 4 per two entries), and the matrix, the
-        // largest item of device memory, halves. The rounding (2^-11 relative, unbiased)
-        // moves the image by 0.001 % RMS.
-        check_nodes(pre.nodes.positions.len() as u64)?;
-        let mut rows = vec![0u32];
-        let mut entries: Vec<[u32; 4]> = Vec::new();
-        let h = |x: f32| crate::gpu::half::to_f16(x) as u32;
-        let mut row: Vec<(u32, [f32; 3])> = Vec::new();
-        let matrix = ops.global_matrix(mode);
-        for q in 0..pre.nodes.positions.len() {
-            if let Some((matrix, skip_diagonal)) = matrix {
-                let inv = node_tex[q].map(|x| 1.0 / x);
-                row.clear();
-                row.extend(
-                    matrix
-                        .row(q)
-                        .filter(|(p, _)| !(skip_diagonal && *p as usize == q))
-                        .map(|(p, w)| (p, [0, 1, 2].map(|c| w[c] * inv[c] as f32))),
-                );
-                for pair in row.chunks(2) {
-                    let (p0, a) = pair[0];
-                    let (p1, b) = pair.get(1).copied().unwrap_or((p0, [0.0; 3]));
-                    entries.push([
-                        p0 | p1 << 16,
-                        h(a[0]) | h(a[1]) << 16,
-                        h(a[2]) | h(b[0]) << 16,
-                        h(b[1]) | h(b[2]) << 16,
-                    ]);
-                }
-            }
-            rows.push(entries.len() as u32);
-        }
-        // Storage usage only when asked or measured: it subjects the buffers to
-        // maxStorageBufferRange.
-        let global_storage = match global_layout {
-            GlobalLayout::Texel => false,
-            GlobalLayout::Storage => true,
-            GlobalLayout::Auto => {
-                (entries.len() as u64 * 16).max(rows.len() as u64 * 4)
-                    <= gpu.info.max_storage_buffer_range
-            }
-        };
-        let global_usage = if global_storage {
-            texel_usage | vk::BufferUsageFlags::STORAGE_BUFFER
-        } else {
-            texel_usage
-        };
-        let global_pairs = entries.len() as u32;
-        let global_rows = upload(gpu, Item::GlobalRows, &rows, global_usage)?;
-        let global_entries = upload(gpu, Item::GlobalEntries, &entries, global_usage)?;
+        let global = upload_global(gpu, pre, mode, global_layout, &node_tex)?;
 
-        let texture = match &scene.texture {
-            Some(t) => Image::from_pixels(
-                gpu,
-                Item::Texture.name(),
-                Item::Texture.format(),
-                t.width(),
-                t.height(),
-                t.as_raw(),
-            )?,
-            None => Image::from_rgba8(gpu, "albedo texture (white)", 1, 1, &[255; 4])?,
-        };
-        // Dense over the atlas (the illumination pass finds a fragment's texel by its
-        // coordinates), eight f16 coefficients to an element; zero on uncovered texels.
+        let texture = upload_texture(gpu, scene)?;
         let transfer_seconds = transfer.map_or(0.0, |t| t.seconds);
-        let transfer = match transfer {
-            Some(tr) => {
-                let k = crate::environment::sh::coefficients(tr.settings.order);
-                let per = crate::layout::transfer_elements(k);
-                let per_element = crate::layout::TRANSFER_COEFFICIENTS_PER_ELEMENT;
-                let mut dense = vec![[0u32; 4]; (atlas.width * atlas.height) as usize * per];
-                for (t, texel) in atlas.texels.iter().enumerate() {
-                    let base = (texel.y * atlas.width + texel.x) as usize * per;
-                    let row = &tr.coefficients[t * k..(t + 1) * k];
-                    for (j, c) in row.iter().enumerate() {
-                        let e = &mut dense[base + j / per_element][(j % per_element) / 2];
-                        *e |= (crate::gpu::half::to_f16(*c) as u32) << (16 * (j % 2));
-                    }
-                }
-                upload(gpu, Item::EnvironmentTransfer, &dense, texel_usage)?
-            }
-            None => upload(gpu, Item::EnvironmentTransfer, &[[0u32; 4]], texel_usage)?,
-        };
+        let transfer = upload_transfer(gpu, pre, transfer)?;
         Ok(SubsurfaceData {
             transfer,
             transfer_seconds,
@@ -938,24 +745,345 @@ impl SubsurfaceData {
             index_count: atlas.indices.len() as u32,
             atlas_size: (atlas.width, atlas.height),
             texel_mm: atlas.texel_mm,
-            texels,
+            texels: covered.texels,
             texel_count: atlas.texels.len() as u32,
-            dilate_texels,
-            dilate_count,
-            charts,
+            dilate_texels: covered.dilate_texels,
+            dilate_count: covered.dilate_count,
+            charts: covered.charts,
             kernels,
             kernel_size: ops.kernel_size,
             seam_rows,
             seam_entries,
             gather_rows,
             gather_entries,
-            global_rows,
-            global_entries,
-            global_pairs,
-            global_storage,
+            global_rows: global.rows,
+            global_entries: global.entries,
+            global_pairs: global.pairs,
+            global_storage: global.storage,
             node_count: pre.nodes.positions.len() as u32,
             texture: Arc::new(texture),
         })
+    }
+}
+
+/// The atlas mesh's vertices: one per (mesh vertex, chart), with the prolongation's nodes and
+/// weights and the exit lobe's slope and drift interpolated from those nodes.
+fn atlas_vertices(scene: &Scene, pre: &Preprocessed) -> Vec<AtlasVertex> {
+    let atlas = &pre.atlas;
+    let ops = &pre.ops;
+    let mesh = &scene.mesh;
+    atlas
+        .vertex_mesh
+        .iter()
+        .zip(&atlas.vertex_uv)
+        .map(|(&v, uv)| {
+            let v = v as usize;
+            let mut nodes = [0u32; 3];
+            let mut weights = [0f32; 3];
+            let mut exit_slope = [0f32; 3];
+            let mut exit_drift = [[0f32; 3]; 3];
+            for (k, (n, w)) in pre.nodes.prolong[v].iter().take(3).enumerate() {
+                nodes[k] = *n;
+                weights[k] = *w;
+                if let Some(s) = ops.exit_slopes.get(*n as usize) {
+                    for c in 0..3 {
+                        exit_slope[c] += w * s[c];
+                    }
+                }
+                if let Some(d) = ops.exit_drifts.get(*n as usize) {
+                    for (e, d) in exit_drift.iter_mut().zip(d) {
+                        for j in 0..3 {
+                            e[j] += w * d[j];
+                        }
+                    }
+                }
+            }
+            AtlasVertex {
+                position: mesh.positions[v].to_array(),
+                normal: mesh.normals[v].to_array(),
+                uv: mesh.uvs[v].to_array(),
+                atlas: [uv.x as f32, uv.y as f32],
+                nodes,
+                weights,
+                exit_slope,
+                exit_drift,
+            }
+        })
+        .collect()
+}
+
+/// The covered texels on the device: all of them, the ones `dilate` visits, and the chart-id
+/// image.
+struct CoveredTexels {
+    /// Covered texels, packed coordinates.
+    texels: Arc<Buffer>,
+    /// Covered texels whose centre a triangle may not cover.
+    dilate_texels: Arc<Buffer>,
+    /// Their number.
+    dilate_count: u32,
+    /// Chart id + 1 per atlas texel.
+    charts: Arc<Image>,
+}
+
+/// Uploads the covered texels (`packed`: `x | y << 16` each), those whose centre a triangle
+/// may not cover, and the chart id + 1 of every atlas texel.
+fn upload_covered_texels(
+    gpu: &Arc<Gpu>,
+    pre: &Preprocessed,
+    packed: &[u32],
+) -> GpuResult<CoveredTexels> {
+    let atlas = &pre.atlas;
+    let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+    let texels = upload(gpu, Item::CoveredTexels, packed, texel_usage)?;
+    let sure = atlas.centres_surely_covered();
+    let to_dilate: Vec<u32> = packed
+        .iter()
+        .zip(&sure)
+        .filter(|(_, &s)| !s)
+        .map(|(&p, _)| p)
+        .collect();
+    let dilate_count = to_dilate.len() as u32;
+    let dilate_texels = upload(gpu, Item::DilateTexels, &to_dilate, texel_usage)?;
+    let mut chart_ids = vec![0u32; (atlas.width * atlas.height) as usize];
+    for t in &atlas.texels {
+        chart_ids[(t.y * atlas.width + t.x) as usize] = t.chart + 1;
+    }
+    let charts = Arc::new(Image::from_pixels(
+        gpu,
+        Item::ChartIds.name(),
+        Item::ChartIds.format(),
+        atlas.width,
+        atlas.height,
+        bytemuck::cast_slice(&chart_ids),
+    )?);
+    Ok(CoveredTexels {
+        texels,
+        dilate_texels,
+        dilate_count,
+        charts,
+    })
+}
+
+/// The kernels of `mode` per covered texel, with the direct term added to the centre tap,
+/// divided by the texel's texture mean (`texel_tex`) and packed two f16 taps to an entry.
+fn kernel_entries(pre: &Preprocessed, mode: Blend, texel_tex: &[[f64; 3]]) -> Vec<[u16; 8]> {
+    let atlas = &pre.atlas;
+    let ops = &pre.ops;
+    let kk = (ops.kernel_size * ops.kernel_size) as usize;
+    let (use_local, direct) = match mode {
+        Blend::Local => (true, None),
+        Blend::Global => (false, None),
+        Blend::Simple => (true, Some(&ops.direct_simple)),
+        Blend::Optimized => (true, Some(&ops.direct_optimized)),
+    };
+    // Half precision: 6 bytes a tap instead of 12 for the pass that streams the most data
+    // per texel; kernel weights span a few decades, well inside f16's normal range, and the
+    // rounding (2^-11 relative) is far below the method's error (see the accuracy tests).
+    // Two taps per 16-byte fetch, and beta (which weighs the same texel as the window's
+    // centre tap) added to the centre tap: the pass's cost on lavapipe follows its fetch
+    // count, and this halves the kernel fetches (k*k + 1 -> ceil(k*k / 2)).
+    let h = crate::gpu::half::to_f16;
+    let pairs = kernel_pairs(ops.kernel_size) as usize;
+    let centre = kk / 2;
+    let mut kernels: Vec<[u16; 8]> = vec![[0; 8]; atlas.texels.len() * pairs];
+    for (t, entries) in kernels.chunks_exact_mut(pairs).enumerate() {
+        let inv = texel_tex[t].map(|x| 1.0 / x);
+        let beta = direct.map(|d| d[t]).unwrap_or([0.0; 3]);
+        for j in 0..kk {
+            let mut w = if use_local {
+                ops.kernels[t * kk + j]
+            } else {
+                [0.0; 3]
+            };
+            if j == centre {
+                w = [w[0] + beta[0], w[1] + beta[1], w[2] + beta[2]];
+            }
+            let slot = &mut entries[j / 2][3 * (j % 2)..3 * (j % 2) + 3];
+            for c in 0..3 {
+                slot[c] = h(w[c] * inv[c] as f32);
+            }
+        }
+    }
+    kernels
+}
+
+/// The seam taps of `mode` as CSR rows and entries (source texel from `packed` as float bits,
+/// weight divided by the receiving texel's texture mean); all rows empty where the mode has
+/// no taps.
+fn seam_taps(
+    pre: &Preprocessed,
+    mode: Blend,
+    packed: &[u32],
+    texel_tex: &[[f64; 3]],
+) -> (Vec<u32>, Vec<[f32; 4]>) {
+    let atlas = &pre.atlas;
+    let ops = &pre.ops;
+    let mut seam_rows = vec![0u32];
+    let mut seam_entries: Vec<[f32; 4]> = Vec::new();
+    for t in 0..atlas.texels.len() {
+        if mode.seam_taps() {
+            let inv = texel_tex[t].map(|x| 1.0 / x);
+            for (src, w) in ops.seams.row(t) {
+                seam_entries.push([
+                    f32::from_bits(packed[src as usize]),
+                    w[0] * inv[0] as f32,
+                    w[1] * inv[1] as f32,
+                    w[2] * inv[2] as f32,
+                ]);
+            }
+        }
+        seam_rows.push(seam_entries.len() as u32);
+    }
+    (seam_rows, seam_entries)
+}
+
+/// The gather's entries: source texel from `packed` as float bits, and weight.
+fn gather_texel_entries(pre: &Preprocessed, packed: &[u32]) -> Vec<[f32; 2]> {
+    let ops = &pre.ops;
+    ops.gather
+        .cols
+        .iter()
+        .zip(&ops.gather.vals)
+        .map(|(&t, &w)| [f32::from_bits(packed[t as usize]), w])
+        .collect()
+}
+
+/// The global matrix on the device, with how it can be bound.
+struct GlobalBuffers {
+    /// CSR rows, in entry pairs.
+    rows: Arc<Buffer>,
+    /// Entry pairs.
+    entries: Arc<Buffer>,
+    /// Number of entry pairs.
+    pairs: u32,
+    /// Whether the rows and entries can also be bound as storage buffers.
+    storage: bool,
+}
+
+/// The global matrix of `mode` as CSR rows and entry pairs, each row divided by its
+/// receiving node's texture mean (`node_tex`); rows all empty where the mode has no global
+/// response.
+fn global_matrix_entries(
+    pre: &Preprocessed,
+    mode: Blend,
+    node_tex: &[[f64; 3]],
+) -> (Vec<u32>, Vec<[u32; 4]>) {
+    let ops = &pre.ops;
+    // Two entries per 16-byte fetch, weights in half precision: the pass's cost on
+    // lavapipe follows its fetches (3 instead of 4 per two entries), and the matrix, the
+    // largest item of device memory, halves. The rounding (2^-11 relative, unbiased)
+    // moves the image by 0.001 % RMS.
+    let mut rows = vec![0u32];
+    let mut entries: Vec<[u32; 4]> = Vec::new();
+    let h = |x: f32| crate::gpu::half::to_f16(x) as u32;
+    let mut row: Vec<(u32, [f32; 3])> = Vec::new();
+    let matrix = ops.global_matrix(mode);
+    for q in 0..pre.nodes.positions.len() {
+        if let Some((matrix, skip_diagonal)) = matrix {
+            let inv = node_tex[q].map(|x| 1.0 / x);
+            row.clear();
+            row.extend(
+                matrix
+                    .row(q)
+                    .filter(|(p, _)| !(skip_diagonal && *p as usize == q))
+                    .map(|(p, w)| (p, [0, 1, 2].map(|c| w[c] * inv[c] as f32))),
+            );
+            for pair in row.chunks(2) {
+                let (p0, a) = pair[0];
+                let (p1, b) = pair.get(1).copied().unwrap_or((p0, [0.0; 3]));
+                entries.push([
+                    p0 | p1 << 16,
+                    h(a[0]) | h(a[1]) << 16,
+                    h(a[2]) | h(b[0]) << 16,
+                    h(b[1]) | h(b[2]) << 16,
+                ]);
+            }
+        }
+        rows.push(entries.len() as u32);
+    }
+    (rows, entries)
+}
+
+/// Uploads the global matrix of `mode`, bindable as storage buffers too where
+/// `global_layout` asks for it or (`Auto`) where it fits `maxStorageBufferRange`.
+fn upload_global(
+    gpu: &Arc<Gpu>,
+    pre: &Preprocessed,
+    mode: Blend,
+    global_layout: GlobalLayout,
+    node_tex: &[[f64; 3]],
+) -> GpuResult<GlobalBuffers> {
+    let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+    check_nodes(pre.nodes.positions.len() as u64)?;
+    let (rows, entries) = global_matrix_entries(pre, mode, node_tex);
+    // Storage usage only when asked or measured: it subjects the buffers to
+    // maxStorageBufferRange.
+    let global_storage = match global_layout {
+        GlobalLayout::Texel => false,
+        GlobalLayout::Storage => true,
+        GlobalLayout::Auto => {
+            (entries.len() as u64 * 16).max(rows.len() as u64 * 4)
+                <= gpu.info.max_storage_buffer_range
+        }
+    };
+    let global_usage = if global_storage {
+        texel_usage | vk::BufferUsageFlags::STORAGE_BUFFER
+    } else {
+        texel_usage
+    };
+    let global_pairs = entries.len() as u32;
+    let global_rows = upload(gpu, Item::GlobalRows, &rows, global_usage)?;
+    let global_entries = upload(gpu, Item::GlobalEntries, &entries, global_usage)?;
+    Ok(GlobalBuffers {
+        rows: global_rows,
+        entries: global_entries,
+        pairs: global_pairs,
+        storage: global_storage,
+    })
+}
+
+/// Uploads the scene's texture, or a white 1x1 one without it.
+fn upload_texture(gpu: &Arc<Gpu>, scene: &Scene) -> GpuResult<Image> {
+    match &scene.texture {
+        Some(t) => Image::from_pixels(
+            gpu,
+            Item::Texture.name(),
+            Item::Texture.format(),
+            t.width(),
+            t.height(),
+            t.as_raw(),
+        ),
+        None => Image::from_rgba8(gpu, "albedo texture (white)", 1, 1, &[255; 4]),
+    }
+}
+
+/// Uploads the environment's transfer, or one zero element without it.
+fn upload_transfer(
+    gpu: &Arc<Gpu>,
+    pre: &Preprocessed,
+    transfer: Option<&crate::environment::prt::Transfer>,
+) -> GpuResult<Arc<Buffer>> {
+    let atlas = &pre.atlas;
+    let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+    // Dense over the atlas (the illumination pass finds a fragment's texel by its
+    // coordinates), eight f16 coefficients to an element; zero on uncovered texels.
+    match transfer {
+        Some(tr) => {
+            let k = crate::environment::sh::coefficients(tr.settings.order);
+            let per = crate::layout::transfer_elements(k);
+            let per_element = crate::layout::TRANSFER_COEFFICIENTS_PER_ELEMENT;
+            let mut dense = vec![[0u32; 4]; (atlas.width * atlas.height) as usize * per];
+            for (t, texel) in atlas.texels.iter().enumerate() {
+                let base = (texel.y * atlas.width + texel.x) as usize * per;
+                let row = &tr.coefficients[t * k..(t + 1) * k];
+                for (j, c) in row.iter().enumerate() {
+                    let e = &mut dense[base + j / per_element][(j % per_element) / 2];
+                    *e |= (crate::gpu::half::to_f16(*c) as u32) << (16 * (j % 2));
+                }
+            }
+            upload(gpu, Item::EnvironmentTransfer, &dense, texel_usage)
+        }
+        None => upload(gpu, Item::EnvironmentTransfer, &[[0u32; 4]], texel_usage),
     }
 }
 

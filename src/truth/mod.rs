@@ -553,13 +553,7 @@ pub fn compute_with_clock(
     let t0 = clock();
     let clock = || clock() - t0;
     let (w, h) = (scene.width, scene.height);
-    let covered: Vec<u32> = (0..w * h)
-        .into_par_iter()
-        .filter(|&i| {
-            let (o, d) = camera_ray(scene, i % w, i / w);
-            tracer.covers(o, d)
-        })
-        .collect();
+    let covered = covered_pixels(scene, &tracer);
     let per_half = settings.spp.div_ceil(2);
     // Sums of each half per covered pixel and channel, then of the surface's part of both.
     let mut sums = vec![[[0.0f64; 3]; 3]; covered.len()];
@@ -568,31 +562,7 @@ pub fn compute_with_clock(
     // round's. Progress within a round follows it (the clock is read once a round).
     let mut expected_round = 0.0;
     if let Some(budget) = settings.time_s {
-        // One sample per pixel and half is the least a truth can be: timed on a strided sample
-        // of the pixels (seeded apart from the image's samples, and dropped), and refused where
-        // it would take more than twice the budget.
-        let step = (covered.len() / PILOT_PIXELS).max(1);
-        let start = clock();
-        let sampled = covered
-            .iter()
-            .step_by(step)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map_init(Scratch::default, |scratch, &i| {
-                let (o, d) = camera_ray(scene, i % w, i / w);
-                let mut rng = Rng::new(&[settings.seed, i as u64, PILOT_STREAM]);
-                for _ in 0..2 {
-                    for c in 0..3 {
-                        tracer.radiance(o, d, c, &mut rng, scratch);
-                    }
-                }
-            })
-            .count();
-        let round = (clock() - start) * covered.len() as f64 / sampled.max(1) as f64;
-        if round > 2.0 * budget {
-            return Err(TruthError::BudgetTooShort(round, budget));
-        }
-        expected_round = round;
+        expected_round = pilot_round(scene, settings, &tracer, &covered, &clock, budget)?;
     }
     let mut done = 0u32;
     let mut round_start = clock();
@@ -610,30 +580,7 @@ pub fn compute_with_clock(
             .zip(covered.chunks(chunk))
             .enumerate()
         {
-            let (e, p, t, m) = sums
-                .par_iter_mut()
-                .zip(covered)
-                .map_init(Scratch::default, |scratch, (sum, &i)| {
-                    let (o, d) = camera_ray(scene, i % w, i / w);
-                    let (mut e, mut p, mut t, mut m) = (0u64, 0u64, 0u64, 0u64);
-                    for half in 0..2 {
-                        let mut rng = Rng::new(&[settings.seed, i as u64, half as u64, k]);
-                        for c in 0..3 {
-                            let r = tracer.radiance(o, d, c, &mut rng, scratch);
-                            sum[half][c] += r.radiance + r.surface;
-                            sum[2][c] += r.surface;
-                            e += r.events;
-                            p += 1;
-                            t += r.truncated as u64;
-                            m += r.capped;
-                        }
-                    }
-                    (e, p, t, m)
-                })
-                .reduce(
-                    || (0, 0, 0, 0),
-                    |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3),
-                );
+            let (e, p, t, m) = trace_chunk(scene, settings, &tracer, sums, covered, k);
             events += e;
             paths += p;
             truncated += t;
@@ -659,22 +606,7 @@ pub fn compute_with_clock(
             }
         }
     }
-    let n = done as f64;
-    let mut radiance = vec![0.0f32; (4 * w * h) as usize];
-    let mut noise = vec![0.0f32; (4 * w * h) as usize];
-    let mut surface = vec![0.0f32; (4 * w * h) as usize];
-    for (sum, &i) in sums.iter().zip(&covered) {
-        let i = i as usize;
-        for c in 0..3 {
-            let (a, b) = (sum[0][c] / n, sum[1][c] / n);
-            radiance[4 * i + c] = (0.5 * (a + b)) as f32;
-            noise[4 * i + c] = (0.5 * (a - b).abs()) as f32;
-            surface[4 * i + c] = (0.5 * sum[2][c] / n) as f32;
-        }
-        radiance[4 * i + 3] = 1.0;
-        noise[4 * i + 3] = 1.0;
-        surface[4 * i + 3] = 1.0;
-    }
+    let (radiance, noise, surface) = assemble_images(&sums, &covered, w, h, done);
     Ok(Truth {
         width: w,
         height: h,
@@ -689,6 +621,121 @@ pub fn compute_with_clock(
         capped_connections: capped,
         pixels: covered.len(),
     })
+}
+
+/// The pixels (`x + y * width`) whose camera ray meets the object.
+fn covered_pixels(scene: &Scene, tracer: &Tracer<'_>) -> Vec<u32> {
+    let w = scene.width;
+    (0..w * scene.height)
+        .into_par_iter()
+        .filter(|&i| {
+            let (o, d) = camera_ray(scene, i % w, i / w);
+            tracer.covers(o, d)
+        })
+        .collect()
+}
+
+/// The time budget's pilot: the seconds a round over all `covered` pixels is expected to
+/// take.
+fn pilot_round(
+    scene: &Scene,
+    settings: &TruthSettings,
+    tracer: &Tracer<'_>,
+    covered: &[u32],
+    clock: &dyn Fn() -> f64,
+    budget: f64,
+) -> Result<f64, TruthError> {
+    let w = scene.width;
+    // One sample per pixel and half is the least a truth can be: timed on a strided sample
+    // of the pixels (seeded apart from the image's samples, and dropped), and refused where
+    // it would take more than twice the budget.
+    let step = (covered.len() / PILOT_PIXELS).max(1);
+    let start = clock();
+    let sampled = covered
+        .iter()
+        .step_by(step)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map_init(Scratch::default, |scratch, &i| {
+            let (o, d) = camera_ray(scene, i % w, i / w);
+            let mut rng = Rng::new(&[settings.seed, i as u64, PILOT_STREAM]);
+            for _ in 0..2 {
+                for c in 0..3 {
+                    tracer.radiance(o, d, c, &mut rng, scratch);
+                }
+            }
+        })
+        .count();
+    let round = (clock() - start) * covered.len() as f64 / sampled.max(1) as f64;
+    if round > 2.0 * budget {
+        return Err(TruthError::BudgetTooShort(round, budget));
+    }
+    Ok(round)
+}
+
+/// Traces sample `k` of both halves for every pixel of `covered`, adding to its `sums`
+/// (halves A and B, then the surface's part); returns the collisions, paths, truncated paths
+/// and capped connections.
+fn trace_chunk(
+    scene: &Scene,
+    settings: &TruthSettings,
+    tracer: &Tracer<'_>,
+    sums: &mut [[[f64; 3]; 3]],
+    covered: &[u32],
+    k: u64,
+) -> (u64, u64, u64, u64) {
+    let w = scene.width;
+    sums.par_iter_mut()
+        .zip(covered)
+        .map_init(Scratch::default, |scratch, (sum, &i)| {
+            let (o, d) = camera_ray(scene, i % w, i / w);
+            let (mut e, mut p, mut t, mut m) = (0u64, 0u64, 0u64, 0u64);
+            for half in 0..2 {
+                let mut rng = Rng::new(&[settings.seed, i as u64, half as u64, k]);
+                for c in 0..3 {
+                    let r = tracer.radiance(o, d, c, &mut rng, scratch);
+                    sum[half][c] += r.radiance + r.surface;
+                    sum[2][c] += r.surface;
+                    e += r.events;
+                    p += 1;
+                    t += r.truncated as u64;
+                    m += r.capped;
+                }
+            }
+            (e, p, t, m)
+        })
+        .reduce(
+            || (0, 0, 0, 0),
+            |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3),
+        )
+}
+
+/// The radiance, noise and surface images (RGBA, `w` x `h`) from the `sums` of `done`
+/// samples per half over the `covered` pixels.
+fn assemble_images(
+    sums: &[[[f64; 3]; 3]],
+    covered: &[u32],
+    w: u32,
+    h: u32,
+    done: u32,
+) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let n = done as f64;
+    let mut radiance = vec![0.0f32; (4 * w * h) as usize];
+    let mut noise = vec![0.0f32; (4 * w * h) as usize];
+    let mut surface = vec![0.0f32; (4 * w * h) as usize];
+    for (sum, &i) in sums.iter().zip(covered) {
+        let i = i as usize;
+        for c in 0..3 {
+            let (a, b) = (sum[0][c] / n, sum[1][c] / n);
+            radiance[4 * i + c] = (0.5 * (a + b)) as f32;
+            noise[4 * i + c] = (0.5 * (a - b).abs()) as f32;
+            surface[4 * i + c] = (0.5 * sum[2][c] / n) as f32;
+        }
+        radiance[4 * i + 3] = 1.0;
+        noise[4 * i + 3] = 1.0;
+        surface[4 * i + 3] = 1.0;
+    }
+    (radiance, noise, surface)
 }
 
 /// Chunks of pixels a round of the truth runs in (progress within a round).

@@ -166,28 +166,33 @@ fn settings(words: &[&str]) -> Result<SettingsOverrides> {
     Ok(o)
 }
 
-fn parse_step(words: &[&str]) -> Result<Step> {
-    let args = &words[1..];
-    let want = |n: usize| -> Result<()> {
-        match args.len().cmp(&n) {
-            std::cmp::Ordering::Greater => bail!("too many arguments"),
-            _ => Ok(()),
+/// Argument `k` as a finite real number.
+fn arg_real(args: &[&str], k: usize, what: &str) -> Result<f32> {
+    finite(number(args.get(k).copied(), what)?, what)
+}
+
+/// Argument `k` as a light index.
+fn arg_index(args: &[&str], k: usize) -> Result<usize> {
+    number(args.get(k).copied(), "light index")
+}
+
+/// Arguments `from..from + 3` as three finite numbers.
+fn arg_triple(args: &[&str], from: usize, what: &str) -> Result<[f64; 3]> {
+    let mut v = [0.0f64; 3];
+    for (c, x) in v.iter_mut().enumerate() {
+        *x = number(args.get(from + c).copied(), what)?;
+        if !x.is_finite() {
+            bail!("{what} must be finite");
         }
-    };
-    let real =
-        |k: usize, what: &str| -> Result<f32> { finite(number(args.get(k).copied(), what)?, what) };
-    let index = |k: usize| -> Result<usize> { number(args.get(k).copied(), "light index") };
-    let triple = |from: usize, what: &str| -> Result<[f64; 3]> {
-        let mut v = [0.0f64; 3];
-        for (c, x) in v.iter_mut().enumerate() {
-            *x = number(args.get(from + c).copied(), what)?;
-            if !x.is_finite() {
-                bail!("{what} must be finite");
-            }
-        }
-        Ok(v)
-    };
-    let (step, n) = match words[0] {
+    }
+    Ok(v)
+}
+
+/// Frame counts, waits, the camera, the window and the output commands, with the arguments
+/// they take at most; `None` for another command.
+fn view_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> {
+    let real = |k: usize, what: &str| arg_real(args, k, what);
+    Ok(Some(match command {
         "frames" => {
             let n: u32 = number(args.first().copied(), "frame count")?;
             if n == 0 {
@@ -198,7 +203,7 @@ fn parse_step(words: &[&str]) -> Result<Step> {
         "wait" => (Step::Wait, 0),
         "orbit" | "light" => {
             let (a, b) = (real(0, "angle in degrees")?, real(1, "angle in degrees")?);
-            let act = if words[0] == "orbit" {
+            let act = if command == "orbit" {
                 Action::Orbit(a, b)
             } else {
                 Action::Light(a, b)
@@ -224,6 +229,37 @@ fn parse_step(words: &[&str]) -> Result<Step> {
             }
             (Step::Act(Action::Zoom(f)), 1)
         }
+        "screenshot" => (
+            Step::Act(Action::Screenshot(plain(args.first().copied())?)),
+            1,
+        ),
+        "save-scene" => (
+            Step::Act(Action::SaveScene(plain(args.first().copied())?)),
+            1,
+        ),
+        "ui" => (Step::Act(Action::ToggleUi), 0),
+        "reset" => (Step::Act(Action::Reset), 0),
+        "resize" => {
+            let w: u32 = number(args.first().copied(), "width")?;
+            let h: u32 = number(args.get(1).copied(), "height")?;
+            if w == 0 || h == 0 {
+                bail!("resize needs a positive size");
+            }
+            if w > MAX_WINDOW || h > MAX_WINDOW {
+                bail!("resize {w} {h}: at most {MAX_WINDOW} pixels a side");
+            }
+            (Step::Act(Action::Resize(w, h)), 2)
+        }
+        "quit" => (Step::Act(Action::Quit), 0),
+        _ => return Ok(None),
+    }))
+}
+
+/// The material, mode, model and settings commands, with the arguments they take at most;
+/// `None` for another command.
+fn material_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> {
+    let triple = |from: usize, what: &str| arg_triple(args, from, what);
+    Ok(Some(match command {
         "material" => (
             Step::Act(Action::Material(
                 args.first().context("missing material name")?.to_string(),
@@ -262,6 +298,16 @@ fn parse_step(words: &[&str]) -> Result<Step> {
             (Step::Act(Action::Model(model)), 1)
         }
         "settings" => (Step::Act(Action::Settings(settings(args)?)), args.len()),
+        _ => return Ok(None),
+    }))
+}
+
+/// The commands that edit, add or remove a light, with the arguments they take at most;
+/// `None` for another command.
+fn light_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> {
+    let index = |k: usize| arg_index(args, k);
+    let triple = |from: usize, what: &str| arg_triple(args, from, what);
+    Ok(Some(match command {
         "light-direction" => {
             let d = triple(1, "direction component")?;
             (
@@ -277,7 +323,10 @@ fn parse_step(words: &[&str]) -> Result<Step> {
             )
         }
         "light-intensity" => (
-            Step::Act(Action::LightIntensity(index(0)?, real(1, "intensity")?)),
+            Step::Act(Action::LightIntensity(
+                index(0)?,
+                arg_real(args, 1, "intensity")?,
+            )),
             2,
         ),
         "light-kind" => (
@@ -292,34 +341,33 @@ fn parse_step(words: &[&str]) -> Result<Step> {
             1,
         ),
         "remove-light" => (Step::Act(Action::RemoveLight(index(0)?)), 1),
-        "screenshot" => (
-            Step::Act(Action::Screenshot(plain(args.first().copied())?)),
-            1,
-        ),
-        "save-scene" => (
-            Step::Act(Action::SaveScene(plain(args.first().copied())?)),
-            1,
-        ),
-        "ui" => (Step::Act(Action::ToggleUi), 0),
-        "reset" => (Step::Act(Action::Reset), 0),
-        "resize" => {
-            let w: u32 = number(args.first().copied(), "width")?;
-            let h: u32 = number(args.get(1).copied(), "height")?;
-            if w == 0 || h == 0 {
-                bail!("resize needs a positive size");
-            }
-            if w > MAX_WINDOW || h > MAX_WINDOW {
-                bail!("resize {w} {h}: at most {MAX_WINDOW} pixels a side");
-            }
-            (Step::Act(Action::Resize(w, h)), 2)
+        _ => return Ok(None),
+    }))
+}
+
+/// One command's words as a step, refusing unknown commands and extra arguments.
+fn parse_step(words: &[&str]) -> Result<Step> {
+    let args = &words[1..];
+    let want = |n: usize| -> Result<()> {
+        match args.len().cmp(&n) {
+            std::cmp::Ordering::Greater => bail!("too many arguments"),
+            _ => Ok(()),
         }
-        "quit" => (Step::Act(Action::Quit), 0),
-        other => bail!(
-            "unknown command '{other}' (frames, wait, orbit, light, environment, envmap, pan, \
+    };
+    let command = words[0];
+    let (step, n) = if let Some(found) = view_step(command, args)? {
+        found
+    } else if let Some(found) = material_step(command, args)? {
+        found
+    } else if let Some(found) = light_step(command, args)? {
+        found
+    } else {
+        bail!(
+            "unknown command '{command}' (frames, wait, orbit, light, environment, envmap, pan, \
              zoom, material, mode, sigma-s, sigma-a, eta, model, settings, light-direction, \
              light-colour, light-intensity, light-kind, add-light, remove-light, screenshot, \
              save-scene, ui, reset, resize, quit)"
-        ),
+        )
     };
     want(n)?;
     Ok(step)

@@ -244,19 +244,8 @@ impl Swapchain {
         let gpu = self.gpu.clone();
         let s = surface(&gpu)?;
         let d = &gpu.device;
-        let index = match unsafe {
-            s.swapchain
-                .acquire_next_image(self.raw, u64::MAX, self.acquired, vk::Fence::null())
-        } {
-            Ok((i, _suboptimal)) => i,
-            Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => return Ok((Presented::OutOfDate, None)),
-            Err(e) => {
-                return Err(GpuError::Vk {
-                    call: "vkAcquireNextImageKHR",
-                    result: e,
-                }
-                .into())
-            }
+        let Some(index) = self.acquire(s)? else {
+            return Ok((Presented::OutOfDate, None));
         };
         let target = self.images[index as usize];
         let readback = if read && self.can_read {
@@ -271,6 +260,38 @@ impl Swapchain {
         } else {
             None
         };
+        self.record(source, target, readback.as_ref())?;
+        self.submit(index)?;
+        let presented = self.queue_present(s, index)?;
+        unsafe { d.wait_for_fences(&[self.fence], true, u64::MAX) }.vk("vkWaitForFences")?;
+        let pixels = match readback {
+            None => None,
+            Some(buf) => Some(self.window_pixels(&buf)?),
+        };
+        Ok((presented, pixels))
+    }
+
+    /// Acquires the next swapchain image, signalling `acquired`: its index, or `None` where
+    /// the swapchain is out of date.
+    fn acquire(&self, s: &crate::gpu::Surface) -> Result<Option<u32>> {
+        match unsafe {
+            s.swapchain
+                .acquire_next_image(self.raw, u64::MAX, self.acquired, vk::Fence::null())
+        } {
+            Ok((i, _suboptimal)) => Ok(Some(i)),
+            Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Ok(None),
+            Err(e) => Err(GpuError::Vk {
+                call: "vkAcquireNextImageKHR",
+                result: e,
+            }
+            .into()),
+        }
+    }
+
+    /// Records the frame's command buffer: the blit of `source` onto the swapchain image
+    /// `target`, its copy into `readback` where given, and its transition for presentation.
+    fn record(&self, source: &Image, target: vk::Image, readback: Option<&Buffer>) -> Result<()> {
+        let d = &self.gpu.device;
         let range = vk::ImageSubresourceRange {
             aspect_mask: vk::ImageAspectFlags::COLOR,
             base_mip_level: 0,
@@ -278,8 +299,6 @@ impl Swapchain {
             base_array_layer: 0,
             layer_count: 1,
         };
-        let src = source.info.extent;
-        let scaled = (src.width, src.height) != (self.extent.width, self.extent.height);
         unsafe {
             d.reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())
                 .vk("vkResetCommandBuffer")?;
@@ -289,57 +308,96 @@ impl Swapchain {
                     .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
             )
             .vk("vkBeginCommandBuffer")?;
-            let to_dst = [
-                // The swapchain image: whatever it held -> blit destination, after the
-                // acquire semaphore's wait (at the BLIT stage, see the submit).
-                vk::ImageMemoryBarrier2::default()
-                    .src_stage_mask(vk::PipelineStageFlags2::BLIT)
-                    .src_access_mask(vk::AccessFlags2::NONE)
-                    .dst_stage_mask(vk::PipelineStageFlags2::BLIT)
-                    .dst_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                    .old_layout(vk::ImageLayout::UNDEFINED)
-                    .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .image(target)
-                    .subresource_range(range),
-                // The window image: the `window` pass's storage writes and the `ui` pass's
-                // attachment writes visible to the blit.
-                vk::ImageMemoryBarrier2::default()
-                    .src_stage_mask(
-                        vk::PipelineStageFlags2::COMPUTE_SHADER
-                            | vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
-                    )
-                    .src_access_mask(
-                        vk::AccessFlags2::SHADER_STORAGE_WRITE
-                            | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
-                    )
-                    .dst_stage_mask(vk::PipelineStageFlags2::BLIT)
-                    .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
-                    .old_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-                    .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-                    .image(source.raw)
-                    .subresource_range(range),
-            ];
+        }
+        self.record_blit(source, target, range);
+        let present_src = match readback {
+            Some(buf) => self.record_readback(target, buf, range),
+            None => (
+                vk::PipelineStageFlags2::BLIT,
+                vk::AccessFlags2::TRANSFER_WRITE,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            ),
+        };
+        // Presentation needs no access mask: the semaphore signal orders it.
+        let to_present = [vk::ImageMemoryBarrier2::default()
+            .src_stage_mask(present_src.0)
+            .src_access_mask(present_src.1)
+            .dst_stage_mask(vk::PipelineStageFlags2::NONE)
+            .dst_access_mask(vk::AccessFlags2::NONE)
+            .old_layout(present_src.2)
+            .new_layout(vk::ImageLayout::PRESENT_SRC_KHR)
+            .image(target)
+            .subresource_range(range)];
+        unsafe {
+            d.cmd_pipeline_barrier2(
+                self.cmd,
+                &vk::DependencyInfo::default().image_memory_barriers(&to_present),
+            );
+            d.end_command_buffer(self.cmd).vk("vkEndCommandBuffer")?;
+        }
+        Ok(())
+    }
+
+    /// Records the blit of `source` onto the swapchain image `target` (scaled, filtered
+    /// linearly, where the sizes differ), with the barriers before it.
+    fn record_blit(&self, source: &Image, target: vk::Image, range: vk::ImageSubresourceRange) {
+        let d = &self.gpu.device;
+        let src = source.info.extent;
+        let scaled = (src.width, src.height) != (self.extent.width, self.extent.height);
+        let to_dst = [
+            // The swapchain image: whatever it held -> blit destination, after the
+            // acquire semaphore's wait (at the BLIT stage, see the submit).
+            vk::ImageMemoryBarrier2::default()
+                .src_stage_mask(vk::PipelineStageFlags2::BLIT)
+                .src_access_mask(vk::AccessFlags2::NONE)
+                .dst_stage_mask(vk::PipelineStageFlags2::BLIT)
+                .dst_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .image(target)
+                .subresource_range(range),
+            // The window image: the `window` pass's storage writes and the `ui` pass's
+            // attachment writes visible to the blit.
+            vk::ImageMemoryBarrier2::default()
+                .src_stage_mask(
+                    vk::PipelineStageFlags2::COMPUTE_SHADER
+                        | vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+                )
+                .src_access_mask(
+                    vk::AccessFlags2::SHADER_STORAGE_WRITE
+                        | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+                )
+                .dst_stage_mask(vk::PipelineStageFlags2::BLIT)
+                .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
+                .old_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+                .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+                .image(source.raw)
+                .subresource_range(range),
+        ];
+        unsafe {
             d.cmd_pipeline_barrier2(
                 self.cmd,
                 &vk::DependencyInfo::default().image_memory_barriers(&to_dst),
             );
-            let layers = vk::ImageSubresourceLayers {
-                aspect_mask: vk::ImageAspectFlags::COLOR,
-                mip_level: 0,
-                base_array_layer: 0,
-                layer_count: 1,
-            };
-            let corner = |e: vk::Extent2D| vk::Offset3D {
-                x: e.width as i32,
-                y: e.height as i32,
-                z: 1,
-            };
-            let region = [vk::ImageBlit {
-                src_subresource: layers,
-                src_offsets: [vk::Offset3D::default(), corner(src)],
-                dst_subresource: layers,
-                dst_offsets: [vk::Offset3D::default(), corner(self.extent)],
-            }];
+        }
+        let layers = vk::ImageSubresourceLayers {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            mip_level: 0,
+            base_array_layer: 0,
+            layer_count: 1,
+        };
+        let corner = |e: vk::Extent2D| vk::Offset3D {
+            x: e.width as i32,
+            y: e.height as i32,
+            z: 1,
+        };
+        let region = [vk::ImageBlit {
+            src_subresource: layers,
+            src_offsets: [vk::Offset3D::default(), corner(src)],
+            dst_subresource: layers,
+            dst_offsets: [vk::Offset3D::default(), corner(self.extent)],
+        }];
+        unsafe {
             d.cmd_blit_image(
                 self.cmd,
                 source.raw,
@@ -353,82 +411,86 @@ impl Swapchain {
                     vk::Filter::NEAREST
                 },
             );
-            let mut present_src = (
-                vk::PipelineStageFlags2::BLIT,
-                vk::AccessFlags2::TRANSFER_WRITE,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-            );
-            if let Some(buf) = &readback {
-                let to_src = [vk::ImageMemoryBarrier2::default()
-                    .src_stage_mask(vk::PipelineStageFlags2::BLIT)
-                    .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                    .dst_stage_mask(vk::PipelineStageFlags2::COPY)
-                    .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
-                    .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-                    .image(target)
-                    .subresource_range(range)];
-                d.cmd_pipeline_barrier2(
-                    self.cmd,
-                    &vk::DependencyInfo::default().image_memory_barriers(&to_src),
-                );
-                let copy = [crate::gpu::resources::whole_image_copy(self.extent)];
-                d.cmd_copy_image_to_buffer(
-                    self.cmd,
-                    target,
-                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                    buf.raw,
-                    &copy,
-                );
-                let to_host = [vk::BufferMemoryBarrier2::default()
-                    .src_stage_mask(vk::PipelineStageFlags2::COPY)
-                    .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                    .dst_stage_mask(vk::PipelineStageFlags2::HOST)
-                    .dst_access_mask(vk::AccessFlags2::HOST_READ)
-                    .buffer(buf.raw)
-                    .offset(0)
-                    .size(vk::WHOLE_SIZE)];
-                d.cmd_pipeline_barrier2(
-                    self.cmd,
-                    &vk::DependencyInfo::default().buffer_memory_barriers(&to_host),
-                );
-                present_src = (
-                    vk::PipelineStageFlags2::COPY,
-                    vk::AccessFlags2::NONE,
-                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                );
-            }
-            // Presentation needs no access mask: the semaphore signal orders it.
-            let to_present = [vk::ImageMemoryBarrier2::default()
-                .src_stage_mask(present_src.0)
-                .src_access_mask(present_src.1)
-                .dst_stage_mask(vk::PipelineStageFlags2::NONE)
-                .dst_access_mask(vk::AccessFlags2::NONE)
-                .old_layout(present_src.2)
-                .new_layout(vk::ImageLayout::PRESENT_SRC_KHR)
-                .image(target)
-                .subresource_range(range)];
+        }
+    }
+
+    /// Records the copy of the swapchain image `target` into `buf`, made visible to the host;
+    /// returns the stage, access and layout the image is left in.
+    fn record_readback(
+        &self,
+        target: vk::Image,
+        buf: &Buffer,
+        range: vk::ImageSubresourceRange,
+    ) -> (vk::PipelineStageFlags2, vk::AccessFlags2, vk::ImageLayout) {
+        let d = &self.gpu.device;
+        let to_src = [vk::ImageMemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::BLIT)
+            .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+            .dst_stage_mask(vk::PipelineStageFlags2::COPY)
+            .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
+            .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+            .image(target)
+            .subresource_range(range)];
+        let copy = [crate::gpu::resources::whole_image_copy(self.extent)];
+        let to_host = [vk::BufferMemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::COPY)
+            .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+            .dst_stage_mask(vk::PipelineStageFlags2::HOST)
+            .dst_access_mask(vk::AccessFlags2::HOST_READ)
+            .buffer(buf.raw)
+            .offset(0)
+            .size(vk::WHOLE_SIZE)];
+        unsafe {
             d.cmd_pipeline_barrier2(
                 self.cmd,
-                &vk::DependencyInfo::default().image_memory_barriers(&to_present),
+                &vk::DependencyInfo::default().image_memory_barriers(&to_src),
             );
-            d.end_command_buffer(self.cmd).vk("vkEndCommandBuffer")?;
+            d.cmd_copy_image_to_buffer(
+                self.cmd,
+                target,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                buf.raw,
+                &copy,
+            );
+            d.cmd_pipeline_barrier2(
+                self.cmd,
+                &vk::DependencyInfo::default().buffer_memory_barriers(&to_host),
+            );
+        }
+        (
+            vk::PipelineStageFlags2::COPY,
+            vk::AccessFlags2::NONE,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+        )
+    }
 
-            let waits = [vk::SemaphoreSubmitInfo::default()
-                .semaphore(self.acquired)
-                .stage_mask(vk::PipelineStageFlags2::BLIT)];
-            let signals = [vk::SemaphoreSubmitInfo::default()
-                .semaphore(self.presentable[index as usize])
-                .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)];
-            let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
-            let submit = [vk::SubmitInfo2::default()
-                .wait_semaphore_infos(&waits)
-                .command_buffer_infos(&cmds)
-                .signal_semaphore_infos(&signals)];
+    /// Submits the recorded command buffer, waiting on `acquired` and signalling image
+    /// `index`'s presentation semaphore and the fence.
+    fn submit(&self, index: u32) -> Result<()> {
+        let gpu = &self.gpu;
+        let d = &gpu.device;
+        let waits = [vk::SemaphoreSubmitInfo::default()
+            .semaphore(self.acquired)
+            .stage_mask(vk::PipelineStageFlags2::BLIT)];
+        let signals = [vk::SemaphoreSubmitInfo::default()
+            .semaphore(self.presentable[index as usize])
+            .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)];
+        let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
+        let submit = [vk::SubmitInfo2::default()
+            .wait_semaphore_infos(&waits)
+            .command_buffer_infos(&cmds)
+            .signal_semaphore_infos(&signals)];
+        unsafe {
             d.reset_fences(&[self.fence]).vk("vkResetFences")?;
             d.queue_submit2(*gpu.queue(), &submit, self.fence)
                 .vk("vkQueueSubmit2")?;
         }
+        Ok(())
+    }
+
+    /// Presents image `index` once its presentation semaphore is signalled.
+    fn queue_present(&self, s: &crate::gpu::Surface, index: u32) -> Result<Presented> {
         let wait = [self.presentable[index as usize]];
         let chains = [self.raw];
         let indices = [index];
@@ -437,48 +499,43 @@ impl Swapchain {
             .swapchains(&chains)
             .image_indices(&indices);
         // The queue is held for the call only (a match would keep the guard to its end).
-        let result = unsafe { s.swapchain.queue_present(*gpu.queue(), &info) };
-        let presented = match result {
-            Ok(false) => Presented::Shown,
+        let result = unsafe { s.swapchain.queue_present(*self.gpu.queue(), &info) };
+        match result {
+            Ok(false) => Ok(Presented::Shown),
             // Suboptimal or out of date: shown or not, the swapchain must be re-created.
-            Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Presented::OutOfDate,
-            Err(e) => {
-                return Err(GpuError::Vk {
-                    call: "vkQueuePresentKHR",
-                    result: e,
+            Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Ok(Presented::OutOfDate),
+            Err(e) => Err(GpuError::Vk {
+                call: "vkQueuePresentKHR",
+                result: e,
+            }
+            .into()),
+        }
+    }
+
+    /// The pixels of the presented image, copied into `buf`, as RGBA.
+    fn window_pixels(&self, buf: &Buffer) -> Result<WindowPixels> {
+        let bytes = buf
+            .mapped()
+            .context("window readback buffer is not host-visible")?;
+        let bgra = matches!(
+            self.format,
+            vk::Format::B8G8R8A8_UNORM | vk::Format::B8G8R8A8_SRGB
+        );
+        let rgba = bytes
+            .chunks_exact(4)
+            .flat_map(|p| {
+                if bgra {
+                    [p[2], p[1], p[0], 255]
+                } else {
+                    [p[0], p[1], p[2], 255]
                 }
-                .into())
-            }
-        };
-        unsafe { d.wait_for_fences(&[self.fence], true, u64::MAX) }.vk("vkWaitForFences")?;
-        let pixels = match readback {
-            None => None,
-            Some(buf) => {
-                let bytes = buf
-                    .mapped()
-                    .context("window readback buffer is not host-visible")?;
-                let bgra = matches!(
-                    self.format,
-                    vk::Format::B8G8R8A8_UNORM | vk::Format::B8G8R8A8_SRGB
-                );
-                let rgba = bytes
-                    .chunks_exact(4)
-                    .flat_map(|p| {
-                        if bgra {
-                            [p[2], p[1], p[0], 255]
-                        } else {
-                            [p[0], p[1], p[2], 255]
-                        }
-                    })
-                    .collect();
-                Some(WindowPixels {
-                    width: self.extent.width,
-                    height: self.extent.height,
-                    rgba,
-                })
-            }
-        };
-        Ok((presented, pixels))
+            })
+            .collect();
+        Ok(WindowPixels {
+            width: self.extent.width,
+            height: self.extent.height,
+            rgba,
+        })
     }
 }
 
