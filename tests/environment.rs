@@ -40,7 +40,7 @@ fn illumination(scene: &Scene, pre: &preprocess::Preprocessed) -> (Vec<[f32; 4]>
             &gpu,
             scene.clone(),
             pre,
-            translucent::pipeline::environment_transfer(&scene, pre, None).as_ref(),
+            translucent::pipeline::environment_transfer(scene, pre, None).as_ref(),
             Options {
                 capture: true,
                 ..Default::default()

@@ -62,7 +62,7 @@ fn capture_with(
             &gpu,
             scene.clone(),
             pre,
-            translucent::pipeline::environment_transfer(&scene, pre, None).as_ref(),
+            translucent::pipeline::environment_transfer(scene, pre, None).as_ref(),
             Options {
                 mode,
                 capture: true,

@@ -47,13 +47,13 @@ pub(super) fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
     for line in pre.summary() {
         println!("{line}");
     }
-    let need = crate::passes::data::Requirements::of(&scene, &pre, Blend::Optimized);
+    let need = crate::passes::data::Requirements::of(&scene, pre, Blend::Optimized);
     println!(
         "device memory to render (optimized blending): {:.1} MiB",
         need.total as f64 / (1u64 << 20) as f64
     );
     if let Some(times) = args.reweigh {
-        reweigh_times(cli, &scene, &pre, times)?;
+        reweigh_times(cli, &scene, pre, times)?;
     }
     Ok(())
 }

@@ -1061,7 +1061,7 @@ fn upload_texture(gpu: &Arc<Gpu>, scene: &Scene) -> GpuResult<Image> {
 fn upload_transfer(
     gpu: &Arc<Gpu>,
     pre: &Preprocessed,
-    transfer: Option<&crate::environment::prt::Transfer>,
+    transfer: Option<&crate::preprocess::transfer::Transfer>,
 ) -> GpuResult<Arc<Buffer>> {
     let atlas = &pre.atlas;
     let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;

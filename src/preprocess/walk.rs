@@ -335,7 +335,7 @@ struct Walker<'a> {
     nodes: &'a Nodes,
     surface: Surface,
     /// The reduced medium, isotropic: the truth's with g = 0.
-    medium: crate::truth::Medium,
+    medium: crate::physics::Medium,
     lamps: &'a [Light],
     /// Exits count after this many scattering events or more.
     min_order: u32,
@@ -362,7 +362,7 @@ pub fn walk_response(
         mesh,
         nodes,
         surface: Surface::new(mesh, nodes),
-        medium: crate::truth::Medium::new(material, 0.0),
+        medium: crate::physics::Medium::new(material, 0.0),
         lamps,
         min_order,
         n: nodes.positions.len(),

@@ -636,7 +636,7 @@ pub(super) struct Output {
     /// Image height, pixels.
     pub(super) height: u32,
     /// The preprocessing settings the scene file gives.
-    pub(super) settings: crate::preprocess::settings::SettingsOverrides,
+    pub(super) settings: super::settings::SettingsOverrides,
     /// Shadow-map edge length in texels, when given.
     pub(super) shadow_map: Option<u32>,
     /// Radiance -> display multiplier.
@@ -672,8 +672,8 @@ pub(super) fn resolve_output(
     if width > most || height > most {
         bail!("[output] size {width}x{height} exceeds {most} pixels per side");
     }
-    let settings = crate::preprocess::settings::SettingsOverrides::from(desc.settings);
-    crate::preprocess::settings::validate(&settings).context("[settings]")?;
+    let settings = super::settings::SettingsOverrides::from(desc.settings);
+    super::settings::validate(&settings).context("[settings]")?;
     // The default shadow map follows the atlas texel, known after the settings are chosen
     // (`shadow::shadow_map_size`).
     let shadow_map = od.shadow_map;

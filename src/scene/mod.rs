@@ -116,8 +116,8 @@ pub struct Scene {
     /// The surface's own reflection.
     pub surface: Surface,
     /// The preprocessing settings the scene file gives (`[settings]`); the command line's
-    /// win over them ([`crate::preprocess::choose`]).
-    pub settings: crate::preprocess::settings::SettingsOverrides,
+    /// win over them ([`crate::pipeline::choose`]).
+    pub settings: settings::SettingsOverrides,
     /// The description with every default made explicit (what `render` prints).
     pub resolved: SceneDesc,
     /// Why the image may be black or nearly so, for a reason the user can fix (printed and
@@ -126,7 +126,7 @@ pub struct Scene {
     /// What was adapted that needs no action (long triangles split): printed with the scene.
     pub notes: Vec<String>,
     /// Why the material's model is what it is, where the default model chose it
-    /// (`preprocess::model::apply_default`); printed with the derived settings.
+    /// (`pipeline::model::apply_default`); printed with the derived settings.
     pub model_reason: Option<String>,
 }
 

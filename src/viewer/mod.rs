@@ -249,12 +249,16 @@ impl Wanted {
     }
 }
 
+/// What a background run gives back: the preparation with how its operators were made, and
+/// the device's re-weighting it borrowed.
+type JobResult = (Result<(Prepared, String)>, Option<KeptReweigher>);
+
 /// A preprocessing run for a new material on a background thread.
 struct Job {
     wanted: Wanted,
     started: Instant,
     progress: Arc<Mutex<(String, u64, u64)>>,
-    handle: JoinHandle<(Result<(Prepared, String)>, Option<KeptReweigher>)>,
+    handle: JoinHandle<JobResult>,
 }
 
 /// The window and everything that draws into it.

@@ -37,7 +37,7 @@ pub fn render(scene: &Scene, pre: &Preprocessed, options: Options, frames: usize
             &gpu,
             scene.clone(),
             pre,
-            translucent::pipeline::environment_transfer(&scene, pre, None).as_ref(),
+            translucent::pipeline::environment_transfer(scene, pre, None).as_ref(),
             options,
         )
         .expect("renderer");
