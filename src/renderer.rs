@@ -8,7 +8,7 @@
 //! Only the light changes between frames: every pass reads precomputed data uploaded once.
 
 use crate::gpu::{Buffer, Gpu, Image};
-use crate::graph::{timing::FrameTiming, Access, FrameGraph, ImageDesc, RenderGraph, Stage};
+use crate::graph::{timing::FrameTiming, FrameGraph, RenderGraph};
 use crate::layout::Item;
 use crate::passes::{
     self, compute,
@@ -23,6 +23,8 @@ use ash::vk;
 use glam::Quat;
 use gpu_allocator::MemoryLocation;
 use std::sync::Arc;
+
+mod graph;
 
 /// The pixels and timings of a finished render.
 #[derive(Debug, Clone)]
@@ -176,6 +178,77 @@ fn read_back<T: bytemuck::Pod>(buffer: &Buffer, count: usize) -> Result<Vec<T>> 
     Ok(bytemuck::cast_slice(&bytes[..count * std::mem::size_of::<T>()]).to_vec())
 }
 
+/// The buffers a renderer writes or reads between frames, made before its graph.
+struct HostBuffers {
+    uniforms: Arc<Buffer>,
+    environment_map: Arc<Buffer>,
+    hdr_readback: Arc<Buffer>,
+    display_readback: Arc<Buffer>,
+}
+
+impl HostBuffers {
+    /// Makes the frame uniforms, the environment map (written from `scene`) and the readback
+    /// buffers of the output images.
+    fn new(gpu: &Arc<Gpu>, scene: &Scene) -> Result<HostBuffers> {
+        let (w, h) = (scene.width, scene.height);
+        let uniforms = Arc::new(Buffer::new(
+            gpu,
+            "frame uniforms",
+            std::mem::size_of::<FrameUniforms>() as u64,
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?);
+        // The environment map for the surface's mirror reflection, host-visible so that the
+        // viewer switches maps in place (one black pixel where the surface reflects none).
+        let environment_map = Arc::new(Buffer::new(
+            gpu,
+            Item::EnvironmentMap.name(),
+            passes::data::environment_pixels(scene).max(1) * Item::EnvironmentMap.bytes(),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::CpuToGpu,
+        )?);
+        write_environment_map(&environment_map, scene)?;
+        let pixels = w as u64 * h as u64;
+        let readback = |item: Item| host_buffer(gpu, item.name(), pixels * item.bytes());
+        let hdr_readback = readback(Item::RadianceReadback)?;
+        let display_readback = readback(Item::DisplayReadback)?;
+        Ok(HostBuffers {
+            uniforms,
+            environment_map,
+            hdr_readback,
+            display_readback,
+        })
+    }
+}
+
+/// The global pass's variant: measured on the device under [`compute::GlobalLayout::Auto`],
+/// else chosen from the device and the rows' mean length.
+fn choose_global_variant(
+    gpu: &Arc<Gpu>,
+    data: &SubsurfaceData,
+    options: &Options,
+) -> Result<compute::GlobalVariant> {
+    let mean_pairs = data.mean_row_pairs();
+    let global_variant = if options.global_layout == compute::GlobalLayout::Auto {
+        let tuned = compute::tune_global(gpu, data, options.global_lanes)?;
+        tracing::info!("global pass measured: {}", tuned.summary());
+        tuned.best
+    } else {
+        compute::GlobalVariant::choose(
+            &gpu.info,
+            options.global_layout,
+            options.global_lanes,
+            mean_pairs,
+        )
+        .map_err(anyhow::Error::msg)?
+    };
+    tracing::info!(
+        "global pass: {global_variant} ({mean_pairs:.0} entry pairs per row, subgroup {})",
+        gpu.info.subgroup_size
+    );
+    Ok(global_variant)
+}
+
 impl Renderer {
     /// Uploads the scene's preprocessing (and under an environment light its transfer,
     /// `pipeline::environment_transfer`) and builds the frame graph.
@@ -233,310 +306,30 @@ impl Renderer {
         data: &SubsurfaceData,
         options: Options,
     ) -> Result<Renderer> {
-        let (w, h) = (scene.width, scene.height);
-        let mean_pairs = data.mean_row_pairs();
-        let global_variant = if options.global_layout == compute::GlobalLayout::Auto {
-            let tuned = compute::tune_global(gpu, data, options.global_lanes)?;
-            tracing::info!("global pass measured: {}", tuned.summary());
-            tuned.best
-        } else {
-            compute::GlobalVariant::choose(
-                &gpu.info,
-                options.global_layout,
-                options.global_lanes,
-                mean_pairs,
-            )
-            .map_err(anyhow::Error::msg)?
-        };
-        tracing::info!(
-            "global pass: {global_variant} ({mean_pairs:.0} entry pairs per row, subgroup {})",
-            gpu.info.subgroup_size
-        );
-        let uniforms = Arc::new(Buffer::new(
-            gpu,
-            "frame uniforms",
-            std::mem::size_of::<FrameUniforms>() as u64,
-            vk::BufferUsageFlags::UNIFORM_BUFFER,
-            MemoryLocation::CpuToGpu,
-        )?);
-        // The environment map for the surface's mirror reflection, host-visible so that the
-        // viewer switches maps in place (one black pixel where the surface reflects none).
-        let environment_map = Arc::new(Buffer::new(
-            gpu,
-            Item::EnvironmentMap.name(),
-            passes::data::environment_pixels(&scene).max(1) * Item::EnvironmentMap.bytes(),
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::CpuToGpu,
-        )?);
-        write_environment_map(&environment_map, &scene)?;
-        let pixels = w as u64 * h as u64;
-        let readback = |item: Item| host_buffer(gpu, item.name(), pixels * item.bytes());
-        let hdr_readback = readback(Item::RadianceReadback)?;
-        let display_readback = readback(Item::DisplayReadback)?;
-        let (aw, ah) = data.atlas_size;
-        let local_image = Arc::new(Image::zeroed_storage(
-            gpu,
-            Item::LocalResponse.name(),
-            Item::LocalResponse.format(),
-            aw,
-            ah,
-        )?);
-
+        let global_variant = choose_global_variant(gpu, data, &options)?;
+        let host = HostBuffers::new(gpu, &scene)?;
         let mut g = RenderGraph::new();
-        let frame = g.import_buffer(uniforms.clone(), None);
-        let environment = g.import_buffer(environment_map.clone(), None);
-        let vertices = g.import_buffer(data.vertices.clone(), None);
-        let indices = g.import_buffer(data.indices.clone(), None);
-        let texels = g.import_buffer(data.texels.clone(), None);
-        let kernels = g.import_buffer(data.kernels.clone(), None);
-        let seam_rows = g.import_buffer(data.seam_rows.clone(), None);
-        let seam_entries = g.import_buffer(data.seam_entries.clone(), None);
-        let gather_rows = g.import_buffer(data.gather_rows.clone(), None);
-        let gather_entries = g.import_buffer(data.gather_entries.clone(), None);
-        let global_rows = g.import_buffer(data.global_rows.clone(), None);
-        let global_entries = g.import_buffer(data.global_entries.clone(), None);
-        let transfer = g.import_buffer(data.transfer.clone(), None);
-        let charts = g.import_image(data.charts.clone(), Access::Sampled(Stage::Compute));
-        let texture = g.import_image(data.texture.clone(), Access::Sampled(Stage::Fragment));
-        let local = g.import_image(local_image, Access::StorageRead(Stage::Fragment));
-        let hdr_rb = g.import_buffer(hdr_readback.clone(), Some(Access::HostRead));
-        let display_rb = g.import_buffer(display_readback.clone(), Some(Access::HostRead));
-
-        let layers: u32 = scene
-            .lights
-            .iter()
-            .map(crate::scene::shadow::layers_of)
-            .sum();
-        let (s, _) = crate::scene::shadow::shadow_map_size(&scene, data.texel_mm);
-        let shadow_maps = g.image(
-            Item::ShadowMaps.name(),
-            ImageDesc::layered(passes::shadow::FORMAT, s, s, layers),
-        );
-        let map = g.image(
-            Item::IlluminationMap.name(),
-            ImageDesc::new(passes::illum::FORMAT, aw, ah),
-        );
-        let node_buffer = |g: &mut RenderGraph, item: Item| {
-            g.buffer(item.name(), data.node_count.max(1) as u64 * item.bytes())
-        };
-        let node_irradiance = node_buffer(&mut g, Item::NodeIrradiance);
-        let node_radiosity = node_buffer(&mut g, Item::NodeRadiosity);
-        let hdr = g.image(
-            Item::Radiance.name(),
-            ImageDesc::new(passes::composite::HDR_FORMAT, w, h),
-        );
-        let depth = g.image(
-            Item::Depth.name(),
-            ImageDesc::new(passes::composite::DEPTH_FORMAT, w, h),
-        );
-        let display = g.image(
-            Item::Display.name(),
-            ImageDesc::new(passes::composite::DISPLAY_FORMAT, w, h),
-        );
-
-        passes::shadow::add(
-            &mut g,
-            passes::shadow::ShadowInputs {
-                frame,
-                vertices,
-                indices,
-                index_count: data.index_count,
-                layers,
-            },
-            shadow_maps,
-        );
-        passes::illum::add(
-            &mut g,
-            passes::illum::IllumInputs {
-                frame,
-                vertices,
-                indices,
-                index_count: data.index_count,
-                shadow_maps,
-                transfer,
-                environment: scene.environment.is_some(),
-                incidence: scene.material.takes_incidence_factor(),
-            },
-            map,
-        );
-        let dilate_texels = g.import_buffer(data.dilate_texels.clone(), None);
-        compute::dilate(&mut g, dilate_texels, data.dilate_count, charts, map);
-        compute::local(
-            &mut g,
-            compute::LocalInputs {
-                texels,
-                texel_count: data.texel_count,
-                kernels,
-                kernel_size: data.kernel_size,
-                seam_rows,
-                seam_entries,
-                map,
-            },
-            local,
-        );
-        let rows = |r, e| compute::SparseInputs {
-            rows: r,
-            entries: e,
-            row_count: data.node_count,
-        };
-        compute::gather(
-            &mut g,
-            rows(gather_rows, gather_entries),
-            map,
-            node_irradiance,
-        );
-        compute::global(
-            &mut g,
-            rows(global_rows, global_entries),
-            node_irradiance,
-            node_radiosity,
-            global_variant,
-        );
+        let assembly = graph::Assembly::new(&mut g, gpu, &scene, data, &host)?;
+        assembly.add_shadow_and_illumination(&mut g);
+        assembly.add_responses(&mut g, global_variant);
         let single_pass = scene.material.model.has_single_pass();
-        let single = if single_pass {
-            let mesh = passes::single::MeshInputs {
-                frame,
-                vertices,
-                indices,
-                index_count: data.index_count,
-            };
-            let image = |g: &mut RenderGraph, item: Item| {
-                g.image(item.name(), ImageDesc::new(item.format(), w, h))
-            };
-            let entry = g.image(
-                Item::EntryDepth.name(),
-                ImageDesc::layered(passes::single::ENTRY_FORMAT, s, s, layers),
-            );
-            passes::single::entry(&mut g, shadow_maps, entry);
-            let back = image(&mut g, Item::BackDepth);
-            let single = image(&mut g, Item::SingleScattering);
-            let single_depth = image(&mut g, Item::SingleDepth);
-            passes::single::thickness(&mut g, mesh, back);
-            passes::single::single(
-                &mut g,
-                mesh,
-                passes::single::SingleInputs { entry, back },
-                single,
-                single_depth,
-            );
-            single
-        } else {
-            let black = Image::from_pixels(
-                gpu,
-                "no single scattering",
-                Item::SingleScattering.format(),
-                1,
-                1,
-                &[0; 16],
-            )?;
-            g.import_image(Arc::new(black), Access::Sampled(Stage::Fragment))
-        };
-        passes::composite::add(
-            &mut g,
-            passes::composite::CompositeInputs {
-                frame,
-                vertices,
-                indices,
-                index_count: data.index_count,
-                node_radiosity,
-                local,
-                texture,
-                textured: scene.texture.is_some(),
-                single,
-                single_pass,
-                chord: scene.material.model.gathers_over_chord(),
-                shadow_maps,
-                oblique: scene.material.model.oblique_exit() && scene.environment.is_none(),
-                environment,
-                surface: scene.surface.reflects(&scene.material),
-            },
-            passes::composite::CompositeTargets {
-                hdr,
-                display,
-                depth,
-            },
-            scene.exposure,
-        );
-        // The window pass reads the display before the readback does: the readback, skipped in
-        // most window frames, is then the display's last user and changes no layout that a
-        // pass after it relies on (see `graph::compile::check_skip`).
-        let window = match &options.window {
-            None => None,
-            Some(out) => {
-                let image = Arc::new(Image::new(
-                    gpu,
-                    "window image",
-                    crate::gpu::ImageInfo {
-                        format: passes::window::format(out.linear),
-                        extent: vk::Extent2D {
-                            width: w,
-                            height: h,
-                        },
-                        layers: 1,
-                        usage: vk::ImageUsageFlags::STORAGE
-                            | vk::ImageUsageFlags::COLOR_ATTACHMENT
-                            | vk::ImageUsageFlags::TRANSFER_SRC,
-                    },
-                    false,
-                )?);
-                // Undefined -> the layout the graph expects at the start of each frame.
-                gpu.one_shot(|cmd| {
-                    image.transition(
-                        gpu,
-                        cmd,
-                        (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
-                        (
-                            vk::PipelineStageFlags2::ALL_COMMANDS,
-                            vk::AccessFlags2::TRANSFER_READ,
-                        ),
-                        (
-                            vk::ImageLayout::UNDEFINED,
-                            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                        ),
-                    )
-                })?;
-                let window_id = g.import_image(image.clone(), Access::TransferRead);
-                passes::window::add(&mut g, display, window_id, out.linear);
-                if let Some(ui) = &out.ui {
-                    passes::ui::add(&mut g, window_id, ui.clone());
-                }
-                Some(image)
-            }
-        };
-        passes::readback::add(
-            &mut g,
-            PassName::Readback.as_str(),
-            vec![(hdr, hdr_rb), (display, display_rb)],
-        );
+        let single = assembly.add_single_scattering(&mut g, single_pass)?;
+        assembly.add_composite(&mut g, single, single_pass);
+        let window = assembly.add_window(&mut g, options.window.as_ref())?;
+        assembly.add_readback(&mut g);
         let capture = if options.capture {
-            let atlas_bytes = aw as u64 * ah as u64 * 16;
-            let node_bytes = data.node_count.max(1) as u64 * 16;
-            let b = CaptureBuffers {
-                irradiance: host_buffer(gpu, "capture irradiance", atlas_bytes)?,
-                local: host_buffer(gpu, "capture local", atlas_bytes)?,
-                node_irradiance: host_buffer(gpu, "capture node irradiance", node_bytes)?,
-                node_radiosity: host_buffer(gpu, "capture node radiosity", node_bytes)?,
-                single: single_pass
-                    .then(|| host_buffer(gpu, "capture single scattering", pixels * 16))
-                    .transpose()?,
-            };
-            let mut to_host =
-                |buffer: &Arc<Buffer>| g.import_buffer(buffer.clone(), Some(Access::HostRead));
-            let mut pairs = vec![
-                (map, to_host(&b.irradiance)),
-                (local, to_host(&b.local)),
-                (node_irradiance, to_host(&b.node_irradiance)),
-                (node_radiosity, to_host(&b.node_radiosity)),
-            ];
-            if let Some(buffer) = &b.single {
-                pairs.push((single, to_host(buffer)));
-            }
-            passes::readback::add(&mut g, PassName::Capture.as_str(), pairs);
-            Some(b)
+            Some(assembly.add_capture(&mut g, single, single_pass)?)
         } else {
             None
         };
+        let shadow_map_size = assembly.shadow_map_size();
         let graph = g.build(gpu)?;
+        let HostBuffers {
+            uniforms,
+            environment_map,
+            hdr_readback,
+            display_readback,
+        } = host;
         Ok(Renderer {
             gpu: gpu.clone(),
             // Before `scene` moves in.
@@ -548,7 +341,7 @@ impl Renderer {
             hdr_readback,
             display_readback,
             capture,
-            shadow_map_size: s,
+            shadow_map_size,
             global_variant,
             transfer_seconds: data.transfer_seconds,
             last_lights: None,

@@ -9,12 +9,39 @@ pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     output::create_dir(&args.out)?;
     let mut scene = scene;
     let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, false)?;
-    let pre = &prepared.pre;
     let mode = args
         .mode
         .unwrap_or_else(|| Blend::for_model(scene.material.model));
+    let run = time_frames(&gpu, &scene, &prepared, args, mode)?;
+    let (b, bandwidth) = write_report(&gpu, &scene, &prepared.pre, args, mode, &run)?;
+    print_setup(&b, &gpu, bandwidth);
+    print_passes(&b);
+    println!("wrote {}", args.out.join("bench.json").display());
+    Ok(())
+}
+
+/// The timed frames of a bench run.
+struct TimedRun {
+    /// How the global pass ran.
+    global_variant: crate::passes::compute::GlobalVariant,
+    /// Pass names in execution order.
+    names: Vec<String>,
+    /// Timings of the frames after the warm-up.
+    timings: Vec<crate::graph::timing::FrameTiming>,
+}
+
+/// Renders the warm-up and timed frames under a light that turns about the object, then
+/// checks the validation layer.
+fn time_frames(
+    gpu: &std::sync::Arc<Gpu>,
+    scene: &Scene,
+    prepared: &Prepared,
+    args: &BenchArgs,
+    mode: Blend,
+) -> Result<TimedRun> {
+    let pre = &prepared.pre;
     let mut renderer = Renderer::new(
-        &gpu,
+        gpu,
         scene.clone(),
         pre,
         prepared.transfer.as_ref(),
@@ -40,21 +67,43 @@ pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     }
     let names = renderer.pass_names();
     drop(renderer);
-    check_validation(&gpu)?;
-    let report = TimingReport::new(&gpu.info.name, &gpu.info.driver, &names, &timings);
+    check_validation(gpu)?;
+    Ok(TimedRun {
+        global_variant,
+        names,
+        timings,
+    })
+}
+
+/// Measures the host's and the device's bandwidth, combines them with `run`'s timings into
+/// the report and writes it to bench.json; returns the report and the host's bandwidth.
+fn write_report(
+    gpu: &std::sync::Arc<Gpu>,
+    scene: &Scene,
+    pre: &crate::preprocess::Preprocessed,
+    args: &BenchArgs,
+    mode: Blend,
+    run: &TimedRun,
+) -> Result<(crate::bench::BenchReport, crate::bench::Bandwidth)> {
+    let report = TimingReport::new(&gpu.info.name, &gpu.info.driver, &run.names, &run.timings);
     let bandwidth = crate::bench::measure_bandwidth(256 << 20);
     // Two buffers of up to 256 MiB each (far beyond any cache), within an eighth of the
     // device's memory.
     let largest = (256u64 << 20).min(gpu.info.device_local_bytes / 16);
-    let copies = crate::bench::measure_device_copy(&gpu, largest, 7)?;
-    check_validation(&gpu)?;
-    let memory = crate::passes::data::Requirements::of(&scene, pre, mode);
+    let copies = crate::bench::measure_device_copy(gpu, largest, 7)?;
+    check_validation(gpu)?;
+    let memory = crate::passes::data::Requirements::of(scene, pre, mode);
     let mut b =
-        crate::bench::BenchReport::new(&report, &scene, pre, bandwidth, copies, memory, mode);
-    b.global_variant = global_variant.to_string();
+        crate::bench::BenchReport::new(&report, scene, pre, bandwidth, copies, memory, mode);
+    b.global_variant = run.global_variant.to_string();
     output::write_atomic(&args.out.join("bench.json"), |p| {
         Ok(std::fs::write(p, serde_json::to_string_pretty(&b)?)?)
     })?;
+    Ok((b, bandwidth))
+}
+
+/// Prints the device, the scene's sizes, the global pass's variant and the bandwidths.
+fn print_setup(b: &crate::bench::BenchReport, gpu: &Gpu, bandwidth: crate::bench::Bandwidth) {
     println!("device: {} ({})", b.device, b.driver);
     println!(
         "scene: {} vertices, {} nodes, {} texels in {}x{}, {} nonzeros, {k}x{k} kernels, {}x{} image",
@@ -94,6 +143,11 @@ pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
         "host bandwidth (this run): read {:.1} GB/s, copy {:.1} GB/s",
         bandwidth.read_gbps, bandwidth.copy_gbps
     );
+}
+
+/// Prints the table of passes against their bounds, the frame's figures and the device
+/// memory by item.
+fn print_passes(b: &crate::bench::BenchReport) {
     println!(
         "{:<10} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>9} {:>7}  bound from",
         "pass",
@@ -137,6 +191,4 @@ pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
         "total",
         b.memory.total as f64 / (1u64 << 20) as f64
     );
-    println!("wrote {}", args.out.join("bench.json").display());
-    Ok(())
 }

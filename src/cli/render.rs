@@ -36,15 +36,7 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
         scene.resolved.to_toml()
     );
-    let inputs: Vec<PathBuf> = [
-        args.input.scene.clone(),
-        scene.resolved.mesh.obj.clone(),
-        scene.resolved.mesh.texture.clone(),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
-    let mut set = output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)?;
+    let mut set = open_output_set(args, &scene)?;
     let mut scene = scene;
     let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
     // The scene as rendered: the default model, which the saved scene names.
@@ -60,6 +52,35 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         prepared.transfer.as_ref(),
         image_options(mode),
     )?;
+    let result = render_frames(&mut renderer, args)?;
+    let report = timing_report(&gpu, &result, scene_warnings);
+    write_outputs(&mut set, &result, &report, &resolved, args)?;
+    set.commit()?;
+    print_summary(&report, &args.out);
+    drop(renderer);
+    check_validation(&gpu)
+}
+
+/// Opens the set of `render`'s outputs in `args.out`, refused where one would replace one of
+/// the scene's input files.
+fn open_output_set(args: &RenderArgs, scene: &Scene) -> Result<output::OutputSet> {
+    let inputs: Vec<PathBuf> = [
+        args.input.scene.clone(),
+        scene.resolved.mesh.obj.clone(),
+        scene.resolved.mesh.texture.clone(),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)
+}
+
+/// Renders and times `args.frames` frames (the lights turning with `--orbit-light`, each
+/// frame written with `--save-frames`); returns the last frame's image with all timings.
+fn render_frames(
+    renderer: &mut Renderer,
+    args: &RenderArgs,
+) -> Result<crate::renderer::RenderOutput> {
     let mut timings = Vec::with_capacity(args.frames);
     for f in 0..args.frames {
         let angle = if args.orbit_light {
@@ -83,7 +104,15 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
             )?;
         }
     }
-    let result = renderer.output(timings)?;
+    renderer.output(timings)
+}
+
+/// The timings of `result` with the scene's warnings and the image's own (printed to stderr).
+fn timing_report(
+    gpu: &Gpu,
+    result: &crate::renderer::RenderOutput,
+    scene_warnings: Vec<String>,
+) -> TimingReport {
     let mut report = TimingReport::new(
         &gpu.info.name,
         &gpu.info.driver,
@@ -95,7 +124,18 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         eprintln!("warning: {w}");
     }
     report.warnings = [scene_warnings, seen].concat();
-    let out = &args.out;
+    report
+}
+
+/// Writes render.png, render.exr, timings.json, trace.json and scene.toml (`resolved`) into
+/// `set`, to be committed together.
+fn write_outputs(
+    set: &mut output::OutputSet,
+    result: &crate::renderer::RenderOutput,
+    report: &TimingReport,
+    resolved: &str,
+    args: &RenderArgs,
+) -> Result<()> {
     output::encode_png(
         &set.path("render.png"),
         result.width,
@@ -108,11 +148,15 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         result.height,
         &result.radiance,
     )?;
-    output::encode_timings(&set.path("timings.json"), &report)?;
+    output::encode_timings(&set.path("timings.json"), report)?;
     output::encode_trace(&set.path("trace.json"), &result.pass_names, &result.frames)?;
-    std::fs::write(set.path("scene.toml"), &resolved)
+    std::fs::write(set.path("scene.toml"), resolved)
         .with_context(|| format!("cannot write scene.toml in '{}'", args.out.display()))?;
-    set.commit()?;
+    Ok(())
+}
+
+/// Prints the device, each pass's times and the frame's, and where the files went.
+fn print_summary(report: &TimingReport, out: &std::path::Path) {
     println!("device: {} ({})", report.device, report.driver);
     println!(
         "{:<12} {:>10} {:>10} {:>10}",
@@ -132,6 +176,4 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         "wrote render.png, render.exr, timings.json, trace.json, scene.toml to {}",
         out.display()
     );
-    drop(renderer);
-    check_validation(&gpu)
 }
