@@ -63,9 +63,9 @@ layout(constant_id = 3) const bool OBLIQUE = false;
 layout(constant_id = 4) const bool SURFACE = false;
 
 // The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
-// (three square roots instead of a pow, which was a third of the former tone-mapping pass on
-// lavapipe), within 0.4 of an 8-bit step of the exact curve over [0, 1]; tests/render.rs checks
-// the display against output::tonemap to one step.
+// (three square roots instead of a pow, which costs more on lavapipe), within 0.4 of an 8-bit
+// step of the exact curve over [0, 1]; tests/render.rs checks the display against
+// output::tonemap to one step.
 vec3 srgb_encode(vec3 c) {
     c = clamp(c, 0.0, 1.0);
     vec3 s1 = sqrt(c);

@@ -1,6 +1,6 @@
 #version 460
 // The depth at which each shadow-map texel's light enters the object, without the shadow
-// pass's slope-scaled bias (a factor times the depth's largest slope per texel, which pushed
+// pass's slope-scaled bias (a factor times the depth's largest slope per texel, which pushes
 // the stored depth away from the light): the slope is measured from the neighbouring texels
 // on the same surface (the smaller difference per axis; none across the silhouette). The
 // `single` pass reads it to measure how far light travels inside.

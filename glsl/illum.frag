@@ -20,13 +20,12 @@ layout(push_constant) uniform Push {
 } push;
 
 // 1 when the scene has an environment light: its sun is the last light, and the transfer is
-// read. Compiled out otherwise (lavapipe ran the sun's soft shadow on every light when it was
-// a branch on a uniform: 7.3-7.8 ms against 3.9-4.5 ms for a scene without one, in the same
-// busy minutes).
+// read. Compiled out otherwise (as a branch on a uniform, lavapipe runs the sun's soft shadow
+// on every light, which makes the pass far slower for a scene without an environment).
 layout(constant_id = 0) const uint ENVIRONMENT = 0u;
 // 1 when the model takes the oblique-incidence factor (halfspace-single); compiled out for the
-// others, whose factor is 1 (the lookup cost lavapipe 0.45 ms of a 6 ms pass on the default
-// scene).
+// others, whose factor is 1 (the lookup has a measurable cost on lavapipe even there:
+// docs/results/models.md).
 layout(constant_id = 1) const uint INCIDENCE = 0u;
 
 layout(location = 0) in vec3 in_position;

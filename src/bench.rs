@@ -4,8 +4,8 @@
 //! writes) can move in: at the rate of the device's own copies (`vkCmdCopyBuffer`, timed with
 //! timestamps in the same run, from 64 KiB to a buffer that leaves the caches), or at the
 //! host's multi-threaded copy rate where that is higher (lavapipe's memory is the host's). The
-//! host's read bandwidth stays as a second figure (the bound used before: on the H200 passes
-//! read as faster than it).
+//! host's read bandwidth stays as a second figure, for comparison only (a discrete GPU's passes
+//! can beat it: docs/results/figures.md).
 
 use crate::graph::timing::{Stats, TimingReport};
 use crate::passes::PassName;
@@ -79,7 +79,7 @@ pub fn copy_sizes(max_bytes: u64) -> Vec<u64> {
 /// Times device copies of every size of [`copy_sizes`] (two untimed, then `repeats` timed,
 /// median): the device's own bandwidth, from buffers that fit its caches to a buffer that
 /// leaves them. The order *begin timestamp -> barrier -> copy -> end timestamp*: lavapipe
-/// latched a begin timestamp written right before the work after it.
+/// latches a begin timestamp written right before the work after it.
 pub fn measure_device_copy(
     gpu: &std::sync::Arc<crate::gpu::Gpu>,
     max_bytes: u64,
@@ -164,8 +164,8 @@ pub struct Traffic {
 
 /// The data each pass must read and write at least, from the sizes of the scene's data: each
 /// datum once (what a pass reads again, a map texel under many kernel taps, an entry depth
-/// per marching step, comes from caches and is not counted; counting it made bounds that a
-/// GPU beat: local at 0.08x on the H200):
+/// per marching step, comes from caches and is not counted; counting it gives bounds that a
+/// GPU beats, docs/results/figures.md):
 /// - shadow: the atlas mesh (vertices and indices) per shadow-map layer (six for a point
 ///   light); writes the depth maps;
 /// - illum: the mesh; writes the illumination map (the shadow maps it samples at a texel's
@@ -260,8 +260,8 @@ pub struct PassBench {
     pub bound_source: &'static str,
     /// Median time / bound (>= 1 for a bound that holds).
     pub ratio: f64,
-    /// Median time / (bytes read over the host's read bandwidth): the figure before the
-    /// device's own copies were measured, kept for comparison.
+    /// Median time / (bytes read over the host's read bandwidth): a second figure beside the
+    /// bound from the device's own copies, kept for comparison.
     pub host_read_ratio: f64,
 }
 

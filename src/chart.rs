@@ -183,14 +183,14 @@ pub struct Sweep<'a> {
 /// the baselines. The protocol: the device is warmed up on the automatic setting until its
 /// frame time is stable (blocks of [`WARMUP_BLOCK`] frames until two successive block medians
 /// agree within [`TIME_TIE`], at most [`WARMUP_BLOCKS`] blocks: JIT caches, first touch of
-/// memory and GPU clocks; without it the first point timed 15 to 25 % slower than points of the
-/// same cost measured later); then every point is timed in each of [`ROUNDS`] interleaved
+/// memory and GPU clocks; without it the first points time slower than points of the same
+/// cost measured later); then every point is timed in each of [`ROUNDS`] interleaved
 /// rounds (one round below 6 frames), a few frames at a time after one untimed frame, and its
 /// time is the lowest of its round medians ([`summarise_rounds`]): other processes on a shared
 /// machine only ever add time, so the lowest round is the one they disturbed least.
 /// Interleaving spreads slow drifts over all points instead of charging them to whichever points
-/// ran during them (identical settings timed 30 % apart when each point ran its frames in one
-/// block).
+/// ran during them (with each point's frames in one block, identical settings time far
+/// apart).
 pub fn measure(
     gpu: &std::sync::Arc<Gpu>,
     sweep: &Sweep<'_>,
@@ -317,8 +317,8 @@ pub fn summarise_rounds(rounds: &[Vec<f64>]) -> (f64, f64) {
 pub const ERROR_TIE: f64 = 0.005;
 
 /// Relative time differences below this are ties: 3 %. Fixed, not the measured spread: on a
-/// shared machine spreads of 20-80 % made most points ties and the front collapsed to two
-/// points, with undominated points off it.
+/// shared machine the spreads are wide enough to make most points ties, collapsing the front
+/// to a few points with undominated points off it.
 pub const TIME_TIE: f64 = 0.03;
 
 /// Marks the Pareto front: a point is on it unless another one is no worse in either time or
@@ -910,9 +910,9 @@ mod tests {
         assert!(summarise_rounds(&[]).0.is_nan());
     }
 
-    /// The case that the spread-based front got wrong (docs/chart-skimmilk.csv before): texel
-    /// x2 at 17.0 ms / 3.07 % and texel x1.4 at 20.5 ms / 1.98 % beaten by nothing, but off the
-    /// front because spreads of 50 % made 20.5 ms "equal" to 17.0 ms.
+    /// A case that a spread-based front gets wrong: texel x2 at 17.0 ms / 3.07 % and texel x1.4
+    /// at 20.5 ms / 1.98 % beaten by nothing, but off the front because spreads of 50 % make
+    /// 20.5 ms "equal" to 17.0 ms.
     #[test]
     fn front_uses_fixed_ties_not_spreads() {
         let mut pts = vec![
@@ -1065,7 +1065,7 @@ mod tests {
                 if near[auto] { "within" } else { "beyond" }
             );
             // Asserted on the default scene (skim milk); on ketchup, points that do the same
-            // work timed up to 13 % apart in one run (its single-scattering pass dominates).
+            // work time too far apart within one run (its single-scattering pass dominates).
             if name == "chart-skimmilk.csv" {
                 assert!(
                     near[auto],

@@ -175,9 +175,8 @@ impl Item {
     /// Bytes of one element.
     pub const fn bytes(self) -> u64 {
         if let Item::AtlasVertices = self {
-            // passes::data::AtlasVertex, asserted there. (The memory report and the bench's
-            // traffic once counted 80 bytes here by hand when the structure had 64; with the
-            // exit slope it had 76, with the exit drift it has 112.)
+            // passes::data::AtlasVertex, asserted there, so that the memory report and the
+            // bench's traffic cannot count a size the structure does not have.
             return 112;
         }
         match crate::gpu::resources::format_bytes(self.format()) {

@@ -1,5 +1,5 @@
-//! Careless input (see docs/robustness.md): values that once rendered
-//! NaN, were accepted silently or named the wrong problem are refused by name; images that
+//! Careless input (see docs/robustness.md): values that would render NaN, be accepted
+//! silently or name the wrong problem are refused by name; images that
 //! would be black for a reason the user can fix come with a warning, printed and recorded in
 //! timings.json; outputs never overwrite inputs, and the saved scene re-runs from anywhere.
 
@@ -213,11 +213,12 @@ fn fixable_black_images_are_warned_of() {
             "{name}: {warnings:?}"
         );
         if name == "cw.toml" {
-            // Fixed, not only warned of: the flipped tetrahedron is lit (it rendered all zero).
+            // Fixed, not only warned of: the flipped tetrahedron is lit (as given it renders all
+            // zero).
             assert!(peak > 1e-3, "clockwise tetrahedron: peak {peak}");
         }
     }
-    // An open plane seen from below: rendered (it was refused as "inside the object").
+    // An open plane seen from below: rendered, not refused as "inside the object".
     write_file(
         &dir,
         "plane.obj",
@@ -241,7 +242,7 @@ fn fixable_black_images_are_warned_of() {
 }
 
 /// The saved scene.toml names its mesh and texture absolutely: it re-runs from another folder
-/// (relative paths were resolved against the output folder).
+/// (relative paths would be resolved against the output folder).
 #[test]
 fn saved_scene_reruns_from_anywhere() {
     let dir = temp_dir("rerun");
@@ -281,7 +282,7 @@ fn saved_scene_reruns_from_anywhere() {
 }
 
 /// Faces listed twice (or four times) are removed with a warning: the image equals the one
-/// of the faces listed once (they doubled and quadrupled the brightness).
+/// of the faces listed once (kept, they would double and quadruple the brightness).
 #[test]
 fn duplicate_faces_do_not_add_light() {
     let dir = temp_dir("duplicates");
@@ -321,8 +322,8 @@ fn duplicate_faces_do_not_add_light() {
 }
 
 /// Inputs are read as regular files of bounded size: a device, a FIFO or a folder given as
-/// the scene or the mesh is refused by what it is (a mesh path of /dev/zero was read until
-/// the kernel killed the process; a FIFO blocked forever).
+/// the scene or the mesh is refused by what it is (read as files, /dev/zero would be read until
+/// the kernel killed the process, and a FIFO would block forever).
 #[test]
 fn devices_fifos_and_folders_are_not_read() {
     let dir = temp_dir("special");
@@ -363,7 +364,7 @@ fn devices_fifos_and_folders_are_not_read() {
 }
 
 /// A render's files land as a set: when one cannot be written, none replaces what the folder
-/// held (a failed write once left new images beside an old scene.toml), and no temporary is
+/// held (never new images beside an old scene.toml), and no temporary is
 /// left; temporaries of a killed run are removed by the next run.
 #[test]
 fn outputs_land_as_a_set() {
@@ -469,7 +470,7 @@ fn faces_wound_against_their_neighbours_are_turned() {
 }
 
 /// Even meshes, coarse or fine, keep their triangles (the truth data and the accuracy figures
-/// were made on them); a mesh of long polygons is split when the scene loads, with a note.
+/// are made on them); a mesh of long polygons is split when the scene loads, with a note.
 #[test]
 fn only_long_triangles_are_split() {
     let mut texts = vec!["[mesh]\nbuiltin = \"bunny\"\n".to_string()];

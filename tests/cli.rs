@@ -406,8 +406,8 @@ fn bench_writes_per_pass_bounds() {
         .as_str()
         .unwrap()
         .contains("vkCmdCopyBuffer"));
-    // The global pass's variant, measured on this device (texel buffers win on lavapipe by
-    // 20x: storage-buffer reads are slow there).
+    // The global pass's variant, measured on this device (texel buffers win on lavapipe:
+    // storage-buffer reads are slow there).
     let variant = b["global_variant"].as_str().unwrap();
     assert!(
         variant.starts_with("texel buffers,") && variant.contains("per row"),
@@ -444,8 +444,8 @@ fn bench_writes_per_pass_bounds() {
         ] {
             assert!(p.get(key).is_some(), "{key} missing in {p}");
         }
-        // No pass is faster than the least time its bytes can move in (the bound counted
-        // every re-read of a map texel once: a GPU beat it by 12x).
+        // No pass is faster than the least time its bytes can move in (re-reads of a map texel
+        // are not counted: a GPU's caches beat a bound that counts them).
         let ratio = p["ratio"].as_f64().unwrap();
         assert!(
             ratio >= 1.0,
@@ -727,7 +727,7 @@ fn truth_writes_image_noise_and_figures_and_compare_removes_its_noise() {
 }
 
 /// The bare command is `render` with clap's defaults: the same settings printed (the pruning
-/// tolerance among them: it once read 0 %) and the same image.
+/// tolerance among them, which must not read 0 %) and the same image.
 #[test]
 fn the_bare_command_renders_like_render() {
     let (a, b) = (temp_dir("bare"), temp_dir("bare-render"));
@@ -916,7 +916,7 @@ fn the_default_model_is_a_function_of_the_scene() {
         std::fs::read(loaded.3.join("render.exr")).unwrap(),
         "the image differs under load"
     );
-    // The written scene renders the same model again, now given.
+    // The written scene renders the same model again, this time named in the scene file.
     let o = bin()
         .arg("render")
         .arg(idle.join("scene.toml"))

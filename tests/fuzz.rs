@@ -3,7 +3,7 @@
 //! seeds (`tests/fuzz-seeds/`, and maps and scripts made here). Every input must give a mesh,
 //! scene, map or script that passes validation, or an error; never a panic, and never an
 //! allocation beyond what a map's stated limit allows. The number of
-//! cases per property is bounded (PROPTEST_CASES overrides), so CI spends a few seconds here.
+//! cases per property is bounded (PROPTEST_CASES overrides), so that CI spends little time here.
 
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
@@ -378,7 +378,7 @@ fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
 }
 
 proptest! {
-    // Each case is a whole run of the binary (about a second): few cases, mutations of the
+    // Each case is a whole run of the binary, so few cases: mutations of the
     // scene seeds that still parse often enough to reach the renderer.
     #![proptest_config(config(24))]
 

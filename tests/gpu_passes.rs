@@ -847,9 +847,9 @@ fn csr_of(rows: &[Vec<(u32, translucent::physics::Rgb)>]) -> Csr {
 /// profiles, behind a refractive boundary and index-matched.
 ///
 /// W is compared entry by entry since the fit's constrained solver is exact. That comparison
-/// found the disc mean of sliver texels losing all its precision in single precision (the
-/// fit divides kernel weights by texel areas down to 5e-6 of a full texel; W was 9 % of a
-/// row off until `Dipole::cumulative` lost its cancellation).
+/// catches the disc mean of sliver texels losing its precision in single precision (the fit
+/// divides kernel weights by texel areas down to 5e-6 of a full texel, so a
+/// `Dipole::cumulative` that cancels puts W far off).
 #[test]
 fn material_edits_re_weighted_on_the_device_equal_a_fresh_preprocessing() {
     use translucent::passes::reweigh::{Geometry, Reweigher};

@@ -198,7 +198,7 @@ fn meaningless_settings_are_refused_by_name() {
 }
 
 /// An EXR given to `compare` whose header declares more pixels than any image read back is
-/// refused before the decoder allocates them (a 344-byte file once asked for 24 GiB).
+/// refused before the decoder allocates them (a 344-byte file can ask for 24 GiB).
 #[test]
 fn declared_image_sizes_are_checked_before_allocation() {
     let dir = temp_dir("declared");

@@ -490,10 +490,10 @@ fn worst_negative_response(p: &Preprocessed, mode: Blend, stride: usize) -> f64 
 
 /// Optimized blending gives every texel under uniform light what F gives it (kernel + direct
 /// term + fitted W = F's row), with the all-orders half-space profile whose single-scattering
-/// peak the kernel resolves and F's node basis does not. A bound on the direct term once added
-/// light from nowhere at 3 % of the texels (up to their whole window), and the ketchup bunny
-/// went from 13.9 to 55.9 % RMS against its exact model; the kernels are balanced against F
-/// instead.
+/// peak the kernel resolves and F's node basis does not. A bound on the direct term instead
+/// would add light from nowhere at a few percent of the texels (up to their whole window),
+/// taking the ketchup bunny several times further from its exact model; the kernels are
+/// balanced against F.
 #[test]
 fn uniform_light_gets_what_f_gives() {
     let ketchup = Material::preset("ketchup").unwrap();
@@ -525,8 +525,8 @@ fn uniform_light_gets_what_f_gives() {
 
 /// Light is never negative: the optimized blending's fitted weights (constrained), its kernels
 /// (balanced against F) and its direct term (bounded) keep every texel's response to light at any one texel non-negative,
-/// on the meshes where they once were not (a tetrahedron at 2 mm texels: -7 % of the peak, a
-/// 3-segment sphere, two disjoint spheres, a huge sigma). The bound is f32 rounding of
+/// on meshes where, unguarded, they are not (a tetrahedron at 2 mm texels, a 3-segment
+/// sphere, two disjoint spheres, a huge sigma). The bound is f32 rounding of
 /// responses the constraint sets to exactly zero.
 #[test]
 fn light_is_never_negative() {
@@ -562,7 +562,7 @@ fn light_is_never_negative() {
 }
 
 /// A run that only reads the cache removes the temporaries killed runs left there (an
-/// interrupted cache write once left 4 MB that no later run removed); a fresh one stays.
+/// interrupted cache write leaves megabytes that nothing else removes); a fresh one stays.
 #[test]
 fn reading_the_cache_removes_stale_temporaries() {
     use translucent::preprocess::cache;

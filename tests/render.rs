@@ -327,15 +327,13 @@ fn display_matches_the_srgb_curve_of_the_radiance() {
 
 /// Texture modulation stays bounded: a sphere half black, half white, and one with a checker,
 /// against the same sphere untextured (same light, same preprocessing). Dividing by a dark
-/// texel's point-sampled texture next to a bright sample once gave 220 times the untextured
-/// maximum; the texture means are now footprint means raised to the largest texture value
-/// within reach over `MAX_TEXTURE_RATIO`, so each pixel is at most that many times its
-/// untextured radiance (a texture <= 1). Measured: no pixel beyond the bound in either
-/// (before: the checker reached 15.2 against 0.233 untextured, 2097 pixels beyond). A uv
-/// sphere read from an OBJ had one silhouette pixel beyond (42x): the texture maximum clamped
-/// the bilinear filter's margin at u = 0 instead of wrapping it
-/// (`passes::data::tests::texture_maximum_bounds_every_sample_across_the_wrap`); no pixel is
-/// allowed beyond now.
+/// texel's point-sampled texture next to a bright sample can give hundreds of times the
+/// untextured maximum; the texture means are footprint means raised to the largest texture
+/// value within reach over `MAX_TEXTURE_RATIO`, so each pixel is at most that many times its
+/// untextured radiance (a texture <= 1). A uv sphere read from an OBJ checks the seam: the
+/// texture maximum must wrap the bilinear filter's margin at u = 0, not clamp it
+/// (`passes::data::tests::texture_maximum_bounds_every_sample_across_the_wrap`). No pixel is
+/// allowed beyond the bound.
 #[test]
 fn texture_modulation_stays_bounded() {
     use translucent::passes::data::MAX_TEXTURE_RATIO;

@@ -4,8 +4,8 @@
 //! with optimized, simple and global-only blending on lavapipe (validation on) and compares
 //! with the brute-force reference. Every case must give a finite image; the optimized render's
 //! relative RMS must stay under the bound given. The bounds are ceilings set about 30 % above
-//! the figures measured when the suite was written, so a regression fails; where a figure is
-//! far from the 2 % goal the README's stability table says so and why. `cargo test --release
+//! the measured figures (docs/results/stability.md), so a regression fails; where a figure is
+//! far from the 2 % goal docs/results/stability.md says so and why. `cargo test --release
 //! --test stability -- --nocapture --test-threads 1` prints the table rows.
 //!
 //! Each case is also rendered with an index-matched boundary (eta = 1) and compared with its

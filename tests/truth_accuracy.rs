@@ -4,7 +4,7 @@
 //! with the truth's noise removed in quadrature, per channel, for each model: the classical
 //! dipole (the paper's) and the default at eta = 1, the exact half-space profile of the
 //! orders from 2 on with the single-scattering pass. The bounds sit a little above what each
-//! gives today (the figures in the README), so that a regression fails.
+//! gives (the figures in docs/results/truth.md), so that a regression fails.
 
 mod common;
 
@@ -89,24 +89,16 @@ fn check(
     }
 }
 
-// Measured at 64x64 (dipole, then the half-space model): bunny in skim milk 5.5 / 4.7 / 6.5
-// and 5.7 / 3.4 / 3.7 %; in marble 5.6 / 6.5 / 7.4 and 4.9 / 5.4 / 6.3 %; ketchup sphere
-// 60.4 / 62.6 / 61.8 and 21.0 / 3.5 / 4.9 %; slab lit from behind 76.8 / 10.6 / 37.4 and
-// 46.0 / 8.0 / 36.8 %. The half-space model's higher orders are gathered over the view ray's
-// length inside (the composite's chord factor); without it they were 5.8 / 3.4 / 3.7,
-// 5.0 / 5.5 / 6.3, 20.2 / 3.6 / 4.9 and 81.6 / 15.1 / 35.6 % (a view ray through the 2 mm
-// slab gathers 1 - e^(-0.7 x 2) = 0.75 of the half-space's red). The half-space model's figures are with the oblique-incidence factor
-// of its orders from 2 on (`physics::incidence`); without it they were 7.4 / 4.1 / 3.6,
-// 6.1 / 6.3 / 7.1 and 22.8 / 3.8 / 5.0 %, the slab (lit along its normal) the same. At 64x64 the texel is one image pixel and the bunny in
-// marble moves by 1-2 points with the chart layout alone: best-first chart growth (which
-// ended the hundreds of sliver charts of fine meshes) took it from 4.4 / 5.3 / 5.8 and
-// 4.5 / 4.3 / 4.7 % to the figures above, while at 256x256 (the README's table) every
-// figure stayed within 0.2 points.
+// The figures each scene and model gives at 64x64, the dipole's and the half-space model's,
+// are in docs/results/truth.md and docs/results/models.md. The half-space model's higher
+// orders are gathered over the view ray's length inside (the composite's chord factor: a view
+// ray through the 2 mm slab gathers 1 - e^(-0.7 x 2) = 0.75 of the half-space's red) and take
+// the oblique-incidence factor of its orders from 2 on (`physics::incidence`); both bring it
+// nearer the truth. At 64x64 the texel is one image pixel and the bunny in marble moves by a
+// point or two with the chart layout alone, where at 256x256 it barely moves.
 
-// With the light across the air (`halfspace-air`): measured 4.6 / 3.8 / 4.2 % in skim milk
-// and 5.7 / 6.1 / 7.1 % in marble at 64x64 (marble is worse than without it here; at 256x256
-// against the 256-path truths: 6.6 / 5.3 / 4.4 and 4.3 / 4.2 / 4.3 %, the
-// README's table).
+// With the light across the air (`halfspace-air`) marble at 64x64 is worse than without it,
+// unlike at 256x256 against the 256-path truths (docs/results/models.md).
 
 /// The truth scene `name` at 64x64 behind a boundary of relative index `eta`, as a user gets
 /// it (the default model, asserted to be `model`), against the refractive truth in
@@ -198,12 +190,12 @@ fn bunny_in_marble() {
 }
 
 // At 128x128, against 512-path truths (`tests/truth-data/bunny-*-128`): `halfspace-air`'s
-// light across the air depends on the node spacing (370 nodes at 64x64, 1839 at 128x128 and
-// 256x256), and at 64x64 it is 5 % brighter than at 256x256, where 128x128 gives the same
-// (`halfspace-air` in docs/results/models.md). `halfspace-single`, whose response does not
-// cross the air, is checked at 64x64 above. Skim milk's green was 5.05 % with G's exit lobe
-// at normal incidence (the table's) instead of under cosine-weighted light: its bound catches
-// that. The truths' noise (1.0-1.1 % after 4x4 binning) keeps every bound above 4.25 %.
+// light across the air depends on the node spacing (far fewer nodes at 64x64 than at 128x128
+// and 256x256, which have the same), and at 64x64 it is brighter than at 256x256, where
+// 128x128 gives the same (`halfspace-air` in docs/results/models.md). `halfspace-single`,
+// whose response does not cross the air, is checked at 64x64 above. Skim milk's green bound
+// catches G's exit lobe taken at normal incidence (the table's) instead of under
+// cosine-weighted light. The truths' noise after 4x4 binning keeps every bound above 4.25 %.
 #[test]
 fn bunny_in_skim_milk_at_128() {
     at_128("bunny-skimmilk", [0.07, 0.05, 0.043]);
@@ -244,12 +236,11 @@ fn skim_milk_slab_lit_from_behind() {
     case("slab-backlit", Model::HalfspaceSingle, [0.50, 0.09, 0.40]);
 }
 
-/// F from random walks in the mesh (`model = "volume"`), the derived walk count (2576 per node
-/// and channel): measured 3.2 / 3.3 / 3.2 % at 64x64 with the walks entering along the lamp
-/// and the exit lobe's drift (512 walks without the drift: 4.8 / 5.4 / 4.5 %), where the
-/// half-space models are 82 / 15 / 36 % off (the bounds no tighter than four times the truth's
-/// noise). Without the walks' exit lobe the slab is 12 / 2 /
-/// 9 % off at 256x256.
+/// F from random walks in the mesh (`model = "volume"`), the derived walk count, with the walks
+/// entering along the lamp and the exit lobe's drift: far nearer the truth than the
+/// half-space models, whose F cannot see the slab's thinness (the bounds no tighter than four
+/// times the truth's noise; the figures, and the slab without the walks' exit lobe, in
+/// docs/results/models.md).
 #[test]
 fn skim_milk_slab_lit_from_behind_with_walks() {
     case_with(
@@ -260,10 +251,10 @@ fn skim_milk_slab_lit_from_behind_with_walks() {
     );
 }
 
-/// The ketchup sphere with walks (the derived 10497 per node and channel): measured 4.0 / 3.4
-/// / 5.0 % with the oblique exit lobe and the drift (512 walks without the drift: 8.4 / 4.2 /
-/// 5.3 %), the half-space model's red 22.8 %. Blue leaves almost all by single scattering: its
-/// few walks' exits make its lobe noisy.
+/// The ketchup sphere with walks (the derived count per node and channel), the oblique exit
+/// lobe and the drift: red far nearer the truth than under the half-space model
+/// (docs/results/models.md). Blue leaves almost all by single scattering: its few walks' exits
+/// make its lobe noisy.
 #[test]
 fn ketchup_sphere_with_walks() {
     case_with(
@@ -275,16 +266,12 @@ fn ketchup_sphere_with_walks() {
 }
 
 /// The bunnies with the walks entering along the lamp's light, the composite's oblique exit
-/// lobe and the walks' drift of the lobe along the surface, the derived walk counts (2576 and
-/// 2369 per node and channel): measured 4.5 / 4.8 / 5.4 % in skim milk and 6.5 / 7.2 / 7.4 %
-/// in marble at 64x64 (whose 6 mm node spacing every model of F finds coarse in marble). With
-/// 512 walks, as this test ran before: 5.1 / 5.1 / 5.5 % and 7.1 / 8.4 / 8.9 % with the drift,
-/// 5.2 / 5.4 / 5.3 % and 7.2 / 7.8 / 8.3 % without it: a fifth of the walks leaves the drift,
-/// a mean direction, too noisy at 64x64's coarse nodes (at 256x256 the drift takes skim milk
-/// from 5.6 / 4.7 / 5.0 % to 3.8 / 3.7 / 4.6 %: README, `volume`; `gpu_passes` and the walks'
-/// unit tests check the drift itself). Entering along the normal, as the walks did before,
-/// 13.7 / 10.7 / 9.0 % and 10.9 / 10.7 / 11.3 %. The walks' draws are seeded: the figures
-/// repeat to the digit.
+/// lobe and the walks' drift of the lobe along the surface, the derived walk counts, at 64x64,
+/// whose 6 mm node spacing every model of F finds coarse in marble. Far fewer walks leave the
+/// drift, a mean direction, too noisy at 64x64's coarse nodes (at 256x256 the drift brings
+/// skim milk nearer the truth: docs/results/models.md, `volume`; `gpu_passes` and the walks'
+/// unit tests check the drift itself); walks entering along the normal instead of along the
+/// lamp are much further off. The walks' draws are seeded: the errors repeat to the digit.
 #[test]
 fn bunnies_with_walks() {
     case_with(
@@ -311,7 +298,7 @@ fn semi_infinite_skim_milk() {
     assert_eq!(scene.material.model, Model::HalfspaceSingle);
     // Texels of 2 mm, not the 0.93 mm the 2-degree view derives over the whole 400 mm box:
     // under uniform light the local and global responses add up to the profile's total at any
-    // texel, and the kernels of half a million texels took most of the test's time.
+    // texel, and the kernels of half a million texels would take most of the test's time.
     let coarse = SettingsOverrides {
         texel_mm: Some(2.0),
         ..Default::default()
@@ -333,10 +320,10 @@ fn semi_infinite_skim_milk() {
     }
 }
 
-// Under the shipped sky (an environment light: its sun behind the bunny), measured at 64x64:
-// dipole 18.8 / 14.9 / 12.7 %, the half-space profile (the default under an environment at
-// eta = 1) 19.4 / 14.5 / 11.6 %: two to three times the directional light's, all of it the
-// models' deficit under light from every side (README "Environment lighting").
+// Under the shipped sky (an environment light: its sun behind the bunny), at 64x64, the dipole
+// and the half-space profile (the default under an environment at eta = 1) are two to three
+// times further off than under the directional light, all of it the models' deficit under
+// light from every side (docs/results/environment.md).
 #[test]
 fn bunny_in_skim_milk_under_the_sky() {
     case("bunny-skimmilk-sky", Model::Dipole, [0.20, 0.16, 0.14]);

@@ -75,8 +75,8 @@ fn read_images(args: &CompareArgs) -> Result<Images> {
 /// Refuses a reference (`b`, read from `path`) that is black in a channel wherever both
 /// images are covered.
 fn refuse_black_reference(a: &[f32], b: &[f32], path: &std::path::Path) -> Result<()> {
-    // A relative error against a black reference channel is undefined (it once printed
-    // 1e152 %).
+    // A relative error against a black reference channel is undefined (unchecked, a near-zero
+    // mean gives figures such as 1e152 %).
     for (c, name) in ["red", "green", "blue"].iter().enumerate() {
         let sum: f64 = b
             .chunks_exact(4)

@@ -66,7 +66,7 @@ fn reference_settings(
             bail!("--spacing-mm {s} must be a finite positive length");
         }
         // Every sample is stored (position, normal, irradiance): bounded before allocating
-        // (0.0001 mm on the bunny once aborted allocating 960 GB).
+        // (0.0001 mm on the bunny would ask for about 960 GB).
         let samples = scene.mesh.surface_area() / (s * s);
         if samples > MAX_REFERENCE_SAMPLES {
             bail!(

@@ -355,8 +355,8 @@ impl Environment {
     }
 
     /// [`Environment::sh_coefficients`] by turning the coefficients projected once
-    /// ([`sh::rotation`]): what a frame computes when the environment turns (microseconds,
-    /// against milliseconds for projecting the map again).
+    /// ([`sh::rotation`]): what a frame computes when the environment turns (far cheaper than
+    /// projecting the map again).
     pub fn coefficients(&self, order: u32, rotation: Quat) -> Vec<[f64; 3]> {
         let k = sh::coefficients(order);
         let m = sh::rotation(order, rotation.as_dquat());

@@ -15,7 +15,7 @@ pub struct PrtSettings {
 
 /// The default order: the first whose per-texel error against ray-traced irradiance on the
 /// shadowed bunny under the shipped sky stops falling by more than its noise (`translucent
-/// prt` measures every order; README "Environment lighting").
+/// prt` measures every order; docs/results/environment.md).
 pub const DEFAULT_ORDER: u32 = 4;
 
 /// Rays per texel by default (a 16 x 16 stratified grid): the transfer's noise then stays

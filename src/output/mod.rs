@@ -109,7 +109,7 @@ impl OutputSet {
     /// Opens a set of `names` in `dir` (created if needed), removing stale temporaries there.
     /// Refuses, before anything is written, a folder where one of `names` would replace one of
     /// `inputs` (the scene file, its mesh or texture): `--out` pointing at the scene's own
-    /// folder once overwrote the user's scene.toml with the resolved one.
+    /// folder would otherwise overwrite the user's scene.toml with the resolved one.
     pub fn new(
         dir: &Path,
         names: &'static [&'static str],
@@ -146,8 +146,8 @@ impl OutputSet {
         })
     }
 
-    /// The path to write `name` (one of the set's names) to now: a temporary name in the
-    /// folder.
+    /// The path to write `name` (one of the set's names) to: a temporary name in the folder,
+    /// renamed into place by [`OutputSet::commit`].
     pub fn path(&mut self, name: &str) -> PathBuf {
         assert!(
             self.names.contains(&name),

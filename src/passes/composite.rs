@@ -1,7 +1,7 @@
 //! `composite`: the camera view. B = (B^l + B^g) T and L = F_t(eta, w_o) B / pi into a linear
 //! HDR image whose alpha marks covered pixels, and the same radiance tone-mapped (exposure,
-//! sRGB curve) into the RGBA8 display image as a second attachment. (The tone mapping was a
-//! compute pass of its own over every pixel; here it costs the covered fragments only.)
+//! sRGB curve) into the RGBA8 display image as a second attachment. (Tone mapping here costs
+//! the covered fragments only, where a compute pass of its own would visit every pixel.)
 //! For `volume` the lamps' shadow maps are read too: orders >= 2 leave with the half-space's
 //! lobe of the incidence at which the lamps' light enters each pixel (`oblique_exit` in
 //! glsl/composite.frag). Behind a refractive boundary the surface's own reflection is added:
@@ -40,7 +40,7 @@ pub struct CompositeInputs {
     /// Albedo texture.
     pub texture: ResourceId,
     /// Whether the scene has a texture; without one (T = 1) the shader is specialised without
-    /// the sample (a sixth of the pass on lavapipe).
+    /// the sample (a measurable share of the pass on lavapipe: docs/results/figures.md).
     pub textured: bool,
     /// Single-scattered radiance per pixel (from `single`; a 1x1 black image where the model
     /// has no such pass).

@@ -321,8 +321,8 @@ pub fn global(
 const TUNE_ROUNDS: usize = 5;
 
 /// A candidate of [`tune_global`] slower than this multiple of the fastest one's best time is
-/// dropped after its first timed round (lavapipe's storage buffers run 20x slower: timing them
-/// five times would cost more than it tells).
+/// dropped after its first timed round (lavapipe's storage buffers run many times slower:
+/// timing them five times would cost more than it tells).
 const TUNE_DROP: f64 = 3.0;
 
 /// What [`tune_global`] measured.

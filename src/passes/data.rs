@@ -1,7 +1,8 @@
 //! The preprocessing's results in device memory, in the layouts the passes read.
 //!
 //! Bulk data is read through texel buffers, not storage buffers: on lavapipe storage-buffer
-//! loads ran 40-70x slower than texel-buffer fetches of the same bytes.
+//! loads run many times slower than texel-buffer fetches of the same bytes
+//! (docs/results/figures.md).
 //! - atlas mesh: one vertex per (mesh vertex, chart) with position, normal, texture coordinate,
 //!   atlas coordinate (texels) and up to three (node, weight) pairs of its prolongation;
 //! - covered texels: `x | y << 16` (R32_UINT), and a chart-id image (R32_UINT, chart + 1);
@@ -320,8 +321,8 @@ impl MaxPyramid {
     /// The largest value of the bilinearly filtered texture over the uv rectangle [lo, hi]
     /// (repeat addressing: a rectangle across the wrap, or wider than the texture, gets the
     /// texture's maximum; the filter's one-pixel margin wraps too: a sample at u = 0 blends
-    /// the last column, which the margin once clamped away, and a sphere's seam column,
-    /// taken for black next to white, gave a silhouette pixel 42x its untextured value).
+    /// the last column, which a clamped margin would leave out, taking a sphere's seam column
+    /// for black next to white and understating a silhouette pixel's bound many times over).
     fn max_in(&self, lo: glam::DVec2, hi: glam::DVec2) -> [f64; 3] {
         let (w, h, _) = &self.levels[0];
         let whole = self.levels.last().map(|l| l.2[0]).unwrap_or([1.0; 3]);
@@ -972,7 +973,7 @@ fn global_matrix_entries(
     // Two entries per 16-byte fetch, weights in half precision: the pass's cost on
     // lavapipe follows its fetches (3 instead of 4 per two entries), and the matrix, the
     // largest item of device memory, halves. The rounding (2^-11 relative, unbiased)
-    // moves the image by 0.001 % RMS.
+    // moves the image far less than the method's error (docs/results/figures.md).
     let mut rows = vec![0u32];
     let mut entries: Vec<[u32; 4]> = Vec::new();
     let h = |x: f32| crate::gpu::half::to_f16(x) as u32;

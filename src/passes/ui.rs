@@ -234,7 +234,7 @@ impl UiLayer {
         })
     }
 
-    /// Takes the next frame's interface: texture changes (uploaded now, with a one-shot
+    /// Takes the next frame's interface: texture changes (uploaded at once, with a one-shot
     /// submission), the triangles and the scale. Call between frames.
     pub fn set_frame(
         &mut self,

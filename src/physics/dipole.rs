@@ -117,9 +117,9 @@ impl Dipole {
     /// P(rho) = (alpha'/2) sum over z in {z_r, z_v} of z (e^(-s z)/z - e^(-s d(rho))/d(rho)),
     /// where d(rho) = sqrt(rho^2 + z^2). P(infinity) equals [`Dipole::total_reflectance`].
     ///
-    /// Evaluated without the difference of nearly equal terms, which lost all precision for
-    /// the discs of sliver texels (single precision, in glsl/profile.glsl, was off by 3e-3 of
-    /// the profile's scale per unit area on a texel of 5e-6 of a full one): with
+    /// Evaluated without the difference of nearly equal terms, which loses all precision for
+    /// the discs of sliver texels (in single precision, in glsl/profile.glsl, it is off by 3e-3
+    /// of the profile's scale per unit area on a texel of 5e-6 of a full one): with
     /// delta = d - z = rho^2 / (d + z), z (e^(-s z)/z - e^(-s d)/d) = e^(-s z) ((1 - e^(-s
     /// delta)) + e^(-s delta) delta / d), a sum of non-negative terms.
     pub fn cumulative(&self, rho: f64) -> f64 {

@@ -346,14 +346,12 @@ impl Material {
     /// sampled at `incidence::sample_mu`: exact for the half-space (Chandrasekhar's H
     /// function, `physics::incidence`), for `halfspace-single`, whose single scattering is its
     /// own, exact pass. None for the others, by measurement (64x64 against the committed
-    /// truths and the stability suite's): the dipole is the paper's model; `halfspace` holds
-    /// single scattering in its profile, and scaling its total to the oblique one (mostly
-    /// single scattering, which leaves with a lobe of its own) fixed the ketchup sphere (green
-    /// 41.6 -> 16.2 %) but made both bunnies worse (skim milk red 7.1 -> 8.4 %, marble blue
-    /// 10.1 -> 11.1 %); `volume`'s F comes from walks inside the object, whose response to
-    /// oblique light is not the half-space's: the factor helped the skim-milk bunny (13.7 ->
-    /// 11.5 %) but broke the 15 mm ketchup sphere (red 7.4 -> 11.9 %) and the grazed cube
-    /// (10.8 -> 14.4 %).
+    /// truths and the stability suite's, docs/results/models.md): the dipole is the paper's
+    /// model; `halfspace` holds single scattering in its profile, and scaling its total to the
+    /// oblique one (mostly single scattering, which leaves with a lobe of its own) helps the
+    /// ketchup sphere but makes both bunnies worse; `volume`'s F comes from walks inside the
+    /// object, whose response to oblique light is not the half-space's: the factor helps the
+    /// skim-milk bunny but breaks the 15 mm ketchup sphere and the grazed cube.
     pub fn incidence_factors(&self) -> Option<[[f64; incidence::SAMPLES]; 3]> {
         if !self.takes_incidence_factor() {
             return None;

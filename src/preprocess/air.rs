@@ -2,10 +2,10 @@
 //!
 //! The half-space F carries light from node p to node q by the profile at their Euclidean
 //! distance, as if the medium filled the space between. On an object that is not convex that
-//! is wrong twice over, and `truth` measures both: on the bunny in skim milk (128x128, 4x4
-//! bins) paths that leave the object and enter it again carry 5 / 6 / 7 % of the light that
-//! reaches the camera, and 20-74 % in the bins under the ears and in the creases
-//! (`docs/experiments/truth-without-reentry.patch`).
+//! is wrong twice over, and `truth` measures both: on the bunny in skim milk paths that leave
+//! the object and enter it again carry a share of the light that reaches the camera, and most
+//! of it in the bins under the ears and in the creases (docs/results/models.md,
+//! `docs/experiments/truth-without-reentry.patch`).
 //!
 //! - **No diffusion through air.** A pair whose segment leaves the medium and enters it again
 //!   (an ear and the head behind it, the sides of a crease, the two sides of an air gap)
@@ -46,9 +46,8 @@ pub const AIR_RAYS: u32 = 256;
 pub const AIR_SEED: u64 = 0x0061_6972;
 
 /// The series of bounces folded into F stops where a bounce adds less than this fraction of
-/// what the bounces before it added, per channel (on the bunny each bounce adds about an
-/// eighth of the one before: 5 bounces; between two plates 1 mm apart, which see each other
-/// almost whole, each adds 0.8-0.9 of the one before: 60-80).
+/// what the bounces before it added, per channel (on the bunny the bounces shrink fast and a
+/// few suffice; two plates 1 mm apart, which see each other almost whole, take tens of them).
 pub const BOUNCE_TOLERANCE: f64 = 1e-4;
 
 /// Most bounces folded into F (a node that sees only the object and returns all light would
@@ -59,7 +58,7 @@ pub const MAX_BOUNCES: u32 = 500;
 /// a pair of F crosses the air ([`crosses_air`]): a segment between two points of the surface
 /// itself starts and ends on it, and whether it leaves the medium there is rounding. Pulled
 /// in by a tenth of a spacing (0.2 mm on the bunny at 256x256), a chord that dips into the air
-/// by more than that is in the air. The README's table gives the bunnies' figures with it
+/// by more than that is in the air. docs/results/models.md gives the bunnies' figures with it
 /// and with other choices (a twentieth, a fifth, the channel's mean free path; near pairs
 /// left alone).
 pub const PULL_SPACINGS: f64 = 0.1;
@@ -336,7 +335,7 @@ pub fn interreflect(
             for (p, d) in dense.iter_mut().enumerate() {
                 *d += sum[q * n + p] as f64;
             }
-            // Entries for every source that now carries light to q, in source order.
+            // Entries for every source that carries light to q after the fold, in source order.
             let mut merged: Vec<(u32, Rgb)> = Vec::with_capacity(n);
             let mut it = row.iter().peekable();
             for (p, &v) in dense.iter().enumerate() {

@@ -263,7 +263,7 @@ fn grow_charts(
             }
         }
         // Enforce the bound against the final mean: violators go back to the pool, until the
-        // mean of what is left no longer changes the verdict.
+        // mean of what is left stops changing the verdict.
         let mut keep = chart;
         loop {
             let mean = normal_sum(&keep, normals, areas).normalize_or_zero();
@@ -859,9 +859,9 @@ mod tests {
 
     #[test]
     fn finer_meshes_of_one_shape_get_as_few_charts() {
-        // A UV sphere of 2000 segments once grew 603 charts where 1000 segments grew 49: growth
-        // depth first let the mean normal drift, and the final-mean check cut slivers that
-        // seeded hundreds of small charts (and the fit's cost grows with the charts' borders).
+        // A finer UV sphere must not grow many times the charts of a coarser one: growth depth
+        // first lets the mean normal drift, and the final-mean check then cuts slivers that
+        // seed hundreds of small charts (and the fit's cost grows with the charts' borders).
         let counts: Vec<usize> = [96, 180, 250, 500]
             .map(|s| {
                 Atlas::build(&Mesh::sphere(25.0, s), 0.5, 3, 30.0)

@@ -145,7 +145,7 @@ pub const MAX_ATLAS_TEXELS: u64 = 16384 * 16384;
 /// Estimates a preprocessing run (see [`Estimate`]).
 pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
     let area = mesh.surface_area();
-    // Bounded so that every product below stays within u64 (a 1e-9 mm texel once wrapped to
+    // Bounded so that every product below stays within u64 (a 1e-9 mm texel would wrap it at
     // 1.8e19 kernel elements); far beyond any device limit either way.
     let texels = (area / (s.texel_mm * s.texel_mm)).ceil().min(1e12) as u64;
     let by_spacing = (area / (0.866 * s.node_spacing_mm * s.node_spacing_mm)).ceil() as u64;

@@ -119,8 +119,8 @@ impl Operators {
             .collect();
         // Energy: the fitted entries should carry what F carries beyond the kernel
         // (sum_p W_pq = sum_p F_pq - P_win(c)), so that the direct term, which makes up
-        // the difference, stays small and its non-negativity bound does not bind (it
-        // gave up 3 % of the light on a ketchup slab). A stiff least-squares row, not a
+        // the difference, stays small and its non-negativity bound does not bind (where
+        // it binds, light is lost, as on a ketchup slab). A stiff least-squares row, not a
         // constraint: the non-negativity constraints come first.
         let areas: Vec<f64> = near
             .iter()

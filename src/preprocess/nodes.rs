@@ -320,8 +320,8 @@ impl Nodes {
         // The mesh's resolution: its mean edge, or the spacing its vertex count implies
         // (area per vertex 0.866 e^2 on an even mesh), whichever is finer. A mesh of long
         // polygons (a 2000-gon disc, a 1000-segment cylinder) has long edges across and
-        // vertices crowded along them: by the mean edge it was "coarse enough", and every
-        // one of its 1000-2000 vertices became a node (F 85 % dense, minutes of fitting).
+        // vertices crowded along them: by the mean edge alone it is "coarse enough", and every
+        // one of its 1000-2000 vertices would become a node (F nearly dense, a long fit).
         let density = (mesh.surface_area() / (0.866 * welded.positions.len().max(1) as f64)).sqrt();
         let edge = mean_edge(&welded.positions, &welded.indices);
         let resolution = edge.min(density);

@@ -41,9 +41,9 @@
 //!     set keep their F entries, which the fit takes as given. A stiff extra row asks the
 //!     fitted entries to carry what F carries beyond the kernel (sum_p W_pq = sum_p F_pq -
 //!     P_win(c)), and the fit is constrained so that the response it fits is non-negative for
-//!     light at every texel s (sum_p u_p phi_p(s) plus the fixed parts >= 0; the fitted
-//!     weights once went negative where no texel pinned them, and light there gave negative
-//!     radiance). The direct term conserves energy the same way as in simple blending:
+//!     light at every texel s (sum_p u_p phi_p(s) plus the fixed parts >= 0; unconstrained,
+//!     the fitted weights go negative where no texel pins them, and light there gives
+//!     negative radiance). The direct term conserves energy the same way as in simple blending:
 //!     beta(t) = sum_q phi_q(t) (sum_p F_pq - sum_p W_pq) - P_win(t), bounded below so that
 //!     light on t alone never gives t a negative response.
 //!   * local only: B^l; global only: F with its diagonal.
@@ -100,8 +100,8 @@ impl Blend {
 
     /// The blending a model renders with unless told otherwise: simple where F comes from
     /// random walks (their F carries the near field across thin parts and seams, which the
-    /// optimized fit would re-fit to the half-space profile: the 2 mm slab lit from behind
-    /// went 3 / 3 / 7 % -> 21 / 32 / 42 % from the truth), optimized elsewhere.
+    /// optimized fit would re-fit to the half-space profile, taking the 2 mm slab lit from
+    /// behind far from the truth: docs/results/models.md), optimized elsewhere.
     pub fn for_model(model: crate::physics::Model) -> Blend {
         if model.walks() {
             Blend::Simple
@@ -361,8 +361,8 @@ pub enum TapLevel {
 /// Mean of R_d over texel `s` as seen from `x`, per channel, by the quadrature [`tap_level`]
 /// chooses. Each sample stands for a square cell of edge c and carries the second-order term
 /// of the cell's mean, R_d + (c^2 / 24) Laplacian(R_d): R_d is convex away from its peak, so
-/// the bare midpoint rule underestimates every tap (by about 1 % of R_total in all, which
-/// showed as a uniform darkening of the slab and the bunny).
+/// the bare midpoint rule underestimates every tap (by about 1 % of R_total in all, a uniform
+/// darkening of the slab and the bunny).
 pub(super) fn texel_mean(atlas: &Atlas, s: usize, x: DVec3, profiles: &[Profile; 3]) -> Rgb {
     let ts = &atlas.texels[s];
     let xs = ts.position.as_dvec3();
@@ -772,13 +772,13 @@ impl Operators {
     /// delivers more than optimized blending's F leaves for it: where P_win(t) - K_tt exceeds
     /// g(t) + W's return to t (see [`Operators::direct_term`]), the direct term would have to
     /// be below minus t's own response, and light on t alone would give t negative radiance.
-    /// Bounding the direct term there instead (an earlier version) added the difference to
-    /// every lit texel as light from nowhere: with the all-orders half-space profile, whose
-    /// single-scattering peak the kernel resolves and F's node basis does not, ketchup went
-    /// 13.9 -> 55.9 % RMS against its exact model. Scaling the taps by (g + return) / (P_win -
-    /// K_tt) keeps both: under uniform light t receives what F gives, and light on t alone
-    /// gives t zero, not less. A few percent of the texels (3 % for ketchup, partial texels at
-    /// chart borders mostly); every blending mode reads the same kernels.
+    /// Bounding the direct term there instead would add the difference to every lit texel as
+    /// light from nowhere: with the all-orders half-space profile, whose single-scattering peak
+    /// the kernel resolves and F's node basis does not, ketchup's error against its exact model
+    /// grows several times over. Scaling the taps by (g + return) / (P_win - K_tt) keeps both:
+    /// under uniform light t receives what F gives, and light on t alone gives t zero, not
+    /// less. A few percent of the texels (partial texels at chart borders mostly); every
+    /// blending mode reads the same kernels.
     fn balance_kernels(&mut self, (g, returned): &(Vec<Rgb>, Vec<Rgb>)) {
         let kk = (self.kernel_size * self.kernel_size) as usize;
         let texels = self.kernels.len() / kk;
@@ -896,7 +896,7 @@ impl Operators {
     /// least minus t's response to its own irradiance through the kernel's centre and W
     /// ([`Operators::returned`]); the bound here catches rounding. Simple blending
     /// keeps the paper's direct term: there beta is negative on most texels (the kernel's
-    /// window exceeds F's diagonal) and the bound would cost 14 points of accuracy; a lit
+    /// window exceeds F's diagonal) and the bound would cost much of its accuracy; a lit
     /// texel's neighbours make up for it under any illumination the light pass produces, and
     /// the composite clamps what a single lit texel would leave below zero.
     fn direct_term(&self, mode: Blend, (g, returned): &(Vec<Rgb>, Vec<Rgb>)) -> Vec<[f32; 3]> {

@@ -18,9 +18,8 @@
 //! - **Pruning tolerance** of F: half the target error (1 % of each row's mass by default), at
 //!   most 1 %. Pruning keeps each row's sum (the dropped mass moves to the kept entries), so
 //!   what it adds is at most the tolerance times the contrast of the light between far and
-//!   near sources. Measured on the bunny at 512x512: 0.5 % -> 1 % leaves the error unchanged
-//!   (1.00 / 1.32 / 1.60 vs 1.01 / 1.28 / 1.60 % RMS) with a fifth fewer entries; 2 % raises
-//!   red to 1.40 %.
+//!   near sources. Measured on the bunny at 512x512 (docs/results/exact-model.md): 0.5 % -> 1 %
+//!   leaves the error unchanged with a fifth fewer entries; 2 % raises red's.
 
 use crate::physics::Material;
 pub use crate::scene::settings::{validate, SettingsOverrides};

@@ -18,7 +18,7 @@ pub const FIT_STEPS_PER_UNKNOWN: usize = 8;
 /// response that the fit does not move (the smallest kernel weight of s among the row's
 /// receivers, and the unfitted sources). Without the
 /// constraint the fitted weights cancel the kernel's overshoot where the texels pin them and
-/// go below zero where they do not: light falling there gave negative radiance.
+/// go below zero where they do not: light falling there gives negative radiance.
 ///
 /// The unconstrained solution where it is feasible (most rows); otherwise the exact
 /// constrained optimum by Goldfarb and Idnani's dual active-set method (Math. Programming 27,
@@ -27,9 +27,9 @@ pub const FIT_STEPS_PER_UNKNOWN: usize = 8;
 /// negative are dropped, in finitely many steps, with the factors of the active set updated by
 /// Givens rotations. Its result moves with its data, not with rounding, beyond the tolerance
 /// (1e-9 of the largest fixed part) to which constraints count as met: a material re-weighted
-/// in single precision fits to the W of a fresh preprocessing. (The dual coordinate ascent it
-/// replaced stopped at its 400-sweep limit on most constrained rows, at an iterate that did
-/// depend on rounding.) Should the step limit [`FIT_STEPS_PER_UNKNOWN`] be reached, each
+/// in single precision fits to the W of a fresh preprocessing. (An iterative method such as
+/// dual coordinate ascent stops at its sweep limit on most constrained rows, at an iterate
+/// that depends on rounding.) Should the step limit [`FIT_STEPS_PER_UNKNOWN`] be reached, each
 /// entry of a still violated constraint is raised to minus its fixed part, which meets it
 /// exactly.
 pub(super) fn solve_non_negative_response(
@@ -45,8 +45,8 @@ pub(super) fn solve_non_negative_response(
         constraints[k].0.iter().map(|&(i, w)| w * x[i]).sum::<f64>() + fixed(k)
     };
     let scale = (0..constraints.len()).fold(0.0_f64, |a, k| a.max(fixed(k).abs()));
-    // Met to 1e-9 of the largest fixed part: stopping at 1e-4 or 1e-6 of it moved a uniformly
-    // lit ketchup slab 1.1 % off R_total (0.5 % at 1e-9) in the earlier iterative solver.
+    // Met to 1e-9 of the largest fixed part: a constraint counted as met at 1e-4 or 1e-6 of it
+    // moves a uniformly lit ketchup slab off R_total.
     let tolerance = 1e-9 * scale;
     let most_violated = |x: &[f64], skip: &dyn Fn(usize) -> bool| -> Option<(usize, f64)> {
         (0..constraints.len())

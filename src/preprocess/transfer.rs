@@ -96,7 +96,7 @@ pub fn transfer(mesh: &Mesh, atlas: &Atlas, eta: f64, settings: PrtSettings) -> 
             *o = (a * scale) as f32;
         }
     };
-    // The time of the transfer, from a pilot on this machine as it runs now: a strided
+    // The time of the transfer, from a pilot on this machine under its current load: a strided
     // sample of the texels (where it is a small part of the work), timed and scaled up. The
     // rest are computed after it.
     let texels = atlas.texels.len();

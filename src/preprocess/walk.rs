@@ -577,9 +577,9 @@ impl Walker<'_> {
         )
     }
 
-    /// The time of the walks, from a pilot on this machine as it runs now: a strided sample of
-    /// the sources with an eighth of their walks, timed and scaled up (where it is a small part
-    /// of the work). Its columns are dropped. 0 where there are too few nodes for one.
+    /// The time of the walks, from a pilot on this machine under its current load: a strided
+    /// sample of the sources with an eighth of their walks, timed and scaled up (where it is a
+    /// small part of the work). Its columns are dropped. 0 where there are too few nodes for one.
     fn pilot(&self, paths: u32) -> f64 {
         let n = self.n;
         let mut estimated_seconds = 0.0;
@@ -997,8 +997,8 @@ mod tests {
     }
 
     /// Start points follow phi_p: each triangle of a node's support is drawn in proportion
-    /// to the integral of phi_p over it (one uniform per draw: the binary search once drew a
-    /// new number at every probe, which skewed the choice).
+    /// to the integral of phi_p over it (one uniform per draw: a new number at every probe of
+    /// the binary search would skew the choice).
     #[test]
     fn start_points_follow_the_basis_function() {
         let mesh = Mesh::cuboid(glam::Vec3::new(20.0, 10.0, 4.0), 6);

@@ -311,8 +311,8 @@ pub(super) fn place_mesh(
 /// Splits long, thin triangles (a 2000-gon disc, a 1000-segment cylinder's sides) to
 /// [`LONG_EDGE_SPACINGS`] times the mesh's own vertex spacing, with a note when it splits any.
 /// The global response's node basis functions are interpolated over render triangles; on long
-/// triangles they reach across the object (F 85 % dense, minutes of fitting where the estimate
-/// said a second). Even meshes, coarse or fine, have no edge that long and are left as they
+/// triangles they reach across the object (F nearly dense, a fit far longer than the estimate
+/// says). Even meshes, coarse or fine, have no edge that long and are left as they
 /// are. The length is bounded below so that the refined mesh has at most about 4x the input's
 /// edge length in edges of that length (a hostile mesh of needles cannot multiply it).
 pub(super) fn split_long_triangles(mesh: &mut Mesh, notes: &mut Vec<String>) {
@@ -617,8 +617,7 @@ pub(super) fn resolve_material(
         // Under an environment the per-frame single scattering would see its sun alone
         // (the pass integrates delta lights along the view rays), not the sky: the
         // half-space profile of every order carries the sky's single scattering too
-        // (against the truth under the shipped sky: 0.86-0.88 of its mean instead of
-        // 0.75-0.81; README "Environment lighting").
+        // (closer to the truth's mean under the shipped sky: docs/results/environment.md).
         None if has_environment && material.model.profile_with_single_pass() => material
             .with_model(crate::physics::Model::Halfspace)
             .context("[material]")?,
@@ -751,7 +750,7 @@ pub(super) fn check_placement(
     let (width, height) = (output.width, output.height);
     // Where the camera and the lights stand relative to the object.
     let bvh = crate::geometry::bvh::Bvh::new(&mesh.positions, &mesh.indices);
-    // An open surface has no inside (a plane seen from below was "inside the object").
+    // An open surface has no inside (a plane seen from below is not "inside the object").
     if closed && bvh.contains(camera.position.as_dvec3()) {
         bail!("[camera] position {:?} lies inside the object", position);
     }

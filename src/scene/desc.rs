@@ -50,7 +50,7 @@ use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Reads an optional RGB or XYZ triple, refusing any other number of components (serde's
-/// array reader took the first three of four and ignored the rest).
+/// array reader takes the first three of four and ignores the rest).
 fn triple<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<[f64; 3]>, D::Error> {
     let v: Vec<f64> = Vec::deserialize(d)?;
     <[f64; 3]>::try_from(v.as_slice()).map(Some).map_err(|_| {

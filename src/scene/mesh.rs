@@ -254,8 +254,8 @@ impl Mesh {
     /// (seams of normals or texture coordinates split vertices that are one point of the
     /// surface, and generated meshes repeat seam vertices with rounding differences: a UV
     /// sphere's seam at sin(2 pi) = -2.4e-16 rather than 0, or poles at -0.0 and 0.0; welded
-    /// exactly, such a mesh had a border that locked meshopt's simplification, and 800 of a
-    /// 2000-segment sphere's 3100 nodes crowded at its poles).
+    /// exactly, such a mesh keeps a border that locks meshopt's simplification, and a
+    /// 2000-segment sphere's nodes crowd at its poles).
     pub fn welded(&self) -> Vec<u32> {
         let cell = (self.bounding_sphere().1 as f64 * 1e-6).max(f64::MIN_POSITIVE);
         let mut first: std::collections::HashMap<[i64; 3], u32> = std::collections::HashMap::new();
@@ -271,7 +271,7 @@ impl Mesh {
 
     /// Removes every triangle whose three corners (by position, either winding) repeat an
     /// earlier one's; returns how many. A face listed twice receives and gives light twice:
-    /// it doubled the brightness.
+    /// it doubles the brightness.
     pub fn remove_duplicate_faces(&mut self) -> usize {
         let welded = self.welded();
         let mut seen = std::collections::HashSet::new();
@@ -299,7 +299,7 @@ impl Mesh {
         let tris = self.triangle_count();
         // Each triangle side as (welded edge, triangle, side, walked from the lower vertex),
         // sorted so that the sides of one edge lie together, in triangle order: an edge with
-        // exactly two sides links them (a sort, not a map of lists: 8 s -> 1 s for 4 M
+        // exactly two sides links them (a sort, not a map of lists: far faster on millions of
         // triangles).
         let side = |t: usize, k: usize| {
             let tri = &self.indices[3 * t..3 * t + 3];

@@ -116,15 +116,8 @@ pub fn shadow_projections(
 
 /// Shadow texels per atlas texel along each axis, at the object: the 3 x 3 filter then spans at
 /// most half the atlas texel at which the illumination map samples the irradiance. Measured on
-/// the bunny at 512x512 (blue RMS vs the reference, the shadow map's share of the error):
-///
-/// | shadow texels per atlas texel | skim milk | skin1 | ketchup |
-/// |---|---|---|---|
-/// | 4 (512 / 400 / 400) | 1.70 % | 2.62 % | 3.10 % |
-/// | 6 (768 / 608 / 608) | 1.64 % | 2.46 % | 2.94 % |
-/// | 1024 for all | 1.60 % | 2.42 % | 2.86 % |
-///
-/// 6 keeps the shadow map's share within 0.08 % at 40 % of the 1024 map's texels.
+/// the bunny at 512x512 against the reference (docs/results/figures.md): 6 keeps the shadow
+/// map's share of the error small at a fraction of a 1024 map's texels, where 4 adds more.
 pub const SHADOW_TEXELS_PER_ATLAS_TEXEL: f64 = 6.0;
 
 /// Largest derived shadow map, texels per side.
@@ -136,8 +129,8 @@ const MAX_DERIVED_SHADOW_MAP: u32 = 4096;
 /// covers the most (rounded up to a multiple of 16, within 64..4096).
 ///
 /// The shadow map only feeds the illumination map (the image itself reads the atlas), so the
-/// image size does not enter (the old rule, twice the image side, gave a 4096 map to a 2048
-/// image whatever the atlas).
+/// image size does not enter (twice the image side would give a 4096 map to a 2048 image
+/// whatever the atlas).
 pub fn shadow_map_size(scene: &Scene, texel_mm: f64) -> (u32, String) {
     if let Some(s) = scene.shadow_map {
         return (s, format!("shadow map {s}x{s}: given"));

@@ -26,8 +26,8 @@
 //! - Absorption is analog: a collision scatters with probability albedo and ends the path
 //!   otherwise, with the weight staying one. Both choices are unbiased (no Russian roulette,
 //!   no cut-off depth); a path ends by absorption or by leaving the object for good. A safety
-//!   cap of [`MAX_EVENTS`] collisions per path is counted in `truncated_paths` (0 in every run
-//!   measured).
+//!   cap of [`MAX_EVENTS`] collisions per path is counted in `truncated_paths` (a safety net
+//!   that ordinary scenes do not reach).
 //! - Each channel has its own paths (sigma_t differs per channel, so one path cannot serve all
 //!   three without weights of large variance).
 //! - Samples are split into two independent halves A and B: the image is (A + B) / 2 and the

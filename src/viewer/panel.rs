@@ -34,7 +34,7 @@ pub struct Snapshot {
     pub preset: Option<String>,
     /// The material shown or asked for.
     pub material: Material,
-    /// The material the image shows now, when the one asked for is still being prepared.
+    /// The material the image currently shows, when the one asked for is still being prepared.
     pub shown: Option<String>,
     /// The blending mode.
     pub mode: Blend,

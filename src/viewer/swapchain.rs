@@ -18,7 +18,7 @@ use std::sync::Arc;
 pub enum Presented {
     /// The image is on screen.
     Shown,
-    /// The swapchain no longer matches the window (resize): re-create it and render again.
+    /// The swapchain does not match the window (resize): re-create it and render again.
     OutOfDate,
 }
 
