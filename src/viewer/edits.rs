@@ -1,0 +1,181 @@
+//! The viewer's actions applied: the camera and the lights' turn, the material, light and
+//! output requests they stand for, and what the shown image then says about the walks.
+
+use super::rig::View;
+use super::script::Action;
+use super::{AppSettings, Running};
+use crate::preprocess::operators::Blend;
+use crate::scene::Light;
+use anyhow::Result;
+use glam::Vec3;
+use winit::dpi::PhysicalSize;
+
+impl Running {
+    /// Does `action` (from a key, the mouse, the panel or the script); false once it asks to
+    /// quit. A camera change that would leave the usable views is refused (`refused_view`).
+    pub(super) fn apply(&mut self, action: Action, app: &AppSettings) -> Result<bool> {
+        let mut v = self.view;
+        match action {
+            Action::Orbit(yaw, pitch) => {
+                v.yaw += yaw;
+                v.pitch += pitch;
+            }
+            Action::Zoom(f) => v.zoom *= f,
+            Action::Pan(dx, dy) => v.pan += self.pan_offset(dx, dy),
+            Action::Light(yaw, pitch) => {
+                v.light_yaw += yaw;
+                v.light_pitch += pitch;
+            }
+            Action::Environment(yaw) => {
+                if self.scene.environment.is_some() {
+                    v.environment_yaw += yaw;
+                } else {
+                    self.status = "the scene has no environment light".into();
+                }
+            }
+            Action::NextEnvironment(step) => self.next_environment(step)?,
+            Action::Material(name) => self.request_preset(name, app)?,
+            Action::NextMaterial(step) => self.request_next_preset(step, app)?,
+            Action::SigmaS(v) => {
+                let m = self.wanted().material;
+                self.request_coefficients(v, m.sigma_a, m.eta, Some(m.model), app)?;
+            }
+            Action::SigmaA(v) => {
+                let m = self.wanted().material;
+                self.request_coefficients(m.sigma_s_prime, v, m.eta, Some(m.model), app)?;
+            }
+            Action::Eta(eta) => self.request_eta(eta, app)?,
+            Action::Model(model) => self.request_model(model, app)?,
+            Action::Settings(o) => self.request_settings(o, app)?,
+            Action::LightDirection(i, d) => self.set_light_direction(i, d)?,
+            Action::LightColour(i, c) => self.set_light_colour(i, c)?,
+            Action::LightIntensity(i, v) => self.set_light_intensity(i, v)?,
+            Action::LightKind(i, kind) => self.set_light_kind(i, kind)?,
+            Action::AddLight(kind) => self.add_light(kind)?,
+            Action::RemoveLight(i) => self.remove_light(i)?,
+            Action::SaveScene(name) => {
+                let name = name.unwrap_or_else(|| format!("scene-{:03}", self.scene_saves));
+                self.scene_saves += 1;
+                self.save_scene(&app.out, &name)?;
+            }
+            Action::Mode(mode) => self.set_mode(mode)?,
+            Action::CycleBlend => {
+                let next = match self.both_blend {
+                    Blend::Optimized => Blend::Simple,
+                    _ => Blend::Optimized,
+                };
+                return self.apply(Action::Mode(next), app);
+            }
+            Action::Screenshot(name) => {
+                let name = name.unwrap_or_else(|| format!("shot-{:03}", self.shots));
+                self.shots += 1;
+                self.shot = Some(name);
+            }
+            Action::ToggleUi => self.ui_visible = !self.ui_visible,
+            Action::Reset => {
+                v = View::default();
+                self.reset_lights()?;
+            }
+            Action::Resize(w, h) => {
+                // The Resized event that follows re-creates the swapchain.
+                let _ = self.window.request_inner_size(PhysicalSize::new(w, h));
+            }
+            Action::Quit => return Ok(false),
+        }
+        self.take_view(v);
+        self.note_moved_walk_lights();
+        Ok(true)
+    }
+
+    /// The look-at point's move for a drag of (`dx`, `dy`) pixels in the image plane: the
+    /// image follows the pointer.
+    fn pan_offset(&self, dx: f32, dy: f32) -> Vec3 {
+        let c = self.rig.camera(&self.view);
+        let dist = c.position.distance(c.target);
+        let per_px = 2.0 * dist * (0.5 * c.fov_y).tan() / self.scene.height.max(1) as f32;
+        let forward = (c.target - c.position).normalize();
+        let right = forward.cross(c.up).normalize_or(Vec3::X);
+        let up = right.cross(forward);
+        (-dx * right + dy * up) * per_px
+    }
+
+    /// Shows the blending `mode`; a simple or an optimized one is also what "both" (key `3`)
+    /// shows from then on.
+    fn set_mode(&mut self, mode: Blend) -> Result<()> {
+        if matches!(mode, Blend::Simple | Blend::Optimized) {
+            self.both_blend = mode;
+        }
+        if mode != self.mode {
+            self.mode = mode;
+            self.reupload()?;
+        }
+        Ok(())
+    }
+
+    /// Takes the view `v` where it gives a usable camera (`Rig::valid`); else keeps the shown
+    /// one and marks the change refused.
+    fn take_view(&mut self, v: View) {
+        self.refused_view = false;
+        if v != self.view {
+            if self.rig.valid(&v) {
+                self.view = v;
+            } else {
+                tracing::debug!("camera change refused: it would enter the object or flip");
+                self.refused_view = true;
+            }
+        }
+    }
+
+    /// Says in the status when the lights differ from those the walks' F was walked for.
+    fn note_moved_walk_lights(&mut self) {
+        // The walks' F answers the lamps where they were when it was walked: said, not hidden,
+        // once a light moves away from there.
+        let walked = &self.prepared.pre.settings.walk_lights;
+        let now = crate::preprocess::walk::entry_lights(&self.rig.lights(&self.view));
+        let moved = |a: &Option<Light>, b: &Option<Light>| match (a, b) {
+            (Some(a), Some(b)) => {
+                a.kind != b.kind
+                    || a.direction.dot(b.direction) < 1.0 - 1e-5
+                    || a.position.distance(b.position) > 1e-3 * self.rig.radius
+                    || a.radiance.distance(b.radiance) > 1e-5 * a.radiance.max_element()
+            }
+            (a, b) => a.is_some() != b.is_some(),
+        };
+        if walked.iter().any(Option::is_some) && walked.iter().zip(&now).any(|(a, b)| moved(a, b)) {
+            self.status = "volume: F was walked for the lights where the scene placed them; moved lights get that F (save the scene and render it to walk for these)".into();
+        }
+    }
+
+    /// Shows the environment map `step` places on in the list (the scene's, the shipped sky,
+    /// the `--environment` files). The transfer does not depend on the map: only the uniforms
+    /// change.
+    fn next_environment(&mut self, step: i32) -> Result<()> {
+        if self.scene.environment.is_none() || self.environments.len() < 2 {
+            self.status = if self.scene.environment.is_none() {
+                "the scene has no environment light".into()
+            } else {
+                "one environment map (add more with --environment)".into()
+            };
+            return Ok(());
+        }
+        let n = self.environments.len() as i32;
+        self.environment_index = (self.environment_index as i32 + step).rem_euclid(n) as usize;
+        let env = self.environments[self.environment_index].clone();
+        for l in self
+            .rig
+            .lights
+            .iter_mut()
+            .chain(self.scene.lights.iter_mut())
+        {
+            if l.kind == crate::scene::desc::LightKind::Environment {
+                l.direction = env.sun_travel(l.rotation);
+            }
+        }
+        self.status = format!("environment {}", env.source);
+        self.scene.environment = Some(env.clone());
+        if let Some(r) = self.renderer.as_mut() {
+            r.set_environment(env)?;
+        }
+        Ok(())
+    }
+}
