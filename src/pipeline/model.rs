@@ -19,7 +19,7 @@
 //!   out only under a coarse target.
 //! - **A closed mesh lit by lamps: `volume`** ([`volume_reason`]): F from random walks inside
 //!   the mesh entering along the lamps' light, the composite's oblique exit lobe and the walks'
-//!   drift; the most accurate model against the volumetric truth (README, accuracy).
+//!   drift; the most accurate model against the volumetric truth (docs/results/models.md).
 //! - **Otherwise `halfspace-single`**: the half-space profile of orders >= 2 and per-frame
 //!   single scattering (an open mesh has no inside to walk in).
 //!

@@ -117,8 +117,8 @@ const TIMING_WINDOW: usize = 60;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Reweigh {
     /// The device's compute pass (`passes::reweigh`). On lavapipe too: with the window
-    /// rendering on the same two cores, a drag on the default scene reached its exact
-    /// image 3.6-4.3 s after it stopped, against 5.0-5.2 s with the CPU's weights (README).
+    /// rendering on the same cores, a drag on the default scene reaches its exact image
+    /// sooner than with the CPU's weights (measured in docs/results/viewer.md).
     #[default]
     Device,
     /// The CPU, as a fresh preprocessing evaluates them.
@@ -202,7 +202,7 @@ struct App {
 }
 
 /// The renderer's options: the global pass's variant as measured for the uploaded data, or
-/// measured now (`tune_global`) when `global` is None.
+/// measured at this build (`tune_global`) when `global` is None.
 fn renderer_options(
     mode: Blend,
     linear: bool,

@@ -110,7 +110,7 @@ impl Running {
 
     /// Asks for the preset `name` with the settings derived for it.
     pub(super) fn request_preset(&mut self, name: String, app: &AppSettings) -> Result<()> {
-        // Check the name now: a typo is an error, not a silent no-op.
+        // Check the name here: a typo is an error, not a silent no-op.
         let material = Material::preset(&name).with_context(|| format!("material '{name}'"))?;
         let material = self.default_model_for(material, app.target_error)?;
         // A preset gets the settings derived for it (and so its own atlas), as a scene
@@ -315,7 +315,7 @@ impl Running {
                 md.model = Some(w.material.model);
                 self.current = w;
                 self.prepared = Arc::new(prepared);
-                // The device's copy of an atlas no longer shown is let go (its run has ended).
+                // The device's copy of an atlas that is not shown is let go (its run has ended).
                 if self
                     .reweigher
                     .as_ref()
