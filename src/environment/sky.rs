@@ -106,16 +106,22 @@ pub fn generate(width: u32, sun_to_sky: f64) -> Vec<[f32; 3]> {
 pub fn write(path: &std::path::Path, width: u32, sun_to_sky: f64) -> anyhow::Result<()> {
     let px = generate(width, sun_to_sky);
     crate::output::write_atomic(path, |tmp| {
-        use exr::prelude::f16;
+        use exr::prelude::*;
         let w = width as usize;
-        exr::prelude::write_rgb_file(tmp, w, w / 2, |x, y| {
-            let p = px[y * w + x];
+        let channels = SpecificChannels::rgb(|Vec2(x, y)| {
+            let p: [f32; 3] = px[y * w + x];
             (
                 f16::from_f32(p[0]),
                 f16::from_f32(p[1]),
                 f16::from_f32(p[2]),
             )
-        })?;
+        });
+        // In order on one thread, so that the same sky gives the same file
+        // (`output::encode_exr`).
+        Image::from_channels((w, w / 2), channels)
+            .write()
+            .non_parallel()
+            .to_file(tmp)?;
         Ok(())
     })
 }
