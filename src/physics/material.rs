@@ -36,16 +36,30 @@ pub enum Model {
 }
 
 impl Model {
-    /// The most accurate model for a medium of relative index `eta` that needs nothing of the
-    /// scene's geometry or lights: the tabulated profile, with per-frame single scattering
-    /// where that applies (eta = 1), of every order behind a refractive boundary: the
-    /// material's model before a command applies the default's decision, which also weighs
-    /// the mesh, the lights and the target error (`pipeline::model::decide`).
-    pub fn for_eta(eta: f64) -> Model {
-        if eta == 1.0 {
-            Model::HalfspaceSingle
+    /// The most accurate model for a medium of relative index `eta`, lit by an environment
+    /// or not, that needs nothing else of the scene, and why: the tabulated profile of every
+    /// order behind a refractive boundary; of every order under an environment (per-frame
+    /// single scattering integrates delta lights along the view rays and would see the sky's
+    /// sun alone); else of orders >= 2 with per-frame single scattering. A material's and a
+    /// scene's model before a command applies the default's decision, which starts from this
+    /// and also weighs the mesh, the lights and the target error (`pipeline::model::decide`).
+    pub fn default_for(eta: f64, environment: bool) -> (Model, String) {
+        if eta != 1.0 {
+            (
+                Model::Halfspace,
+                format!("exact half-space profile of every order behind the refractive boundary (eta = {eta}; per-frame single scattering and the walks of volume need eta = 1)"),
+            )
+        } else if environment {
+            (
+                Model::Halfspace,
+                "exact half-space profile of every order (eta = 1; under an environment the per-frame single scattering would see its sun alone)".to_string(),
+            )
         } else {
-            Model::Halfspace
+            (
+                Model::HalfspaceSingle,
+                "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1)"
+                    .to_string(),
+            )
         }
     }
 
@@ -273,7 +287,7 @@ impl Material {
                 sigma_s_prime: *s,
                 sigma_a: *a,
                 eta: *eta,
-                model: Model::for_eta(*eta),
+                model: Model::default_for(*eta, false).0,
             })
             .ok_or_else(|| {
                 MaterialError::UnknownPreset(
@@ -321,7 +335,7 @@ impl Material {
             sigma_s_prime,
             sigma_a,
             eta,
-            model: Model::for_eta(eta),
+            model: Model::default_for(eta, false).0,
         })
     }
 

@@ -54,24 +54,16 @@ pub fn choose(
             &choice.settings.walk_lights,
         ));
     }
-    // The model is the material's; said with the derived settings, with why.
+    // The model is the material's; said with the derived settings, with why: the default's
+    // reason where it chose the model (`model::apply_default`), else the scene's own default
+    // where the model is that one, else given.
     let m = &scene.material;
-    // Where the default chose the model (`model::apply_default`), its reason.
-    let boundary = super::model::behind_boundary_reason(m.eta);
-    let why = scene.model_reason.as_deref().unwrap_or_else(|| {
-        match (m.model, m.model == crate::physics::Model::for_eta(m.eta)) {
-            (crate::physics::Model::HalfspaceSingle, true) => {
-                "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1)"
-            }
-            (crate::physics::Model::Halfspace, false)
-                if scene.environment.is_some()
-                    && scene.resolved.material.model.is_none()
-                    && m.eta == 1.0 =>
-            {
-                "exact half-space profile of every order (eta = 1; under an environment the per-frame single scattering would see its sun alone)"
-            }
-            (crate::physics::Model::Halfspace, true) => boundary.as_str(),
-            (_, _) => "given",
+    let why = scene.model_reason.clone().unwrap_or_else(|| {
+        let (model, why) = crate::physics::Model::default_for(m.eta, scene.environment.is_some());
+        if super::model::is_default(scene) && m.model == model {
+            why
+        } else {
+            "given".to_string()
         }
     });
     choice

@@ -2,7 +2,8 @@
 //! for `render`, `bench`, `chart` and `view`, said with its reason. No timing enters it, so the
 //! same command renders the same image on an idle machine and on a loaded one. A model given
 //! in the scene file (`[material] model`) or on the command line (`--model`) is used as given.
-//! Otherwise, in this order:
+//! Otherwise, in this order (the first two are the material's and the lights' kind alone,
+//! `Model::default_for`, which a scene's material takes before a command decides the rest):
 //!
 //! - **eta != 1: `halfspace`**, the half-space profile of every order behind the refractive
 //!   boundary (its own tables, with Fresnel reflection and refraction at every crossing): per-frame
@@ -61,14 +62,11 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
         return None;
     }
     let m = &scene.material;
-    if m.eta != 1.0 {
-        return Some((Model::Halfspace, behind_boundary_reason(m.eta)));
-    }
-    if scene.environment.is_some() {
-        return Some((
-            Model::Halfspace,
-            "exact half-space profile of every order (eta = 1; under an environment the per-frame single scattering would see its sun alone)".to_string(),
-        ));
+    // Behind a refractive boundary and under an environment, the material and the lights'
+    // kind decide alone.
+    let (model, why) = Model::default_for(m.eta, scene.environment.is_some());
+    if model != Model::HalfspaceSingle {
+        return Some((model, why));
     }
     let below = m
         .with_model(Model::HalfspaceSingle)
@@ -84,11 +82,6 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
         Model::HalfspaceSingle,
         "exact half-space profile of orders >= 2 and per-frame single scattering (eta = 1; the walks of volume need a closed mesh lit by lamps)".to_string(),
     ))
-}
-
-/// Why the default is `halfspace` behind a refractive boundary.
-pub fn behind_boundary_reason(eta: f64) -> String {
-    format!("exact half-space profile of every order behind the refractive boundary (eta = {eta}; per-frame single scattering and the walks of volume need eta = 1)")
 }
 
 /// Applies [`decide`] to `scene`: its material takes the default model, recorded in its

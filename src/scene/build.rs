@@ -614,14 +614,11 @@ pub(super) fn resolve_material(
     }
     let material = match mat.model {
         Some(model) => material.with_model(model).context("[material]")?,
-        // Under an environment the per-frame single scattering would see its sun alone
-        // (the pass integrates delta lights along the view rays), not the sky: the
-        // half-space profile of every order carries the sky's single scattering too
-        // (closer to the truth's mean under the shipped sky: docs/results/environment.md).
-        None if has_environment && material.model.profile_with_single_pass() => material
-            .with_model(crate::physics::Model::Halfspace)
+        // The default as far as the material and the lights' kind decide; a command decides
+        // the rest (`pipeline::model::decide`).
+        None => material
+            .with_model(crate::physics::Model::default_for(material.eta, has_environment).0)
             .context("[material]")?,
-        None => material,
     };
     Ok((material, roughness))
 }
