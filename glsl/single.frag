@@ -9,6 +9,12 @@
 // (its depth without the shadow bias, from the `entry` pass) to the point (exact for a convex
 // object; where the light's path leaves and re-enters the object, the air between is counted
 // as medium).
+// Behind a refractive boundary (eta != 1; Jensen et al. 2001's single-scattering term with its
+// planar approximation at each end): the view ray runs on refracted towards the normal, the
+// light's path inside is refracted at its entry (found in the object's shape as the shadow map
+// sees it, `refracted_path`), and the light is
+// weighed by the Fresnel transmittance at both ends, by cos_i / cos_t (the beam inside is
+// narrower) and by 1 / eta^2 (radiance leaving a medium of index eta).
 // Alpha holds the length of the ray inside (to the nearest back face; 0 where the pass found
 // none, as in a pixel it did not draw), for the composite's chord factor of the higher orders.
 // The ray is cut into STEPS intervals of equal optical depth in the least extinguishing
@@ -21,8 +27,7 @@ layout(set = 0, binding = 1) uniform sampler2DArray entry_depth;
 layout(set = 0, binding = 2) uniform sampler2D back_depth;
 
 layout(location = 0) in vec3 in_position;
-// Written by camera.vert, which `thickness` shares; declared so that the interface matches
-// (an unconsumed vertex output is a validation warning).
+// The surface's normal at the view ray's entry (camera.vert, which `thickness` shares).
 layout(location = 1) in vec3 in_normal;
 
 layout(location = 0) out vec4 out_single;
@@ -37,32 +42,167 @@ vec3 unproject(mat4 inverse_matrix, vec2 ndc, float z) {
     return w.xyz / w.w;
 }
 
+// Where the light of `l` first meets the surface on its straight line through p: true with
+// that point, its shadow-map layer and coordinates, where the map sees a surface there.
+bool entry_point(Light l, vec3 p, out vec3 entry, out uint layer, out vec2 uv) {
+    layer = shadow_layer(l, p);
+    entry = p;
+    uv = vec2(0.0);
+    vec4 clip = frame.shadow_view_proj[layer] * vec4(p, 1.0);
+    if (clip.w <= 0.0) {
+        return false;
+    }
+    vec3 ndc = clip.xyz / clip.w;
+    uv = ndc.xy * 0.5 + 0.5;
+    if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) {
+        return false;
+    }
+    float z = texture(entry_depth, vec3(uv, float(layer))).r;
+    if (z >= 1.0) {
+        return false;
+    }
+    entry = unproject(frame.shadow_inverse[layer], ndc.xy, z);
+    return true;
+}
+
 // Distance the light of `l` travels inside before reaching p (a point inside the object):
 // from the first surface its shadow map sees to p, along the light's travel. Zero where the
 // map has nothing there (outside its frustum, or depth and sampling put p in front of the
 // surface it sees).
 float light_depth(Light l, vec3 p, vec3 travel) {
-    uint layer = shadow_layer(l, p);
-    vec4 clip = frame.shadow_view_proj[layer] * vec4(p, 1.0);
-    if (clip.w <= 0.0) {
+    vec3 entry;
+    uint layer;
+    vec2 uv;
+    if (!entry_point(l, p, entry, layer, uv)) {
         return 0.0;
     }
-    vec3 ndc = clip.xyz / clip.w;
-    vec2 uv = ndc.xy * 0.5 + 0.5;
-    if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) {
-        return 0.0;
-    }
-    float z = texture(entry_depth, vec3(uv, float(layer))).r;
-    if (z >= 1.0) {
-        return 0.0;
-    }
-    vec3 entry = unproject(frame.shadow_inverse[layer], ndc.xy, z);
     return max(dot(p - entry, travel), 0.0);
+}
+
+// The unit normal, facing the light (against `travel`), of the surface the shadow map sees at
+// `entry` (layer, coordinates `uv`): from the depths one texel over in u and in v, the nearer
+// side where one of them falls off the object; -travel where neither does.
+vec3 entry_normal(vec3 entry, uint layer, vec2 uv, vec3 travel) {
+    vec2 texel = 1.0 / vec2(textureSize(entry_depth, 0).xy);
+    vec3 du = vec3(0.0);
+    vec3 dv = vec3(0.0);
+    for (int k = 0; k < 2; ++k) {
+        float sign = k == 0 ? 1.0 : -1.0;
+        vec2 ou = uv + vec2(sign * texel.x, 0.0);
+        vec2 ov = uv + vec2(0.0, sign * texel.y);
+        float zu = texture(entry_depth, vec3(ou, float(layer))).r;
+        float zv = texture(entry_depth, vec3(ov, float(layer))).r;
+        vec3 eu = unproject(frame.shadow_inverse[layer], ou * 2.0 - 1.0, zu) - entry;
+        vec3 ev = unproject(frame.shadow_inverse[layer], ov * 2.0 - 1.0, zv) - entry;
+        if (zu < 1.0 && (du == vec3(0.0) || dot(eu, eu) < dot(du, du))) {
+            du = sign * eu;
+        }
+        if (zv < 1.0 && (dv == vec3(0.0) || dot(ev, ev) < dot(dv, dv))) {
+            dv = sign * ev;
+        }
+    }
+    vec3 normal = cross(du, dv);
+    if (dot(normal, normal) == 0.0) {
+        return -travel;
+    }
+    normal = normalize(normal);
+    return dot(normal, travel) > 0.0 ? -normal : normal;
+}
+
+// Bisection steps that find where a refracted path leaves the object.
+const uint PATH_STEPS = 8u;
+
+// Behind a refractive boundary, the path of the light of `l` that reaches p (a point inside)
+// refracted: its length inside and the cosine at which it entered. The path is found in the
+// object's own shape, as the shadow map sees it: the light's straight entry gives a first
+// entry normal; the light refracted there travels along t, and the path starts where the line
+// back from p along -t leaves the object (bisection on the map's inside test); where that
+// exit is a surface the light reaches, its normal gives t again, once. Where it is not (the
+// line leaves through a side turned from the light, as past a terminator, where refraction
+// forbids the short grazing path), the straight path stands. Zero length and normal
+// incidence where the map sees no surface on the straight line.
+float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
+    cos_i = 1.0;
+    vec3 entry;
+    uint layer;
+    vec2 uv;
+    if (!entry_point(l, p, entry, layer, uv)) {
+        return 0.0;
+    }
+    float straight = max(dot(p - entry, travel), 0.0);
+    vec3 n = entry_normal(entry, layer, uv, travel);
+    cos_i = clamp(-dot(n, travel), 0.0, 1.0);
+    if (straight <= 0.0) {
+        return 0.0;
+    }
+    float length_inside = straight;
+    for (int pass = 0; pass < 2; ++pass) {
+        vec3 t = refract(travel, n, 1.0 / eta);
+        if (dot(t, t) == 0.0) {
+            break;
+        }
+        // Back along -t a plane's exit lies within the straight depth over t's share of the
+        // light's travel.
+        float lo = 0.0;
+        float hi = straight / max(dot(t, travel), 0.2);
+        for (uint k = 0u; k < PATH_STEPS; ++k) {
+            float mid = 0.5 * (lo + hi);
+            vec3 q = p - t * mid;
+            vec3 e;
+            uint lq;
+            vec2 uq;
+            bool inside = entry_point(l, q, e, lq, uq) && dot(q - e, travel) > 0.0;
+            if (inside) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        // The exit must be where the light enters: the first surface the map sees on the
+        // light's line through it.
+        vec3 q = p - t * hi;
+        vec3 e;
+        uint lq;
+        vec2 uq;
+        if (!entry_point(l, q, e, lq, uq)
+            || abs(dot(q - e, travel)) > 0.05 * straight + 2.0 * (hi - lo)) {
+            break;
+        }
+        length_inside = hi;
+        n = entry_normal(e, lq, uq, travel);
+        cos_i = clamp(-dot(n, travel), 0.0, 1.0);
+    }
+    return length_inside;
+}
+
+// The light of `l` at p inside the object: the distance it travels inside, and its irradiance
+// `e` (across its beam, from `light_at`) turned into the irradiance across the beam inside:
+// behind a refractive boundary the Fresnel transmittance of its entry times cos_i / cos_t (the
+// beam narrows as it bends towards the normal).
+float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, inout vec3 e) {
+    if (!refracts) {
+        return light_depth(l, p, travel);
+    }
+    float cos_i;
+    float d = refracted_path(l, p, travel, eta, cos_i);
+    float cos_t = sqrt(max(1.0 - (1.0 - cos_i * cos_i) / (eta * eta), 0.0));
+    e *= fresnel_transmittance(eta, cos_i) * cos_i / max(cos_t, 1e-6);
+    return d;
 }
 
 void main() {
     vec3 x = in_position;
     vec3 d = normalize(x - frame.camera_pos.xyz);
+    float eta = frame.material.x;
+    bool refracts = eta != 1.0;
+    // The view ray inside: refracted towards the normal behind a refractive boundary.
+    vec3 normal = normalize(in_normal);
+    normal = dot(normal, d) > 0.0 ? -normal : normal;
+    float cos_o = -dot(normal, d);
+    vec3 inside = refracts ? refract(d, normal, 1.0 / eta) : d;
+    if (dot(inside, inside) == 0.0) {
+        inside = d;
+    }
     vec2 size = vec2(textureSize(back_depth, 0));
     float zb = texelFetch(back_depth, ivec2(gl_FragCoord.xy), 0).r;
     vec2 ndc = gl_FragCoord.xy / size * 2.0 - 1.0;
@@ -81,18 +221,18 @@ void main() {
     for (uint i = 0u; i < lights; ++i) {
         vec3 wi;
         light_at(frame.lights[i], x, wi, e0[i]);
-        d0[i] = light_depth(frame.lights[i], x, -wi);
+        d0[i] = light_inside(frame.lights[i], x, -wi, refracts, eta, e0[i]);
     }
     float s0 = 0.0;
     for (uint k = 0u; k < n; ++k) {
         float s1 = k + 1u == n ? s_exit : -log(1.0 - float(k + 1u) / float(n) * t_exit) / ref;
         float ds = s1 - s0;
-        vec3 p = x + d * s1;
+        vec3 p = x + inside * s1;
         for (uint i = 0u; i < lights; ++i) {
             vec3 wi;
             vec3 e1;
             light_at(frame.lights[i], p, wi, e1);
-            float d1 = light_depth(frame.lights[i], p, -wi);
+            float d1 = light_inside(frame.lights[i], p, -wi, refracts, eta, e1);
             if (ds > 0.0) {
                 // s + d_l(s) linear over the interval: the exponential integrates exactly.
                 vec3 rate = sigma_t * max(1.0 + (d1 - d0[i]) / ds, 1e-4);
@@ -104,5 +244,7 @@ void main() {
         }
         s0 = s1;
     }
-    out_single = vec4(frame.sigma_s.rgb / (4.0 * PI) * sum, s_exit);
+    // Leaving: the Fresnel transmittance of the view's exit and radiance over eta^2.
+    float leave = refracts ? fresnel_transmittance(eta, cos_o) / (eta * eta) : 1.0;
+    out_single = vec4(frame.sigma_s.rgb / (4.0 * PI) * sum * leave, s_exit);
 }

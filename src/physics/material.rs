@@ -31,7 +31,9 @@ pub enum Model {
     /// (`preprocess::walk`): the light of orders >= 2 that crosses thin parts, goes around
     /// concavities and reaches the far side as the volume carries it, not by the half-space
     /// profile at the Euclidean distance; the kernels and the near-field fit keep the
-    /// half-space profile. eta = 1 only.
+    /// half-space profile. Any eta: behind a refractive boundary the walks enter refracted,
+    /// are reflected back in with Fresnel's probability and leave refracted, and single
+    /// scattering is refracted at both ends.
     Volume,
 }
 
@@ -47,7 +49,7 @@ impl Model {
         if eta != 1.0 {
             (
                 Model::Halfspace,
-                format!("exact half-space profile of every order behind the refractive boundary (eta = {eta}; per-frame single scattering and the walks of volume need eta = 1)"),
+                format!("exact half-space profile of every order behind the refractive boundary (eta = {eta}; --model volume walks the mesh behind it: more accurate on closed meshes lit by lamps, slower to prepare)"),
             )
         } else if environment {
             (
@@ -105,6 +107,7 @@ impl Model {
                 single_pass: true,
                 walks: true,
                 oblique_exit: true,
+                refracts: true,
                 ..none
             },
         }
@@ -264,7 +267,7 @@ pub enum MaterialError {
     #[error("index of refraction eta = {0} is outside the supported range [1.0, 3.0]")]
     BadEta(f64),
     /// A model of an index-matched medium asked for one that is not.
-    #[error("model '{0}' needs an index-matched medium (eta = 1), not eta = {1}: its single scattering and walks assume light crosses the surface unbent; use model 'halfspace' or 'dipole', or eta = 1")]
+    #[error("model '{0}' needs an index-matched medium (eta = 1), not eta = {1}: its half-space profile of orders >= 2 assumes light crosses the surface unbent; use model 'volume', 'halfspace' or 'dipole', or eta = 1")]
     HalfspaceNeedsIndexMatch(&'static str, f64),
 }
 

@@ -13,6 +13,18 @@ pub fn fresnel_reflectance(eta: f64, cos: f64) -> f64 {
     1.0 - fresnel_transmittance(eta, cos)
 }
 
+/// The unit direction `d` (arriving at a surface whose unit normal `n` faces it: `n.d < 0`)
+/// refracted across it, `ratio` the index of d's side over the other's (Snell: sin_t = ratio
+/// sin_i); None beyond the critical angle (total internal reflection).
+pub fn refract(d: DVec3, n: DVec3, ratio: f64) -> Option<DVec3> {
+    let cos_i = -n.dot(d);
+    let sin_t2 = ratio * ratio * (1.0 - cos_i * cos_i).max(0.0);
+    if sin_t2 >= 1.0 {
+        return None;
+    }
+    Some((ratio * d + (ratio * cos_i - (1.0 - sin_t2).sqrt()) * n).normalize())
+}
+
 /// The GGX width alpha of a roughness in [0, 1] (alpha = roughness^2, as Disney's, Blender's
 /// and glTF's roughness).
 pub fn alpha(roughness: f64) -> f64 {
@@ -42,6 +54,33 @@ pub fn ggx_reflection(eta: f64, alpha: f64, n: DVec3, wi: DVec3, wo: DVec3) -> f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Snell's law, the refracted ray on the far side in the plane of incidence, the way back
+    /// reversing it, and total internal reflection beyond the critical angle.
+    #[test]
+    fn refraction_follows_snell() {
+        let n = DVec3::Z;
+        for (eta, deg) in [(1.3f64, 40.0f64), (1.5, 75.0), (1.0, 30.0)] {
+            let (s, c) = deg.to_radians().sin_cos();
+            let d = DVec3::new(s, 0.0, -c);
+            let t = refract(d, n, 1.0 / eta).unwrap();
+            assert!((t.length() - 1.0).abs() < 1e-12);
+            assert!(t.z < 0.0 && t.y.abs() < 1e-12 && t.x > 0.0, "{t}");
+            assert!(
+                (eta * t.x - s).abs() < 1e-12,
+                "sin_t {} vs sin_i {s} / {eta}",
+                t.x
+            );
+            // From inside back out (normal facing the ray): the incident direction again.
+            let back = refract(-t, -n, eta).unwrap();
+            assert!((back + d).length() < 1e-12, "{back} vs {}", -d);
+        }
+        // Inside eta 1.5, beyond asin(1 / 1.5) = 41.8 degrees, nothing leaves.
+        let (s, c) = 45f64.to_radians().sin_cos();
+        assert!(refract(DVec3::new(s, 0.0, c), -n, 1.5).is_none());
+        let (s, c) = 40f64.to_radians().sin_cos();
+        assert!(refract(DVec3::new(s, 0.0, c), -n, 1.5).is_some());
+    }
 
     /// The distribution is normalised (its projected area integrates to 1 over the
     /// hemisphere), and light arriving along the normal of a nearly smooth surface of eta 1.5

@@ -6,8 +6,9 @@
 //! `Model::default_for`, which a scene's material takes before a command decides the rest):
 //!
 //! - **eta != 1: `halfspace`**, the half-space profile of every order behind the refractive
-//!   boundary (its own tables, with Fresnel reflection and refraction at every crossing): per-frame
-//!   single scattering and the walks of `volume` are models of an index-matched surface.
+//!   boundary (its own tables, with Fresnel reflection and refraction at every crossing).
+//!   `volume` holds the boundary too, and is nearer the truth on closed meshes lit by lamps,
+//!   but its walks cost far more to prepare: a user names it.
 //! - **An environment light: `halfspace`**, whose profile carries every order: the per-frame
 //!   single scattering integrates delta lights along the view rays and would see the sky's sun
 //!   alone.

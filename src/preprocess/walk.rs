@@ -34,7 +34,8 @@
 
 use crate::geometry::bvh::{Bvh, Hit};
 use crate::numeric::rng::Rng;
-use crate::physics::{Material, Rgb};
+use crate::physics::surface::refract;
+use crate::physics::{fresnel_transmittance, Material, Rgb};
 use crate::scene::desc::LightKind;
 use crate::scene::mesh::Mesh;
 use crate::scene::{Light, MAX_LIGHTS};
@@ -189,13 +190,15 @@ impl Sources {
 }
 
 /// What tracing from the surface of a closed mesh needs: where each node's points are drawn,
-/// the ray-casting structure, the sign that turns a triangle's winding normal outward, and an
-/// offset off the surface (a millionth of the object's size).
+/// the ray-casting structure, the sign that turns a triangle's winding normal outward, an
+/// offset off the surface (a millionth of the object's size), and the medium's relative index
+/// of refraction (1 unless [`Surface::behind`] says otherwise).
 pub(super) struct Surface {
     pub(super) sources: Sources,
     pub(super) bvh: Bvh,
     orientation: f64,
     pub(super) eps: f64,
+    eta: f64,
 }
 
 impl Surface {
@@ -210,13 +213,22 @@ impl Surface {
                 1.0
             },
             eps: 1e-6 * (radius as f64).max(1e-3),
+            eta: 1.0,
         }
+    }
+
+    /// The same surface as the boundary of a medium of relative index `eta`: light entering
+    /// is weighed by its Fresnel transmittance.
+    pub(super) fn behind(self, eta: f64) -> Surface {
+        Surface { eta, ..self }
     }
 
     /// How a walk starting at `x` (outward normal `n`) enters under `lamps`, channel `c`:
     /// along the light of one lamp, drawn in proportion to each lamp's irradiance at `x`
-    /// (radiance, distance and cone from [`Light::towards`], the cosine, and a shadow ray
-    /// through the mesh), with their sum as the walk's weight; none where no lamp reaches `x`.
+    /// (radiance, distance and cone from [`Light::towards`], the cosine, the Fresnel
+    /// transmittance behind a refractive boundary, and a shadow ray through the mesh), with
+    /// their sum as the walk's weight; none where no lamp reaches `x`. The direction is the
+    /// lamp's light travelling, before refraction.
     pub(super) fn entry(
         &self,
         lamps: &[Light],
@@ -231,7 +243,11 @@ impl Surface {
         for (e, lamp) in irradiance.iter_mut().zip(lamps) {
             let (towards, distance, factor) = lamp.towards(x);
             let cos = n.dot(towards);
-            let e_c = lamp.radiance[c] as f64 * factor * cos;
+            let mut e_c = lamp.radiance[c] as f64 * factor * cos;
+            if self.eta != 1.0 {
+                // As the illumination pass weighs it: the light that enters.
+                e_c *= fresnel_transmittance(self.eta, cos);
+            }
             if e_c > 0.0
                 && !(shadows
                     && self
@@ -261,6 +277,48 @@ impl Surface {
             .map(|&(d, _)| (d, total))
     }
 
+    /// A walk travelling along `d` inside meets the surface at `hit` (on triangle `hit.triangle`
+    /// of `mesh`): Ok(the direction it leaves along, refracted away from the normal) or, behind
+    /// a refractive boundary, Err(the direction reflected back in), with Fresnel's probability
+    /// and always beyond the critical angle. Index-matched it leaves straight on and draws no
+    /// random number.
+    pub(super) fn leave(
+        &self,
+        mesh: &Mesh,
+        hit: &Hit,
+        d: DVec3,
+        rng: &mut Rng,
+    ) -> Result<DVec3, DVec3> {
+        if self.eta == 1.0 {
+            return Ok(d);
+        }
+        let n = self.outward_normal(mesh, hit.triangle as usize);
+        let cos_in = n.dot(d);
+        if cos_in <= 0.0 {
+            // A face met from its outer side (rounding at an edge): straight on, as
+            // index-matched.
+            return Ok(d);
+        }
+        match refract(d, -n, self.eta) {
+            Some(out) if rng.uniform() < fresnel_transmittance(self.eta, n.dot(out)) => Ok(out),
+            _ => Err(d - 2.0 * cos_in * n),
+        }
+    }
+
+    /// Light travelling along `d` outside meets the surface (outward unit normal `n`): the
+    /// direction it enters along, refracted towards the normal, with Fresnel's probability;
+    /// None where it is reflected away. Index-matched it enters straight on and draws no
+    /// random number.
+    pub(super) fn enter(&self, d: DVec3, n: DVec3, rng: &mut Rng) -> Option<DVec3> {
+        if self.eta == 1.0 {
+            return Some(d);
+        }
+        if rng.uniform() >= fresnel_transmittance(self.eta, -n.dot(d)) {
+            return None;
+        }
+        refract(d, n, 1.0 / self.eta)
+    }
+
     /// The unit normal of triangle `tri` of `mesh` (the mesh this was made from), turned
     /// out of the object.
     pub(super) fn outward_normal(&self, mesh: &Mesh, tri: usize) -> DVec3 {
@@ -269,18 +327,21 @@ impl Surface {
     }
 }
 
-/// Per receiver of one source node's walks: the deposit per channel (0..3), the same weighted
-/// by the exit cosine (3..6) and by the exit direction's component along the receiving
-/// triangle (6..15: x, y, z per channel).
+/// Per receiver of one source node's walks: the deposit per channel (0..3), the lobe's weight
+/// (the deposit; behind a refractive boundary the deposit over the Fresnel transmittance of
+/// its exit) weighted by the exit cosine (3..6) and by the exit direction's component along
+/// the receiving triangle (6..15: x, y, z per channel), and the lobe's weight alone (15..18).
 type Deposit = [f64; DEPOSIT];
-const DEPOSIT: usize = 15;
+const DEPOSIT: usize = 18;
 
 /// The channel of deposit slot `i`.
 fn deposit_channel(i: usize) -> usize {
     if i < 6 {
         i % 3
-    } else {
+    } else if i < 15 {
         (i - 6) / 3
+    } else {
+        i - 15
     }
 }
 
@@ -361,7 +422,7 @@ pub fn walk_response(
     let walker = Walker {
         mesh,
         nodes,
-        surface: Surface::new(mesh, nodes),
+        surface: Surface::new(mesh, nodes).behind(material.eta),
         medium: crate::physics::Medium::new(material, 0.0),
         lamps,
         min_order,
@@ -371,7 +432,7 @@ pub fn walk_response(
     };
     let estimated_seconds = walker.pilot(paths);
     let (rows, exits, report) = walker.walk_all(paths, estimated_seconds);
-    (with_exit_lobes(rows, &exits), report)
+    (with_exit_lobes(rows, &exits, material.eta), report)
 }
 
 impl Walker<'_> {
@@ -415,6 +476,13 @@ impl Walker<'_> {
                 let at = v0 * b[0] + v1 * b[1] + v2 * b[2];
                 let (d, weight) = if along_lamps {
                     match surface.entry(lamps, at, normal, c, shadows, &mut rng) {
+                        // Behind a refractive boundary the light bends towards the normal.
+                        Some((d, w)) if surface.eta != 1.0 => {
+                            match refract(d, normal, 1.0 / surface.eta) {
+                                Some(d) => (d, w),
+                                None => continue,
+                            }
+                        }
                         Some(entry) => entry,
                         None => continue,
                     }
@@ -470,22 +538,48 @@ impl Walker<'_> {
                 }
             }
             if let Some(hit) = (!inside).then(|| bvh.intersect(x, d, s)).flatten() {
+                // Behind a refractive boundary: reflected back in with Fresnel's probability
+                // (always beyond the critical angle), a new flight from the surface;
+                // otherwise out, refracted away from the normal.
+                let d_out = match surface.leave(mesh, &hit, d, rng) {
+                    Ok(d_out) => d_out,
+                    Err(reflected) => {
+                        x = x + d * hit.t
+                            - surface.outward_normal(mesh, hit.triangle as usize) * eps;
+                        d = reflected;
+                        ball = (x, 0.0);
+                        continue;
+                    }
+                };
                 if order >= self.min_order {
                     tally.left[c] += weight;
-                    self.deposit(scratch, &hit, d, c, weight);
+                    self.deposit(scratch, &hit, d_out, c, weight);
                 }
-                // On through the air (eta = 1: straight on): into the
-                // object again where the line meets it, gone otherwise.
-                // A hit within a few eps is the exit's own edge
-                // (rounding), and one through a face turned away
-                // is not an entry: neither is taken.
-                let out = x + d * (hit.t + eps);
-                match bvh.intersect(out, d, f64::INFINITY) {
+                // On through the air: into the object again where the line meets it
+                // (refracted, with Fresnel's probability, behind a refractive boundary),
+                // gone otherwise. A hit within a few eps is the exit's own edge (rounding),
+                // and one through a face turned away is not an entry: neither is taken.
+                let out = if surface.eta == 1.0 {
+                    x + d * (hit.t + eps)
+                } else {
+                    x + d * hit.t + d_out * eps
+                };
+                match bvh.intersect(out, d_out, f64::INFINITY) {
                     Some(h)
                         if h.t > 10.0 * eps
-                            && surface.outward_normal(mesh, h.triangle as usize).dot(d) < 0.0 =>
+                            && surface.outward_normal(mesh, h.triangle as usize).dot(d_out)
+                                < 0.0 =>
                     {
-                        x = out + d * (h.t + eps);
+                        let normal = surface.outward_normal(mesh, h.triangle as usize);
+                        let Some(d_in) = surface.enter(d_out, normal, rng) else {
+                            break;
+                        };
+                        x = if surface.eta == 1.0 {
+                            out + d_out * (h.t + eps)
+                        } else {
+                            out + d_out * h.t + d_in * eps
+                        };
+                        d = d_in;
                         ball = (x, 0.0);
                         tally.counters[3] += 1;
                         continue;
@@ -528,6 +622,15 @@ impl Walker<'_> {
             .outward_normal(self.mesh, hit.triangle as usize);
         let cos = normal.dot(d);
         let mu = cos.clamp(0.0, 1.0);
+        // Behind a refractive boundary the composite multiplies the exit lobe by the Fresnel
+        // transmittance of the exit: the lobe is fitted to the exits divided by it (as the
+        // half-space tables store theirs), and F is scaled to the exits' flux
+        // ([`with_exit_lobes`]).
+        let lobe_weight = if self.surface.eta != 1.0 {
+            weight / fresnel_transmittance(self.surface.eta, mu).max(1e-6)
+        } else {
+            weight
+        };
         // Along the surface it leaves through.
         let along = d - normal * cos;
         for (q, w) in corner_weights(self.mesh, self.nodes, hit.triangle as usize) {
@@ -538,10 +641,11 @@ impl Walker<'_> {
             }
             let a = &mut acc[q as usize];
             a[c] += phi * weight;
-            a[3 + c] += phi * mu * weight;
+            a[3 + c] += phi * mu * lobe_weight;
             for (j, x) in along.to_array().iter().enumerate() {
-                a[6 + 3 * c + j] += phi * x * weight;
+                a[6 + 3 * c + j] += phi * x * lobe_weight;
             }
+            a[15 + c] += phi * lobe_weight;
         }
     }
 
@@ -659,11 +763,16 @@ impl Walker<'_> {
 type Rows = Vec<Vec<(u32, Rgb)>>;
 
 /// The walks' result from F's rows and the lobe-weighted exits per receiver: the exit lobes'
-/// slopes and drifts.
-fn with_exit_lobes(rows: Rows, exits: &[Deposit]) -> Walked {
+/// slopes and drifts. Behind a refractive boundary (`eta` != 1) the lobe is fitted to the exits
+/// over their Fresnel transmittance, which the composite multiplies back; each receiver's row
+/// of F is then divided by the flux that lobe lets out per unit ([`lobe_flux`]), so that the
+/// composite lets out the flux that left.
+fn with_exit_lobes(mut rows: Rows, exits: &[Deposit], eta: f64) -> Walked {
+    // The lobe's weight alone: the deposit itself where the surface is index-matched.
+    let lobe_total = |e: &Deposit, c: usize| if eta != 1.0 { e[15 + c] } else { e[c] };
     let slopes: Vec<[f32; 3]> = exits
         .iter()
-        .map(|e| std::array::from_fn(|c| exit_slope(e[3 + c], e[c])))
+        .map(|e| std::array::from_fn(|c| exit_slope(e[3 + c], lobe_total(e, c))))
         .collect();
     let drifts = exits
         .iter()
@@ -672,17 +781,43 @@ fn with_exit_lobes(rows: Rows, exits: &[Deposit]) -> Walked {
             std::array::from_fn(|c| {
                 exit_drift(
                     DVec3::new(e[6 + 3 * c], e[7 + 3 * c], e[8 + 3 * c]),
-                    e[c],
+                    lobe_total(e, c),
                     k[c],
                 )
             })
         })
         .collect();
+    if eta != 1.0 {
+        for (row, k) in rows.iter_mut().zip(&slopes) {
+            let flux: [f64; 3] = std::array::from_fn(|c| lobe_flux(eta, k[c]));
+            for (_, v) in row.iter_mut() {
+                for c in 0..3 {
+                    v.0[c] /= flux[c];
+                }
+            }
+        }
+    }
     Walked {
         rows,
         slopes,
         drifts,
     }
+}
+
+/// The flux that leaves through a refractive boundary of relative index `eta` per unit of a
+/// lobe of slope `k` (radiance F_t(eta, mu) (1 + k (mu - 2/3)) / pi per unit): 2 times the
+/// integral over (0, 1) of F_t(eta, mu) (1 + k (mu - 2/3)) mu dmu, by the midpoint rule. 1 where
+/// eta = 1.
+pub fn lobe_flux(eta: f64, k: f32) -> f64 {
+    const STEPS: usize = 256;
+    let k = k as f64;
+    (0..STEPS)
+        .map(|i| {
+            let mu = (i as f64 + 0.5) / STEPS as f64;
+            2.0 * fresnel_transmittance(eta, mu) * (1.0 + k * (mu - 2.0 / 3.0)).max(0.0) * mu
+        })
+        .sum::<f64>()
+        / STEPS as f64
 }
 
 /// The drift a of the exit lobe 1 + k (mu - 2/3) + a . w (w the exit direction, a along the
@@ -745,16 +880,19 @@ mod tests {
             .unwrap()
     }
 
-    /// Mean exit cosine of the tabulated lobe, as a slope ([`exit_slope`]).
+    /// Mean exit cosine of the tabulated lobe, as a slope ([`exit_slope`]). Behind a
+    /// refractive boundary the table's lobe is the exits' over their transmittance, whose
+    /// integral is not 1: the mean is over the lobe's own integral.
     fn table_slope(p: &crate::physics::profile::Profile) -> f64 {
         let steps = 1000;
-        let mean = (0..steps)
-            .map(|i| {
-                let mu = (i as f64 + 0.5) / steps as f64;
-                mu * p.exit_lobe(mu) * 2.0 * mu / steps as f64
-            })
-            .sum::<f64>();
-        18.0 * (mean - 2.0 / 3.0)
+        let (mut moment, mut total) = (0.0, 0.0);
+        for i in 0..steps {
+            let mu = (i as f64 + 0.5) / steps as f64;
+            let w = p.exit_lobe(mu) * 2.0 * mu / steps as f64;
+            moment += mu * w;
+            total += w;
+        }
+        18.0 * (moment / total - 2.0 / 3.0)
     }
 
     /// On a box much larger than the diffusion length the walks return what a half-space
@@ -763,11 +901,27 @@ mod tests {
     /// tabulated exit lobe. Ketchup: the red channel's diffusion length is 5 mm, the box 2 m.
     #[test]
     fn a_large_box_returns_the_half_space_total_and_lobe() {
+        a_large_box_at(1.0);
+    }
+
+    /// The same behind a refractive boundary (eta 1.3): walks reflected back in with Fresnel's
+    /// probability, the lobe fitted to the exits over their transmittance, against the table
+    /// made behind the same boundary.
+    #[test]
+    fn a_large_box_behind_a_boundary_returns_the_half_space_total_and_lobe() {
+        a_large_box_at(1.3);
+    }
+
+    fn a_large_box_at(eta: f64) {
         // Four segments a side: a node at each face's centre, its support a flat square
         // hundreds of diffusion lengths across, and few nodes to walk from.
         let mesh = Mesh::cuboid(glam::Vec3::new(2000.0, 2000.0, 1000.0), 4);
         let nodes = Nodes::build(&mesh, 500.0);
-        let m = medium_of("ketchup", true);
+        let p = medium_of("ketchup", true);
+        let m = Material::custom(p.sigma_s_prime, p.sigma_a, eta)
+            .unwrap()
+            .with_model(Model::Volume)
+            .unwrap();
         let centre = nodes
             .positions
             .iter()
@@ -780,7 +934,7 @@ mod tests {
             let want = table.total_reflectance();
             let k = table_slope(&table.profiles()[0]);
             println!(
-                "orders >= {min_order}: left {:?}, table {want:?}; red lobe slope at the centre {:.3}, table {k:.3}",
+                "eta {eta}, orders >= {min_order}: left {:?}, table {want:?}; red lobe slope at the centre {:.3}, table {k:.3}",
                 report.left, walked.slopes[centre][0]
             );
             assert_eq!(report.truncated, 0);

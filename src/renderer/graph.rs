@@ -391,7 +391,10 @@ impl<'a> Assembly<'a> {
                 single_pass,
                 chord: scene.material.model.gathers_over_chord(),
                 shadow_maps,
-                oblique: scene.material.model.oblique_exit() && scene.environment.is_none(),
+                // The half-space's oblique lobes are an index-matched surface's.
+                oblique: scene.material.model.oblique_exit()
+                    && scene.environment.is_none()
+                    && scene.material.eta == 1.0,
                 environment,
                 surface: scene.surface.reflects(&scene.material),
             },
