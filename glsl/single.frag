@@ -11,10 +11,10 @@
 // as medium).
 // Behind a refractive boundary (eta != 1; Jensen et al. 2001's single-scattering term with its
 // planar approximation at each end): the view ray runs on refracted towards the normal, the
-// light's path inside is refracted at its entry (found in the object's shape as the shadow map
-// sees it, `refracted_path`), and the light is
-// weighed by the Fresnel transmittance at both ends, by cos_i / cos_t (the beam inside is
-// narrower) and by 1 / eta^2 (radiance leaving a medium of index eta).
+// light's path inside is refracted at its entry (`refracted_path`, checked against the
+// object's shape as the shadow map sees it), and the light is weighed by the Fresnel
+// transmittance at both ends, by cos_i / cos_t (the beam inside is narrower) and by 1 / eta^2
+// (radiance leaving a medium of index eta).
 // Alpha holds the length of the ray inside (to the nearest back face; 0 where the pass found
 // none, as in a pixel it did not draw), for the composite's chord factor of the higher orders.
 // The ray is cut into STEPS intervals of equal optical depth in the least extinguishing
@@ -109,18 +109,18 @@ vec3 entry_normal(vec3 entry, uint layer, vec2 uv, vec3 travel) {
     return dot(normal, travel) > 0.0 ? -normal : normal;
 }
 
-// Bisection steps that find where a refracted path leaves the object.
-const uint PATH_STEPS = 8u;
+// How far (a fraction of the path) the start of a planar refracted path may lie from the
+// surface the shadow map sees there.
+const float PLANE_TOLERANCE = 0.25;
 
 // Behind a refractive boundary, the path of the light of `l` that reaches p (a point inside)
-// refracted: its length inside and the cosine at which it entered. The path is found in the
-// object's own shape, as the shadow map sees it: the light's straight entry gives a first
-// entry normal; the light refracted there travels along t, and the path starts where the line
-// back from p along -t leaves the object (bisection on the map's inside test); where that
-// exit is a surface the light reaches, its normal gives t again, once. Where it is not (the
-// line leaves through a side turned from the light, as past a terminator, where refraction
-// forbids the short grazing path), the straight path stands. Zero length and normal
-// incidence where the map sees no surface on the straight line.
+// refracted, and the cosine at which it entered: Jensen et al.'s planar estimate at the
+// light's straight entry (the depth below the entry's tangent plane over cos_t), kept where
+// the refracted path it implies starts on a surface the light reaches (the shadow map sees it
+// there, within a fraction of the path); where it does not (it leaves through a side turned
+// from the light, as past a terminator, where refraction forbids the short grazing path the
+// plane offers), the straight path and its entry. Zero length and normal incidence where the
+// map sees no surface on the straight line.
 float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
     cos_i = 1.0;
     vec3 entry;
@@ -132,47 +132,20 @@ float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
     float straight = max(dot(p - entry, travel), 0.0);
     vec3 n = entry_normal(entry, layer, uv, travel);
     cos_i = clamp(-dot(n, travel), 0.0, 1.0);
-    if (straight <= 0.0) {
-        return 0.0;
+    vec3 t = refract(travel, n, 1.0 / eta);
+    if (straight <= 0.0 || dot(t, t) == 0.0) {
+        return straight;
     }
-    float length_inside = straight;
-    for (int pass = 0; pass < 2; ++pass) {
-        vec3 t = refract(travel, n, 1.0 / eta);
-        if (dot(t, t) == 0.0) {
-            break;
-        }
-        // Back along -t a plane's exit lies within the straight depth over t's share of the
-        // light's travel.
-        float lo = 0.0;
-        float hi = straight / max(dot(t, travel), 0.2);
-        for (uint k = 0u; k < PATH_STEPS; ++k) {
-            float mid = 0.5 * (lo + hi);
-            vec3 q = p - t * mid;
-            vec3 e;
-            uint lq;
-            vec2 uq;
-            bool inside = entry_point(l, q, e, lq, uq) && dot(q - e, travel) > 0.0;
-            if (inside) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        // The exit must be where the light enters: the first surface the map sees on the
-        // light's line through it.
-        vec3 q = p - t * hi;
-        vec3 e;
-        uint lq;
-        vec2 uq;
-        if (!entry_point(l, q, e, lq, uq)
-            || abs(dot(q - e, travel)) > 0.05 * straight + 2.0 * (hi - lo)) {
-            break;
-        }
-        length_inside = hi;
-        n = entry_normal(e, lq, uq, travel);
-        cos_i = clamp(-dot(n, travel), 0.0, 1.0);
+    float cos_t = -dot(n, t);
+    float planar = straight * cos_i / max(cos_t, 1e-6);
+    vec3 q = p - t * planar;
+    vec3 e;
+    uint lq;
+    vec2 uq;
+    if (entry_point(l, q, e, lq, uq) && abs(dot(q - e, travel)) <= PLANE_TOLERANCE * planar) {
+        return planar;
     }
-    return length_inside;
+    return straight;
 }
 
 // The light of `l` at p inside the object: the distance it travels inside, and its irradiance
