@@ -2,6 +2,37 @@
 
 use super::*;
 
+/// Arguments of `bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Frames to time after the warm-up.
+    #[arg(long, default_value_t = 30)]
+    pub frames: usize,
+    /// Warm-up frames (shader compilation, caches), not timed.
+    #[arg(long, default_value_t = 3)]
+    pub warmup: usize,
+    /// Output folder for bench.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Blending mode (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
+    /// How the global pass reads its matrix: texel buffers, storage buffers, or whichever of
+    /// them (and of one lane or the derived lanes per row) runs fastest here, measured.
+    #[arg(long, value_enum, default_value_t = GlobalLayout::Auto)]
+    pub global_layout: GlobalLayout,
+    /// Lanes that sum one row of the global pass: a power of two up to the device's subgroup
+    /// size (default: derived from the subgroup size and the rows' mean length, and printed).
+    #[arg(long)]
+    pub global_lanes: Option<u32>,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
 pub(super) fn bench(cli: &Cli, args: &BenchArgs) -> Result<()> {
     frame_count("--frames", args.frames, 1)?;
     frame_count("--warmup", args.warmup, 0)?;

@@ -2,6 +2,20 @@
 
 use super::*;
 
+/// Arguments of `borders`.
+#[derive(Debug, Args, Default)]
+pub struct BordersArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder for borders.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
 pub(super) fn borders(args: &BordersArgs) -> Result<()> {
     use crate::reference::{borders, ReferenceSettings};
     let mut scene = args.input.load()?;

@@ -4,6 +4,40 @@ use super::*;
 use crate::physics::Model;
 use crate::reference::{Reference, ReferenceSettings};
 
+/// Arguments of `chart`.
+#[derive(Debug, Args)]
+pub struct ChartArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out/chart")]
+    pub out: PathBuf,
+    /// Timed frames per point, spread over three interleaved rounds from 6 frames on (each
+    /// round after one warm-up frame).
+    #[arg(long, default_value_t = 6)]
+    pub frames: usize,
+    /// A few settings only (for CI).
+    #[arg(long)]
+    pub quick: bool,
+    /// Target relative error for the automatic setting.
+    #[arg(long, default_value_t = preprocess::DEFAULT_TARGET_ERROR)]
+    pub target_error: f64,
+    /// Cache folder for the preprocessing and the truth.
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
+    /// Paths per pixel and channel of the volumetric truth (traced once per scene and cached);
+    /// 0 leaves the truth out.
+    #[arg(long, default_value_t = 128)]
+    pub truth_spp: u32,
+    /// Models to chart besides the scene's, each in its default blending (optimized; simple
+    /// for `volume`, against the truth alone), e.g. "dipole,halfspace"; by default every other
+    /// model that applies (at eta = 1: the dipole, both half-space models and, on a closed
+    /// mesh, the walks; elsewhere the dipole only).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub models: Option<Vec<crate::physics::Model>>,
+}
+
 /// Another model's scene (material under the model) and its exact reference, where there is one.
 type OtherScene = (Scene, Option<Reference>);
 

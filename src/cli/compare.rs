@@ -2,6 +2,25 @@
 
 use super::*;
 
+/// Arguments of `compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// The render (EXR, alpha = coverage).
+    pub render: PathBuf,
+    /// The reference (EXR).
+    pub reference: PathBuf,
+    /// The reference's per-pixel standard deviation (`truth`'s noise.exr): removed from the
+    /// error in quadrature.
+    #[arg(long)]
+    pub noise: Option<PathBuf>,
+    /// Output folder for error.exr, error.png and error.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Relative error shown as full red in error.png.
+    #[arg(long, default_value_t = 0.1)]
+    pub full_scale: f32,
+}
+
 /// The images compared: the render, the reference and its noise, all of one size.
 struct Images {
     /// Width in pixels.

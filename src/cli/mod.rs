@@ -12,6 +12,18 @@ mod tools;
 mod truth;
 mod view;
 
+pub use bench::BenchArgs;
+pub use borders::BordersArgs;
+pub use chart::ChartArgs;
+pub use compare::CompareArgs;
+pub use precompute::PrecomputeArgs;
+pub use prt::PrtArgs;
+pub use reference::ReferenceArgs;
+pub use render::RenderArgs;
+pub use tools::{SkyArgs, TabulateArgs};
+pub use truth::TruthArgs;
+pub use view::ViewArgs;
+
 use crate::gpu::{list_devices, Gpu, GpuOptions};
 use crate::graph::timing::TimingReport;
 use crate::output;
@@ -83,250 +95,6 @@ pub enum Command {
     /// the lights in the panel, save screenshots and the scene; `--script` drives it without
     /// input.
     View(ViewArgs),
-}
-
-/// Arguments of `tabulate`.
-#[derive(Debug, Args)]
-pub struct TabulateArgs {
-    /// Paths per albedo.
-    #[arg(long, default_value_t = 4_000_000)]
-    pub paths: u64,
-    /// Random seed.
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Relative index of refraction of the boundary (1: index-matched).
-    #[arg(long, default_value_t = 1.0)]
-    pub eta: f64,
-    /// The table file to write [default: the shipped one of --eta,
-    /// `assets/profiles/halfspace.txt` or `assets/profiles/halfspace-eta{ETA}.txt`].
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-}
-
-/// Arguments of `sky`.
-#[derive(Debug, Args)]
-pub struct SkyArgs {
-    /// Width in pixels (the height is half).
-    #[arg(long, default_value_t = 512)]
-    pub width: u32,
-    /// The OpenEXR file to write.
-    #[arg(long, default_value = "assets/environments/sky.exr")]
-    pub out: PathBuf,
-    /// The sun's irradiance at normal incidence over the sky's on level ground (0: no sun).
-    #[arg(long, default_value_t = crate::environment::sky::SUN_TO_SKY)]
-    pub sun_to_sky: f64,
-}
-
-/// Arguments of `prt`.
-#[derive(Debug, Args, Default)]
-pub struct PrtArgs {
-    /// The scene (with an environment light) and what replaces parts of it.
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Output folder.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Orders to measure.
-    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6")]
-    pub orders: Vec<u32>,
-    /// Rays per texel of the ray-traced reference.
-    #[arg(long, default_value_t = 4096)]
-    pub reference_rays: u32,
-    /// Compare every this many texels (surely covered ones).
-    #[arg(long, default_value_t = 4)]
-    pub stride: usize,
-    /// Timed frames per order (the illumination pass's median).
-    #[arg(long, default_value_t = 30)]
-    pub frames: usize,
-    /// Preprocessing controls.
-    #[command(flatten)]
-    pub pre: PreprocessArgs,
-}
-
-/// Arguments of `borders`.
-#[derive(Debug, Args, Default)]
-pub struct BordersArgs {
-    /// The scene and what replaces parts of it.
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Output folder for borders.json.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Preprocessing controls.
-    #[command(flatten)]
-    pub pre: PreprocessArgs,
-}
-
-/// Arguments of `view`.
-#[derive(Debug, Args, Default)]
-pub struct ViewArgs {
-    /// The scene and what replaces parts of it (the window starts at the scene's image size).
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Folder for screenshots (key `p`).
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Starting blending mode (default: the model's, `Blend::for_model`).
-    #[arg(long, value_enum)]
-    pub mode: Option<Blend>,
-    /// A script of viewer actions, as a file or inline text, e.g.
-    /// "frames 3; light 40 0; screenshot lit; quit" (see `src/viewer/script.rs`).
-    #[arg(long)]
-    pub script: Option<String>,
-    /// Present without waiting for vertical blank (mailbox or immediate where offered).
-    #[arg(long)]
-    pub no_vsync: bool,
-    /// More environment maps (OpenEXR or Radiance HDR) to switch between with key `e`, for a
-    /// scene with an environment light.
-    #[arg(long, value_delimiter = ',')]
-    pub environment: Vec<PathBuf>,
-    /// Where an edit of the material's coefficients, index or model re-weights the operators
-    /// (the settings, and so the atlas and the nodes, stay): on the device (its compute
-    /// pass), on the CPU, or `off`: the whole preprocessing for every edit.
-    #[arg(long, value_enum, default_value = "device")]
-    pub reweigh: crate::viewer::Reweigh,
-    /// Milliseconds a material or settings request must stay unchanged before it is
-    /// prepared (the preview shows every edit at once): a slider drag is prepared where it
-    /// stops, not at every value it passes.
-    #[arg(long, default_value_t = 200)]
-    pub settle_ms: u64,
-    /// Preprocessing controls.
-    #[command(flatten)]
-    pub pre: PreprocessArgs,
-}
-
-/// Arguments of `reference`.
-#[derive(Debug, Args)]
-pub struct ReferenceArgs {
-    /// The scene and what replaces parts of it.
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Output folder.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Sample spacing in mm (default: half the smallest z_r).
-    #[arg(long)]
-    pub spacing_mm: Option<f64>,
-    /// Opening angle of the hierarchical sum (default 0.25).
-    #[arg(long)]
-    pub theta: Option<f64>,
-    /// Also compute with half the spacing and theta, and report how much the answer moves.
-    #[arg(long)]
-    pub refine: bool,
-}
-
-/// Arguments of `truth`.
-#[derive(Debug, Args)]
-pub struct TruthArgs {
-    /// The scene and what replaces parts of it (any eta: a smooth dielectric boundary).
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Output folder.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Paths per pixel and channel, both halves together.
-    #[arg(long, default_value_t = 64)]
-    pub spp: u32,
-    /// Trace for this many seconds instead of a number of paths.
-    #[arg(long, conflicts_with = "spp")]
-    pub time: Option<f64>,
-    /// Seed of the random streams (the image is a function of the seed and the samples).
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Henyey-Greenstein mean cosine (sigma_s = sigma_s' / (1 - g)); 0 is the isotropic phase
-    /// on the reduced coefficients that the dipole assumes.
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub g: f64,
-    /// Count scattering orders from this one on (2: everything but single scattering).
-    #[arg(long, default_value_t = 1)]
-    pub min_order: u32,
-    /// Count scattering orders up to this one (1: single scattering alone).
-    #[arg(long)]
-    pub max_order: Option<u32>,
-}
-
-/// Arguments of `chart`.
-#[derive(Debug, Args)]
-pub struct ChartArgs {
-    /// The scene and what replaces parts of it.
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Output folder.
-    #[arg(long, default_value = "out/chart")]
-    pub out: PathBuf,
-    /// Timed frames per point, spread over three interleaved rounds from 6 frames on (each
-    /// round after one warm-up frame).
-    #[arg(long, default_value_t = 6)]
-    pub frames: usize,
-    /// A few settings only (for CI).
-    #[arg(long)]
-    pub quick: bool,
-    /// Target relative error for the automatic setting.
-    #[arg(long, default_value_t = preprocess::DEFAULT_TARGET_ERROR)]
-    pub target_error: f64,
-    /// Cache folder for the preprocessing and the truth.
-    #[arg(long)]
-    pub cache: Option<PathBuf>,
-    /// Paths per pixel and channel of the volumetric truth (traced once per scene and cached);
-    /// 0 leaves the truth out.
-    #[arg(long, default_value_t = 128)]
-    pub truth_spp: u32,
-    /// Models to chart besides the scene's, each in its default blending (optimized; simple
-    /// for `volume`, against the truth alone), e.g. "dipole,halfspace"; by default every other
-    /// model that applies (at eta = 1: the dipole, both half-space models and, on a closed
-    /// mesh, the walks; elsewhere the dipole only).
-    #[arg(long, value_enum, value_delimiter = ',')]
-    pub models: Option<Vec<crate::physics::Model>>,
-}
-
-/// Arguments of `compare`.
-#[derive(Debug, Args)]
-pub struct CompareArgs {
-    /// The render (EXR, alpha = coverage).
-    pub render: PathBuf,
-    /// The reference (EXR).
-    pub reference: PathBuf,
-    /// The reference's per-pixel standard deviation (`truth`'s noise.exr): removed from the
-    /// error in quadrature.
-    #[arg(long)]
-    pub noise: Option<PathBuf>,
-    /// Output folder for error.exr, error.png and error.json.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Relative error shown as full red in error.png.
-    #[arg(long, default_value_t = 0.1)]
-    pub full_scale: f32,
-}
-
-/// Arguments of `bench`.
-#[derive(Debug, Args)]
-pub struct BenchArgs {
-    /// The scene and what replaces parts of it.
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Frames to time after the warm-up.
-    #[arg(long, default_value_t = 30)]
-    pub frames: usize,
-    /// Warm-up frames (shader compilation, caches), not timed.
-    #[arg(long, default_value_t = 3)]
-    pub warmup: usize,
-    /// Output folder for bench.json.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Blending mode (default: the model's, `Blend::for_model`).
-    #[arg(long, value_enum)]
-    pub mode: Option<Blend>,
-    /// How the global pass reads its matrix: texel buffers, storage buffers, or whichever of
-    /// them (and of one lane or the derived lanes per row) runs fastest here, measured.
-    #[arg(long, value_enum, default_value_t = GlobalLayout::Auto)]
-    pub global_layout: GlobalLayout,
-    /// Lanes that sum one row of the global pass: a power of two up to the device's subgroup
-    /// size (default: derived from the subgroup size and the rows' mean length, and printed).
-    #[arg(long)]
-    pub global_lanes: Option<u32>,
-    /// Preprocessing controls.
-    #[command(flatten)]
-    pub pre: PreprocessArgs,
 }
 
 /// The scene to use and the command-line values that replace parts of it.
@@ -446,48 +214,6 @@ impl PreprocessArgs {
             cache: self.cache_dir(),
         }
     }
-}
-
-/// Arguments of `precompute`.
-#[derive(Debug, Args, Default)]
-pub struct PrecomputeArgs {
-    /// The scene and what replaces parts of it.
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Preprocessing controls.
-    #[command(flatten)]
-    pub pre: PreprocessArgs,
-    /// Also re-weight the operators for the material this many times on the device (the
-    /// viewer's material edit, `passes::reweigh`) and once on the CPU, and print the times.
-    #[arg(long, value_name = "TIMES")]
-    pub reweigh: Option<usize>,
-}
-
-/// Arguments of `render` (no `Default`: the bare command takes clap's defaults, see
-/// `bare_render_args`).
-#[derive(Debug, Args)]
-pub struct RenderArgs {
-    /// The scene and what replaces parts of it.
-    #[command(flatten)]
-    pub input: SceneArgs,
-    /// Output folder.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
-    /// Frames to render and time (the images are the last frame's).
-    #[arg(long, default_value_t = 10)]
-    pub frames: usize,
-    /// Blending of local and global responses: local, global, simple or optimized (default: the model's, `Blend::for_model`).
-    #[arg(long, value_enum)]
-    pub mode: Option<Blend>,
-    /// Move the lights a full turn around the object over the frames (no preprocessing).
-    #[arg(long)]
-    pub orbit_light: bool,
-    /// Write every frame as frame_NNNN.png.
-    #[arg(long)]
-    pub save_frames: bool,
-    /// Preprocessing controls.
-    #[command(flatten)]
-    pub pre: PreprocessArgs,
 }
 
 /// Most frames a command renders or warms up with: a hundred thousand frames are hours on a

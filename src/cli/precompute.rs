@@ -2,6 +2,21 @@
 
 use super::*;
 
+/// Arguments of `precompute`.
+#[derive(Debug, Args, Default)]
+pub struct PrecomputeArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+    /// Also re-weight the operators for the material this many times on the device (the
+    /// viewer's material edit, `passes::reweigh`) and once on the CPU, and print the times.
+    #[arg(long, value_name = "TIMES")]
+    pub reweigh: Option<usize>,
+}
+
 pub(super) fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
     if let Some(times) = args.reweigh {
         frame_count("--reweigh", times, 1)?;

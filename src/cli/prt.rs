@@ -3,6 +3,32 @@
 use super::*;
 use crate::reference::texels::{TexelError, TexelReference};
 
+/// Arguments of `prt`.
+#[derive(Debug, Args, Default)]
+pub struct PrtArgs {
+    /// The scene (with an environment light) and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Orders to measure.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6")]
+    pub orders: Vec<u32>,
+    /// Rays per texel of the ray-traced reference.
+    #[arg(long, default_value_t = 4096)]
+    pub reference_rays: u32,
+    /// Compare every this many texels (surely covered ones).
+    #[arg(long, default_value_t = 4)]
+    pub stride: usize,
+    /// Timed frames per order (the illumination pass's median).
+    #[arg(long, default_value_t = 30)]
+    pub frames: usize,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
 pub(super) fn prt(cli: &Cli, args: &PrtArgs) -> Result<()> {
     let scene = args.input.load()?;
     validate(&scene, args)?;

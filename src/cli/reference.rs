@@ -2,6 +2,26 @@
 
 use super::*;
 
+/// Arguments of `reference`.
+#[derive(Debug, Args)]
+pub struct ReferenceArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Sample spacing in mm (default: half the smallest z_r).
+    #[arg(long)]
+    pub spacing_mm: Option<f64>,
+    /// Opening angle of the hierarchical sum (default 0.25).
+    #[arg(long)]
+    pub theta: Option<f64>,
+    /// Also compute with half the spacing and theta, and report how much the answer moves.
+    #[arg(long)]
+    pub refine: bool,
+}
+
 /// Most surface samples `reference --spacing-mm` may ask for (a few GiB of samples).
 pub(super) const MAX_REFERENCE_SAMPLES: f64 = 5e7;
 

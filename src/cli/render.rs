@@ -2,6 +2,33 @@
 
 use super::*;
 
+/// Arguments of `render` (no `Default`: the bare command takes clap's defaults, see
+/// `bare_render_args`).
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// The scene and what replaces parts of it.
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Frames to render and time (the images are the last frame's).
+    #[arg(long, default_value_t = 10)]
+    pub frames: usize,
+    /// Blending of local and global responses: local, global, simple or optimized (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
+    /// Move the lights a full turn around the object over the frames (no preprocessing).
+    #[arg(long)]
+    pub orbit_light: bool,
+    /// Write every frame as frame_NNNN.png.
+    #[arg(long)]
+    pub save_frames: bool,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
 /// The files `render` writes into its output folder (besides frame_NNNN.png).
 pub(super) const RENDER_OUTPUTS: &[&str] = &[
     "render.png",

@@ -2,6 +2,38 @@
 
 use super::*;
 
+/// Arguments of `sky`.
+#[derive(Debug, Args)]
+pub struct SkyArgs {
+    /// Width in pixels (the height is half).
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// The OpenEXR file to write.
+    #[arg(long, default_value = "assets/environments/sky.exr")]
+    pub out: PathBuf,
+    /// The sun's irradiance at normal incidence over the sky's on level ground (0: no sun).
+    #[arg(long, default_value_t = crate::environment::sky::SUN_TO_SKY)]
+    pub sun_to_sky: f64,
+}
+
+/// Arguments of `tabulate`.
+#[derive(Debug, Args)]
+pub struct TabulateArgs {
+    /// Paths per albedo.
+    #[arg(long, default_value_t = 4_000_000)]
+    pub paths: u64,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Relative index of refraction of the boundary (1: index-matched).
+    #[arg(long, default_value_t = 1.0)]
+    pub eta: f64,
+    /// The table file to write [default: the shipped one of --eta,
+    /// `assets/profiles/halfspace.txt` or `assets/profiles/halfspace-eta{ETA}.txt`].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
 pub(super) fn sky(args: &SkyArgs) -> Result<()> {
     crate::output::check_replaceable(&args.out)?;
     if !(8..=16384).contains(&args.width) || !args.width.is_multiple_of(2) {

@@ -2,6 +2,36 @@
 
 use super::*;
 
+/// Arguments of `truth`.
+#[derive(Debug, Args)]
+pub struct TruthArgs {
+    /// The scene and what replaces parts of it (any eta: a smooth dielectric boundary).
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Output folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Paths per pixel and channel, both halves together.
+    #[arg(long, default_value_t = 64)]
+    pub spp: u32,
+    /// Trace for this many seconds instead of a number of paths.
+    #[arg(long, conflicts_with = "spp")]
+    pub time: Option<f64>,
+    /// Seed of the random streams (the image is a function of the seed and the samples).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Henyey-Greenstein mean cosine (sigma_s = sigma_s' / (1 - g)); 0 is the isotropic phase
+    /// on the reduced coefficients that the dipole assumes.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub g: f64,
+    /// Count scattering orders from this one on (2: everything but single scattering).
+    #[arg(long, default_value_t = 1)]
+    pub min_order: u32,
+    /// Count scattering orders up to this one (1: single scattering alone).
+    #[arg(long)]
+    pub max_order: Option<u32>,
+}
+
 /// The traced image's figures that `truth.json` and the summary report.
 struct Figures {
     /// The medium traced.

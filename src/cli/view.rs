@@ -2,6 +2,44 @@
 
 use super::*;
 
+/// Arguments of `view`.
+#[derive(Debug, Args, Default)]
+pub struct ViewArgs {
+    /// The scene and what replaces parts of it (the window starts at the scene's image size).
+    #[command(flatten)]
+    pub input: SceneArgs,
+    /// Folder for screenshots (key `p`).
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Starting blending mode (default: the model's, `Blend::for_model`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Blend>,
+    /// A script of viewer actions, as a file or inline text, e.g.
+    /// "frames 3; light 40 0; screenshot lit; quit" (see `src/viewer/script.rs`).
+    #[arg(long)]
+    pub script: Option<String>,
+    /// Present without waiting for vertical blank (mailbox or immediate where offered).
+    #[arg(long)]
+    pub no_vsync: bool,
+    /// More environment maps (OpenEXR or Radiance HDR) to switch between with key `e`, for a
+    /// scene with an environment light.
+    #[arg(long, value_delimiter = ',')]
+    pub environment: Vec<PathBuf>,
+    /// Where an edit of the material's coefficients, index or model re-weights the operators
+    /// (the settings, and so the atlas and the nodes, stay): on the device (its compute
+    /// pass), on the CPU, or `off`: the whole preprocessing for every edit.
+    #[arg(long, value_enum, default_value = "device")]
+    pub reweigh: crate::viewer::Reweigh,
+    /// Milliseconds a material or settings request must stay unchanged before it is
+    /// prepared (the preview shows every edit at once): a slider drag is prepared where it
+    /// stops, not at every value it passes.
+    #[arg(long, default_value_t = 200)]
+    pub settle_ms: u64,
+    /// Preprocessing controls.
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
+}
+
 pub(super) fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
     // The script is checked before anything slow happens.
     let script = match &args.script {
