@@ -55,7 +55,7 @@ layout(constant_id = 1) const bool SINGLE = false;
 layout(constant_id = 2) const bool CHORD = false;
 // True where orders >= 2 take the half-space's exit lobe of the incidence at which the lamps'
 // light enters here (`volume` in a scene without an environment, whose sky this does not
-// weigh): see oblique_exit.
+// weigh, and index-matched, as the half-space's lobes are): see oblique_exit.
 layout(constant_id = 3) const bool OBLIQUE = false;
 // True where the surface's own reflection is added: a refractive boundary (eta != 1) with the
 // surface on. The light it reflects is what the illumination pass's Fresnel transmittance kept

@@ -163,6 +163,37 @@ float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, inout
     return d;
 }
 
+// Bisection steps that find where the refracted view ray leaves the object.
+const uint EXIT_STEPS = 8u;
+
+// Length of the refracted view ray inside, from x along `inside`: where it meets the nearest
+// back face `thickness` drew at the pixel each of its points falls on (bisection over
+// [0, longest]; the refracted chord of a curved object is longer than the straight one near
+// its rim, and `longest` bounds it).
+float refracted_exit(vec3 x, vec3 inside, float longest, vec2 size) {
+    float lo = 0.0;
+    float hi = longest;
+    for (uint k = 0u; k < EXIT_STEPS; ++k) {
+        float mid = 0.5 * (lo + hi);
+        vec4 clip = frame.view_proj * vec4(x + inside * mid, 1.0);
+        bool within = false;
+        if (clip.w > 0.0) {
+            vec3 q = clip.xyz / clip.w;
+            ivec2 pixel = ivec2((q.xy * 0.5 + 0.5) * size);
+            if (all(greaterThanEqual(pixel, ivec2(0))) && all(lessThan(pixel, ivec2(size)))) {
+                float zq = texelFetch(back_depth, pixel, 0).r;
+                within = zq < 1.0 && q.z < zq;
+            }
+        }
+        if (within) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
 void main() {
     vec3 x = in_position;
     vec3 d = normalize(x - frame.camera_pos.xyz);
@@ -180,6 +211,9 @@ void main() {
     float zb = texelFetch(back_depth, ivec2(gl_FragCoord.xy), 0).r;
     vec2 ndc = gl_FragCoord.xy / size * 2.0 - 1.0;
     float s_exit = zb < 1.0 ? max(dot(unproject(frame.inverse_view_proj, ndc, zb) - x, d), 0.0) : 0.0;
+    if (refracts && s_exit > 0.0) {
+        s_exit = refracted_exit(x, inside, s_exit / max(cos_o, 0.05), size);
+    }
 
     vec3 sigma_t = frame.sigma_t.rgb;
     float ref = min(sigma_t.r, min(sigma_t.g, sigma_t.b));

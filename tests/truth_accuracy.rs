@@ -184,7 +184,7 @@ fn small_and_thin_behind_a_boundary_with_walks() {
         "sphere-ketchup-eta1.3",
         Model::Volume,
         walks(2048),
-        [0.088, 0.088, 0.087],
+        [0.075, 0.088, 0.086],
     );
     refractive(
         "slab-backlit",

@@ -32,8 +32,8 @@ pub struct ChartArgs {
     pub truth_spp: u32,
     /// Models to chart besides the scene's, each in its default blending (optimized; simple
     /// for `volume`, against the truth alone), e.g. "dipole,halfspace"; by default every other
-    /// model that applies (at eta = 1: the dipole, both half-space models and, on a closed
-    /// mesh, the walks; elsewhere the dipole only).
+    /// model that applies (at eta = 1 both half-space models; the walks on a closed mesh
+    /// where the chart has its truth; the dipole and `halfspace` at any eta).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub models: Option<Vec<crate::physics::Model>>,
 }
@@ -173,8 +173,9 @@ fn other_models(scene: &Scene, args: &ChartArgs) -> Vec<Model> {
     let own = scene.material.model;
     match &args.models {
         Some(m) => m.iter().copied().filter(|m| *m != own).collect(),
-        // The walks where they apply: eta = 1 (the material takes the model) and a closed
-        // mesh (`pipeline::choose` refuses the rest).
+        // The models the material takes at its eta, the walks where they apply (a closed
+        // mesh: `pipeline::choose` refuses the rest) and the chart has the truth they are
+        // measured against (the reference does not integrate them).
         None => [
             Model::Dipole,
             Model::Halfspace,
@@ -186,7 +187,7 @@ fn other_models(scene: &Scene, args: &ChartArgs) -> Vec<Model> {
         .filter(|m| {
             *m != own
                 && scene.material.with_model(*m).is_ok()
-                && (!m.walks() || scene.mesh.is_closed())
+                && (!m.walks() || (scene.mesh.is_closed() && args.truth_spp > 0))
         })
         .collect(),
     }

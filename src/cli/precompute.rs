@@ -23,13 +23,16 @@ pub(super) fn precompute(cli: &Cli, args: &PrecomputeArgs) -> Result<()> {
     }
     let mut scene = args.input.load()?;
     let request = args.pre.request();
-    let plan = pipeline::plan(&mut scene, &request)?;
+    // The model first (as `plan` applies it), so that --reweigh is refused for it before the
+    // settings' own checks.
+    pipeline::model::apply_default(&mut scene, request.target_error)?;
     if args.reweigh.is_some() && !crate::passes::reweigh::Reweigher::supports(&scene.material) {
         bail!(
             "--reweigh: model '{}' fills F by random walks, which cannot be re-weighted",
             scene.material.model.name()
         );
     }
+    let plan = pipeline::plan(&mut scene, &request)?;
     println!(
         "mesh: {} vertices, {} triangles, {:.0} mm^2",
         scene.mesh.positions.len(),

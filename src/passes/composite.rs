@@ -54,7 +54,7 @@ pub struct CompositeInputs {
     /// The lights' shadow maps (read where `oblique`).
     pub shadow_maps: ResourceId,
     /// Whether orders >= 2 take the half-space's exit lobe of the lamps' incidence at each
-    /// pixel (`Model::oblique_exit`, in a scene without an environment light).
+    /// pixel (`Model::oblique_exit`, in a scene without an environment light, index-matched).
     pub oblique: bool,
     /// The environment map's radiance per pixel (one black pixel where none is reflected).
     pub environment: ResourceId,

@@ -49,7 +49,7 @@ impl Model {
         if eta != 1.0 {
             (
                 Model::Halfspace,
-                format!("exact half-space profile of every order behind the refractive boundary (eta = {eta}; --model volume walks the mesh behind it: more accurate on closed meshes lit by lamps, slower to prepare)"),
+                format!("exact half-space profile of every order behind the refractive boundary (eta = {eta})"),
             )
         } else if environment {
             (

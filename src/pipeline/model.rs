@@ -67,6 +67,14 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
     // kind decide alone.
     let (model, why) = Model::default_for(m.eta, scene.environment.is_some());
     if model != Model::HalfspaceSingle {
+        // Where the walks would apply, the user is told they can be named.
+        let walkable = scene.environment.is_none() && lamps(scene) > 0 && scene.mesh.is_closed();
+        if m.eta != 1.0 && walkable {
+            return Some((
+                model,
+                format!("{why}; --model volume walks the mesh behind the boundary: nearer the truth, slower to prepare"),
+            ));
+        }
         return Some((model, why));
     }
     let below = m
@@ -104,15 +112,20 @@ pub fn use_model(scene: &mut Scene, model: Model, why: String) -> anyhow::Result
     Ok(())
 }
 
+/// The lamps the walks would enter along (`preprocess::walk::entry_lights`).
+fn lamps(scene: &Scene) -> usize {
+    crate::preprocess::walk::entry_lights(&scene.lights)
+        .iter()
+        .flatten()
+        .count()
+}
+
 /// Why the default is `volume`: the mesh is closed (the walks need an inside), lamps light it
 /// (the walks enter along their light) and no environment does (its sky would enter
 /// everywhere, and the oblique exit lobe does not weigh it). None where one of these fails,
 /// eta is not 1 or the model is given.
 pub fn volume_reason(scene: &Scene) -> Option<String> {
-    let lamps = crate::preprocess::walk::entry_lights(&scene.lights)
-        .iter()
-        .flatten()
-        .count();
+    let lamps = lamps(scene);
     (is_default(scene)
         && scene.material.eta == 1.0
         && scene.environment.is_none()

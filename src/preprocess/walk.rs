@@ -17,10 +17,16 @@
 //! the inward normal, and so does every node of a scene without lamps (the normal incidence
 //! of the tabulated profile that the kernels use). Free flights
 //! are exact (pdf sigma_t e^(-sigma_t s)), scattering isotropic on the reduced coefficients
-//! (as the half-space table and the dipole assume) with analog absorption. The first time a
-//! flight reaches the surface the path leaves there: light that leaves and enters the object
-//! again elsewhere (a concavity lit by the object itself) is not in the method's irradiance
-//! either. A path leaving at x after at least `min_order` scattering events (2 when single
+//! (as the half-space table and the dipole assume) with analog absorption. Index-matched, the
+//! first time a flight reaches the surface the path leaves there; behind a refractive boundary
+//! (eta != 1) the walks enter refracted, weighed by the Fresnel transmittance as the
+//! illumination pass weighs the light, and a flight that reaches the surface is reflected back
+//! in with Fresnel's probability (always beyond the critical angle), else leaves refracted. A
+//! path that left and meets the object again through the air enters there (light that leaves
+//! and enters the object again elsewhere, a concavity lit by the object itself, is not in the
+//! method's irradiance either). Light scattered once that is reflected inside and leaves
+//! without scattering again is in neither F nor the single-scattering pass: none in a
+//! half-space, a little on small and thin objects behind a boundary. A path leaving at x after at least `min_order` scattering events (2 when single
 //! scattering is its own pass) adds w phi_q(x) to every node q of the triangle it leaves
 //! through. With A_p w / sum w of flux per path (unit irradiance weighted by phi_p, spread
 //! over the paths as the lamps' light is; w = 1 along the normal),
@@ -45,7 +51,8 @@ use std::f64::consts::PI;
 
 use super::nodes::Nodes;
 
-/// Collisions after which a walk is cut and counted (`WalkReport::truncated`).
+/// Collisions (and reflections at a refractive boundary) after which a walk is cut and counted
+/// (`WalkReport::truncated`).
 pub const MAX_WALK_EVENTS: u64 = 10_000_000;
 
 /// Seed of every walk's random stream.
@@ -517,6 +524,9 @@ impl Walker<'_> {
         let mut x = at + d * eps;
         let mut order = 0u32;
         let mut events = 0u64;
+        // Reflections at the surface (behind a refractive boundary): cut with the collisions,
+        // since a path reflected totally at every face of a box never leaves.
+        let mut reflections = 0u64;
         // A ball that no surface enters (centre, radius squared): a flight
         // that ends inside it cannot meet the surface and needs no ray cast.
         // It changes no walk, only what a walk costs.
@@ -544,6 +554,11 @@ impl Walker<'_> {
                 let d_out = match surface.leave(mesh, &hit, d, rng) {
                     Ok(d_out) => d_out,
                     Err(reflected) => {
+                        reflections += 1;
+                        if events + reflections >= MAX_WALK_EVENTS {
+                            tally.counters[2] += 1;
+                            break;
+                        }
                         x = x + d * hit.t
                             - surface.outward_normal(mesh, hit.triangle as usize) * eps;
                         d = reflected;
@@ -626,7 +641,9 @@ impl Walker<'_> {
         // transmittance of the exit: the lobe is fitted to the exits divided by it (as the
         // half-space tables store theirs), and F is scaled to the exits' flux
         // ([`with_exit_lobes`]).
-        let lobe_weight = if self.surface.eta != 1.0 {
+        // (A face met from outside at an edge, mu = 0, has no transmittance to divide by: its
+        // exit counts as it is.)
+        let lobe_weight = if self.surface.eta != 1.0 && mu > 0.0 {
             weight / fresnel_transmittance(self.surface.eta, mu).max(1e-6)
         } else {
             weight
@@ -859,7 +876,9 @@ pub struct Walked {
     /// F by receiver rows: (source, value per channel), unpruned.
     pub rows: Vec<Vec<(u32, Rgb)>>,
     /// Per node, the exit lobe's slope per channel ([`exit_slope`]) of everything that left
-    /// through its support, each source weighted by its mean irradiance under the lamps.
+    /// through its support, each source weighted by its mean irradiance under the lamps
+    /// (behind a refractive boundary, of the exits over their Fresnel transmittance, which
+    /// the composite multiplies back).
     pub slopes: Vec<[f32; 3]>,
     /// Per node and channel, the exit lobe's drift along the surface ([`exit_drift`]), a
     /// vector in the mesh's frame, weighted as the slopes are.

@@ -422,7 +422,7 @@ impl Reference {
     ) -> anyhow::Result<()> {
         anyhow::ensure!(
             !model.walks(),
-            "the exact-model reference integrates a radial profile; model {} fills F by random walks in the mesh, whose independent check is volumetric truth (`translucent truth`, eta = 1): compare with that instead",
+            "the exact-model reference integrates a radial profile; model {} fills F by random walks in the mesh, whose independent check is volumetric truth (`translucent truth`): compare with that instead",
             model.name()
         );
         anyhow::ensure!(
