@@ -1,28 +1,43 @@
-//! The smooth dielectric surface's own reflection: Fresnel's reflectance, and the GGX
+//! The smooth dielectric boundary: Fresnel's reflectance, refraction and the mirror direction,
+//! from either side (the volumetric truth and the walks of `volume` cross it with these), and
+//! the surface's own reflection: Fresnel's reflectance and the GGX
 //! microfacet distribution (Walter et al. 2007) with the height-correlated Smith masking
 //! (Heitz 2014) for a surface of some roughness, by which lamps give highlights. The
 //! composite evaluates the same terms (glsl/composite.frag, `surface_reflection`).
 
-use super::fresnel_transmittance;
 use glam::DVec3;
 use std::f64::consts::PI;
 
-/// Fresnel reflectance of unpolarised light arriving from outside at cosine `cos` on a medium
-/// of relative index `eta`: what the surface reflects and the medium does not receive.
-pub fn fresnel_reflectance(eta: f64, cos: f64) -> f64 {
-    1.0 - fresnel_transmittance(eta, cos)
+/// Fresnel reflectance of unpolarised light meeting a smooth boundary at cosine `cos_i` to the
+/// normal, from a side of index n_i towards one of index n_t, `eta` = n_t / n_i; 1 beyond the
+/// critical angle.
+pub fn fresnel_reflectance(cos_i: f64, eta: f64) -> f64 {
+    let cos_i = cos_i.clamp(0.0, 1.0);
+    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t2).sqrt();
+    let parallel = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let perpendicular = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    0.5 * (parallel * parallel + perpendicular * perpendicular)
 }
 
-/// The unit direction `d` (arriving at a surface whose unit normal `n` faces it: `n.d < 0`)
-/// refracted across it, `ratio` the index of d's side over the other's (Snell: sin_t = ratio
-/// sin_i); None beyond the critical angle (total internal reflection).
-pub fn refract(d: DVec3, n: DVec3, ratio: f64) -> Option<DVec3> {
+/// The direction of travel `d` refracted through a boundary whose unit normal `n` faces the
+/// side `d` comes from (n . d < 0), `eta` = n_t / n_i; `None` beyond the critical angle.
+pub fn refract(d: DVec3, n: DVec3, eta: f64) -> Option<DVec3> {
     let cos_i = -n.dot(d);
-    let sin_t2 = ratio * ratio * (1.0 - cos_i * cos_i).max(0.0);
+    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
     if sin_t2 >= 1.0 {
         return None;
     }
-    Some((ratio * d + (ratio * cos_i - (1.0 - sin_t2).sqrt()) * n).normalize())
+    let cos_t = (1.0 - sin_t2).sqrt();
+    Some((d / eta + n * (cos_i / eta - cos_t)).normalize())
+}
+
+/// The mirror direction of `d` about the plane of unit normal `n`.
+pub fn reflect(d: DVec3, n: DVec3) -> DVec3 {
+    d - 2.0 * d.dot(n) * n
 }
 
 /// The GGX width alpha of a roughness in [0, 1] (alpha = roughness^2, as Disney's, Blender's
@@ -48,7 +63,7 @@ pub fn ggx_reflection(eta: f64, alpha: f64, n: DVec3, wi: DVec3, wo: DVec3) -> f
     let v = 0.5
         / (cos_o * (cos_i * cos_i * (1.0 - a2) + a2).sqrt()
             + cos_i * (cos_o * cos_o * (1.0 - a2) + a2).sqrt());
-    d * v * fresnel_reflectance(eta, h.dot(wi).max(0.0)) * cos_i
+    d * v * fresnel_reflectance(h.dot(wi).max(0.0), eta) * cos_i
 }
 
 #[cfg(test)]
@@ -63,7 +78,7 @@ mod tests {
         for (eta, deg) in [(1.3f64, 40.0f64), (1.5, 75.0), (1.0, 30.0)] {
             let (s, c) = deg.to_radians().sin_cos();
             let d = DVec3::new(s, 0.0, -c);
-            let t = refract(d, n, 1.0 / eta).unwrap();
+            let t = refract(d, n, eta).unwrap();
             assert!((t.length() - 1.0).abs() < 1e-12);
             assert!(t.z < 0.0 && t.y.abs() < 1e-12 && t.x > 0.0, "{t}");
             assert!(
@@ -72,14 +87,14 @@ mod tests {
                 t.x
             );
             // From inside back out (normal facing the ray): the incident direction again.
-            let back = refract(-t, -n, eta).unwrap();
+            let back = refract(-t, -n, 1.0 / eta).unwrap();
             assert!((back + d).length() < 1e-12, "{back} vs {}", -d);
         }
         // Inside eta 1.5, beyond asin(1 / 1.5) = 41.8 degrees, nothing leaves.
         let (s, c) = 45f64.to_radians().sin_cos();
-        assert!(refract(DVec3::new(s, 0.0, c), -n, 1.5).is_none());
+        assert!(refract(DVec3::new(s, 0.0, c), -n, 1.0 / 1.5).is_none());
         let (s, c) = 40f64.to_radians().sin_cos();
-        assert!(refract(DVec3::new(s, 0.0, c), -n, 1.5).is_some());
+        assert!(refract(DVec3::new(s, 0.0, c), -n, 1.0 / 1.5).is_some());
     }
 
     /// The distribution is normalised (its projected area integrates to 1 over the
@@ -122,6 +137,6 @@ mod tests {
             "{albedos:?}"
         );
         assert_eq!(alpha(0.5), 0.25);
-        assert!((fresnel_reflectance(1.5, 1.0) - 0.04).abs() < 1e-12);
+        assert!((fresnel_reflectance(1.0, 1.5) - 0.04).abs() < 1e-12);
     }
 }

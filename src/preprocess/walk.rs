@@ -40,7 +40,7 @@
 
 use crate::geometry::bvh::{Bvh, Hit};
 use crate::numeric::rng::Rng;
-use crate::physics::surface::refract;
+use crate::physics::surface::{fresnel_reflectance, reflect, refract};
 use crate::physics::{fresnel_transmittance, Material, Rgb};
 use crate::scene::desc::LightKind;
 use crate::scene::mesh::Mesh;
@@ -286,16 +286,16 @@ impl Surface {
 
     /// A walk travelling along `d` inside meets the surface at `hit` (on triangle `hit.triangle`
     /// of `mesh`): Ok(the direction it leaves along, refracted away from the normal) or, behind
-    /// a refractive boundary, Err(the direction reflected back in), with Fresnel's probability
-    /// and always beyond the critical angle. Index-matched it leaves straight on and draws no
-    /// random number.
+    /// a refractive boundary, Err(the direction reflected back in, and the outward normal),
+    /// with Fresnel's probability and always beyond the critical angle. Index-matched it
+    /// leaves straight on and draws no random number.
     pub(super) fn leave(
         &self,
         mesh: &Mesh,
         hit: &Hit,
         d: DVec3,
         rng: &mut Rng,
-    ) -> Result<DVec3, DVec3> {
+    ) -> Result<DVec3, (DVec3, DVec3)> {
         if self.eta == 1.0 {
             return Ok(d);
         }
@@ -306,10 +306,14 @@ impl Surface {
             // index-matched.
             return Ok(d);
         }
-        match refract(d, -n, self.eta) {
-            Some(out) if rng.uniform() < fresnel_transmittance(self.eta, n.dot(out)) => Ok(out),
-            _ => Err(d - 2.0 * cos_in * n),
+        // From the medium (index eta) into the air: relative index 1 / eta.
+        let reflected = fresnel_reflectance(cos_in, 1.0 / self.eta);
+        if reflected < 1.0 && rng.uniform() >= reflected {
+            if let Some(out) = refract(d, -n, 1.0 / self.eta) {
+                return Ok(out);
+            }
         }
+        Err((reflect(d, n), n))
     }
 
     /// Light travelling along `d` outside meets the surface (outward unit normal `n`): the
@@ -320,10 +324,10 @@ impl Surface {
         if self.eta == 1.0 {
             return Some(d);
         }
-        if rng.uniform() >= fresnel_transmittance(self.eta, -n.dot(d)) {
+        if rng.uniform() < fresnel_reflectance(-n.dot(d), self.eta) {
             return None;
         }
-        refract(d, n, 1.0 / self.eta)
+        refract(d, n, self.eta)
     }
 
     /// The unit normal of triangle `tri` of `mesh` (the mesh this was made from), turned
@@ -485,7 +489,7 @@ impl Walker<'_> {
                     match surface.entry(lamps, at, normal, c, shadows, &mut rng) {
                         // Behind a refractive boundary the light bends towards the normal.
                         Some((d, w)) if surface.eta != 1.0 => {
-                            match refract(d, normal, 1.0 / surface.eta) {
+                            match refract(d, normal, surface.eta) {
                                 Some(d) => (d, w),
                                 None => continue,
                             }
@@ -553,14 +557,13 @@ impl Walker<'_> {
                 // otherwise out, refracted away from the normal.
                 let d_out = match surface.leave(mesh, &hit, d, rng) {
                     Ok(d_out) => d_out,
-                    Err(reflected) => {
+                    Err((reflected, normal)) => {
                         reflections += 1;
                         if events + reflections >= MAX_WALK_EVENTS {
                             tally.counters[2] += 1;
                             break;
                         }
-                        x = x + d * hit.t
-                            - surface.outward_normal(mesh, hit.triangle as usize) * eps;
+                        x = x + d * hit.t - normal * eps;
                         d = reflected;
                         ball = (x, 0.0);
                         continue;

@@ -534,7 +534,7 @@ fn surface_reflection(scene: &Scene, bvh: &Bvh, p: DVec3, n: DVec3, d: DVec3) ->
     if let Some((env, light)) = scene.environment_light() {
         let r = d - 2.0 * d.dot(n) * n;
         let seen = env.radiance_from(light.rotation.as_dquat().inverse() * r);
-        let f = fresnel_reflectance(eta, n.dot(wo).max(0.0));
+        let f = fresnel_reflectance(n.dot(wo).max(0.0), eta);
         for c in 0..3 {
             out[c] += f * light.radiance[c] as f64 * seen[c];
         }

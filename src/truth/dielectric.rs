@@ -54,6 +54,7 @@
 
 use super::{PathResult, Tracer, MAX_EVENTS};
 use crate::numeric::rng::Rng;
+pub use crate::physics::surface::{fresnel_reflectance, reflect, refract};
 use crate::scene::desc::LightKind;
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -67,38 +68,6 @@ const WALK_STEPS: u32 = 12;
 /// Further walks an inverse-probability estimate may take (counted in
 /// [`PathResult::capped`] when reached; the estimate is then dropped).
 const MAX_TRIALS: u32 = 100_000;
-
-/// Fresnel reflectance of unpolarised light meeting a smooth boundary at cosine `cos_i` to the
-/// normal, from a side of index n_i towards one of index n_t, `eta` = n_t / n_i; 1 beyond the
-/// critical angle.
-pub fn fresnel_reflectance(cos_i: f64, eta: f64) -> f64 {
-    let cos_i = cos_i.clamp(0.0, 1.0);
-    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
-    if sin_t2 >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = (1.0 - sin_t2).sqrt();
-    let parallel = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    let perpendicular = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-    0.5 * (parallel * parallel + perpendicular * perpendicular)
-}
-
-/// The direction of travel `d` refracted through a boundary whose unit normal `n` faces the
-/// side `d` comes from (n . d < 0), `eta` = n_t / n_i; `None` beyond the critical angle.
-pub fn refract(d: DVec3, n: DVec3, eta: f64) -> Option<DVec3> {
-    let cos_i = -n.dot(d);
-    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
-    if sin_t2 >= 1.0 {
-        return None;
-    }
-    let cos_t = (1.0 - sin_t2).sqrt();
-    Some((d / eta + n * (cos_i / eta - cos_t)).normalize())
-}
-
-/// The mirror direction of `d` about the plane of unit normal `n`.
-pub fn reflect(d: DVec3, n: DVec3) -> DVec3 {
-    d - 2.0 * d.dot(n) * n
-}
 
 /// Where a light at height `h1` above a plane reaches a point at depth `h2` below it by one
 /// refraction (relative index `eta`), the two feet `along` apart: the distance from the
