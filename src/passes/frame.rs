@@ -103,7 +103,7 @@ impl MaterialUniforms {
         let mut halfspace_h = [[0.0; 4]; INCIDENCE_SAMPLES];
         let mut halfspace_flux = [[0.0; 4]; INCIDENCE_SAMPLES];
         let mut halfspace_slope = [[0.0; 4]; INCIDENCE_SAMPLES];
-        if m.model.oblique_exit() {
+        if m.takes_oblique_exit() {
             for (c, albedo) in m.albedo().into_iter().enumerate() {
                 let t = crate::physics::incidence::halfspace_samples(albedo);
                 for k in 0..INCIDENCE_SAMPLES {

@@ -353,6 +353,13 @@ impl Material {
         Ok(Material { model, ..self })
     }
 
+    /// Whether orders >= 2 leave with the half-space's exit lobe of the lamps' incidence
+    /// ([`Model::oblique_exit`]): that lobe is an index-matched half-space's, so only at
+    /// eta = 1.
+    pub fn takes_oblique_exit(&self) -> bool {
+        self.model.oblique_exit() && self.eta == 1.0
+    }
+
     /// Whether [`Material::incidence_factors`] has factors (without computing them).
     pub fn takes_incidence_factor(&self) -> bool {
         self.model.profile_with_single_pass()

@@ -391,10 +391,7 @@ impl<'a> Assembly<'a> {
                 single_pass,
                 chord: scene.material.model.gathers_over_chord(),
                 shadow_maps,
-                // The half-space's oblique lobes are an index-matched surface's.
-                oblique: scene.material.model.oblique_exit()
-                    && scene.environment.is_none()
-                    && scene.material.eta == 1.0,
+                oblique: scene.material.takes_oblique_exit() && scene.environment.is_none(),
                 environment,
                 surface: scene.surface.reflects(&scene.material),
             },
