@@ -7,7 +7,7 @@
 //!    (atlas, nodes, operators) loaded from the cache or built and stored, then, under an environment light, the environment's transfer over its
 //!    atlas, cached the same way.
 //!
-//! [`prepare`] does both. A material edit in the viewer re-weights what is shown instead where
+//! A command prints the plan between the two. A material edit in the viewer re-weights what is shown instead where
 //! the geometry stays ([`Prepared::for_material`]). The renderer is handed a [`Prepared`]'s
 //! data and prepares nothing.
 
@@ -82,12 +82,6 @@ pub fn plan(scene: &mut Scene, request: &Request) -> Result<Plan> {
     let choice = choose(scene, &request.overrides, request.target_error)?;
     let estimate = estimate(&scene.mesh, &scene.material, &choice.settings);
     Ok(Plan { choice, estimate })
-}
-
-/// [`plan`], then [`load_or_build`] its settings.
-pub fn prepare(scene: &mut Scene, request: &Request, progress: Progress<'_>) -> Result<Prepared> {
-    let plan = plan(scene, request)?;
-    load_or_build(scene, &plan.choice, request.cache.as_deref(), progress)
 }
 
 /// The preprocessing of `scene` with the settings of `choice`, loaded from `cache_dir` or built
