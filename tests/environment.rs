@@ -36,17 +36,15 @@ const SKY: &str = "[[lights]]\nkind = \"environment\"\n";
 fn illumination(scene: &Scene, pre: &preprocess::Preprocessed) -> (Vec<[f32; 4]>, f64) {
     let gpu = common::gpu();
     let map = {
-        let mut r = Renderer::new(
+        let mut r = common::renderer(
             &gpu,
-            scene.clone(),
+            scene,
             pre,
-            translucent::pipeline::environment_transfer(scene, pre, None).as_ref(),
             Options {
                 capture: true,
                 ..Default::default()
             },
-        )
-        .unwrap();
+        );
         r.render(1).unwrap();
         let texels = (pre.atlas.width * pre.atlas.height) as usize;
         let map = r
@@ -351,14 +349,7 @@ fn turning_the_environment_needs_no_preprocessing_and_equals_rotate_deg() {
     let pre = common::preprocess(&scene, SettingsOverrides::default());
     let gpu = common::gpu();
     let (frames, builds) = {
-        let mut r = Renderer::new(
-            &gpu,
-            scene.clone(),
-            &pre,
-            translucent::pipeline::environment_transfer(&scene, &pre, None).as_ref(),
-            Options::default(),
-        )
-        .unwrap();
+        let mut r = common::renderer(&gpu, &scene, &pre, Options::default());
         let before = preprocess::builds();
         let mut images = Vec::new();
         for angle in [0.0f32, 45.0, 90.0] {

@@ -58,11 +58,10 @@ fn capture_with(
 ) {
     let gpu = common::gpu();
     let (cap, out, variant) = {
-        let mut r = Renderer::new(
+        let mut r = common::renderer(
             &gpu,
-            scene.clone(),
+            scene,
             pre,
-            translucent::pipeline::environment_transfer(scene, pre, None).as_ref(),
             Options {
                 mode,
                 capture: true,
@@ -71,8 +70,7 @@ fn capture_with(
                 readback_on_request: false,
                 window: None,
             },
-        )
-        .unwrap();
+        );
         let out = r.render(1).unwrap();
         let variant = r.global_variant();
         let atlas_texels = (pre.atlas.width * pre.atlas.height) as usize;
@@ -489,14 +487,7 @@ fn moving_the_light_changes_the_image_without_preprocessing() {
     let builds = translucent::preprocess::builds();
     let gpu = common::gpu();
     {
-        let mut r = Renderer::new(
-            &gpu,
-            s.clone(),
-            &pre,
-            translucent::pipeline::environment_transfer(&s, &pre, None).as_ref(),
-            Options::default(),
-        )
-        .unwrap();
+        let mut r = common::renderer(&gpu, &s, &pre, Options::default());
         let mut images = Vec::new();
         for k in 0..4 {
             let lights = r.orbit_lights(std::f32::consts::FRAC_PI_2 * k as f32);
@@ -533,14 +524,7 @@ fn a_still_light_skips_the_light_passes() {
     let pre = common::preprocess(&s, coarse(1.5));
     let gpu = common::gpu();
     {
-        let mut r = Renderer::new(
-            &gpu,
-            s.clone(),
-            &pre,
-            translucent::pipeline::environment_transfer(&s, &pre, None).as_ref(),
-            Options::default(),
-        )
-        .unwrap();
+        let mut r = common::renderer(&gpu, &s, &pre, Options::default());
         let names = r.pass_names();
         let lights = r.orbit_lights(0.0);
         let first = r.frame_incremental(&lights).unwrap();
@@ -634,14 +618,7 @@ fn the_interface_is_drawn_over_the_display() {
             }),
             ..Default::default()
         };
-        let mut r = Renderer::new(
-            &gpu,
-            s.clone(),
-            &pre,
-            translucent::pipeline::environment_transfer(&s, &pre, None).as_ref(),
-            options,
-        )
-        .unwrap();
+        let mut r = common::renderer(&gpu, &s, &pre, options);
         let names = r.pass_names();
         let pos = |n: &str| names.iter().position(|x| x == n).unwrap();
         let (window_pass, ui, readback) = (pos("window"), pos("ui"), pos("readback"));
@@ -1032,14 +1009,7 @@ fn oblique_light_leaves_with_the_half_spaces_lobe() {
             capture: true,
             ..Default::default()
         };
-        let mut r = Renderer::new(
-            &gpu,
-            oblique.clone(),
-            &pre,
-            translucent::pipeline::environment_transfer(&oblique, &pre, None).as_ref(),
-            options,
-        )
-        .unwrap();
+        let mut r = common::renderer(&gpu, &oblique, &pre, options);
         [&oblique, &normal].map(|s| orders_beyond_single(&mut r, &s.lights))
     };
     common::assert_no_validation_messages(&gpu);
@@ -1115,14 +1085,7 @@ fn the_exit_lobe_leans_along_the_walks_drift() {
         ..Default::default()
     };
     let frames = [&pre, &leaning].map(|p| {
-        let mut r = Renderer::new(
-            &gpu,
-            box_.clone(),
-            p,
-            translucent::pipeline::environment_transfer(&box_, p, None).as_ref(),
-            options(),
-        )
-        .unwrap();
+        let mut r = common::renderer(&gpu, &box_, p, options());
         orders_beyond_single(&mut r, &box_.lights)
     });
     common::assert_no_validation_messages(&gpu);

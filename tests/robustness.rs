@@ -249,14 +249,7 @@ fn no_nan_or_inf_for_any_preset_or_light_direction() {
                 "{name}: non-finite operator"
             );
         }
-        let mut r = translucent::renderer::Renderer::new(
-            &gpu,
-            scene.clone(),
-            &pre,
-            translucent::pipeline::environment_transfer(&scene, &pre, None).as_ref(),
-            Options::default(),
-        )
-        .unwrap();
+        let mut r = common::renderer(&gpu, &scene, &pre, Options::default());
         for k in 0..4 {
             let lights = r.orbit_lights(k as f32 * 1.7);
             r.frame(&lights).unwrap();

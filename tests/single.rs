@@ -122,14 +122,7 @@ fn the_pass_measures_the_view_rays_length_inside() {
         ..Default::default()
     };
     let (w, h) = (scene.width, scene.height);
-    let mut r = Renderer::new(
-        &gpu,
-        scene.clone(),
-        &pre,
-        translucent::pipeline::environment_transfer(&scene, &pre, None).as_ref(),
-        options,
-    )
-    .unwrap();
+    let mut r = common::renderer(&gpu, &scene, &pre, options);
     let out = r.render(1).unwrap();
     let c = r.captured(0, 0).unwrap().unwrap();
     common::assert_no_validation_messages(&gpu);

@@ -29,18 +29,18 @@ pub fn preprocess(scene: &Scene, overrides: SettingsOverrides) -> Preprocessed {
     Preprocessed::build(&scene.mesh, &scene.material, &choice, &quiet)
 }
 
+/// A renderer of `scene` on `gpu` with its preprocessing `pre` and, under an environment
+/// light, the environment's transfer over its atlas (computed, not cached).
+pub fn renderer(gpu: &Arc<Gpu>, scene: &Scene, pre: &Preprocessed, options: Options) -> Renderer {
+    let transfer = translucent::pipeline::environment_transfer(scene, pre, None);
+    Renderer::new(gpu, scene.clone(), pre, transfer.as_ref(), options).expect("renderer")
+}
+
 /// Renders `frames` frames of `scene` validated; panics on any validation message.
 pub fn render(scene: &Scene, pre: &Preprocessed, options: Options, frames: usize) -> RenderOutput {
     let gpu = gpu();
     let out = {
-        let mut r = Renderer::new(
-            &gpu,
-            scene.clone(),
-            pre,
-            translucent::pipeline::environment_transfer(scene, pre, None).as_ref(),
-            options,
-        )
-        .expect("renderer");
+        let mut r = renderer(&gpu, scene, pre, options);
         r.render(frames).expect("render")
     };
     assert_no_validation_messages(&gpu);
