@@ -51,7 +51,7 @@ fn build(mesh: &Mesh, material: &Material, o: &SettingsOverrides) -> Preprocesse
 /// A slab that is semi-infinite for `material`: the lit top face reaches 8 diffusion lengths
 /// (of the longest channel) beyond a 40 x 40 mm interior, at least 100 mm wide; thickness 4
 /// diffusion lengths within [20, 50] mm. Texel, kernel and node spacing are the settings rule's,
-/// coarsened to keep the test within 300 000 texels and 50 nodes along an edge.
+/// coarsened to keep the test within 200 000 texels and 35 nodes along an edge.
 fn semi_infinite_slab(material: &Material) -> (Preprocessed, [f32; 3]) {
     let ell = material
         .dipoles()
@@ -60,20 +60,20 @@ fn semi_infinite_slab(material: &Material) -> (Preprocessed, [f32; 3]) {
         .fold(0.0f64, f64::max);
     let width = (40.0 + 16.0 * ell).max(100.0) as f32;
     let size = [width, (4.0 * ell).clamp(20.0, 50.0) as f32, width];
-    let mesh = Mesh::cuboid(Vec3::from_array(size), 50);
+    let mesh = Mesh::cuboid(Vec3::from_array(size), 35);
     let scale = ObjectScale {
         area_mm2: mesh.surface_area(),
         pixel_mm: 0.01,
-        max_texels: 3e5,
+        max_texels: 2e5,
         target_error: 0.02,
     };
     let rule = settings::derive(material, &scale, &SettingsOverrides::default()).settings;
     let p = slab(
         material,
         size,
-        50,
+        35,
         rule.texel_mm,
-        rule.node_spacing_mm.max(width as f64 / 50.0),
+        rule.node_spacing_mm.max(width as f64 / 35.0),
     );
     (p, size)
 }
