@@ -146,6 +146,10 @@ pub struct BinnedError {
     pub measured: [f64; 3],
     /// The reference's relative RMS noise on the same bins.
     pub noise: [f64; 3],
+    /// The largest error of one bin, less three of the reference's standard deviations there,
+    /// over the reference's mean over the bins, per channel: what a small blotch or hole does,
+    /// which the RMS dilutes over the object.
+    pub peak: [f64; 3],
 }
 
 impl BinnedError {
@@ -177,15 +181,17 @@ pub fn compare_binned(
         ..Default::default()
     };
     for c in 0..3 {
-        let (mut num, mut den, mut s2) = (0.0, 0.0, 0.0);
+        let (mut num, mut den, mut s2, mut sum, mut peak) = (0.0, 0.0, 0.0, 0.0, 0.0f64);
         for &i in &used {
             let (a, b) = (r[4 * i + c] as f64, t[4 * i + c] as f64);
+            let s = sigma.as_ref().map_or(0.0, |s| s[4 * i + c] as f64);
             num += (a - b) * (a - b);
             den += b * b;
-            if let Some(s) = &sigma {
-                s2 += (s[4 * i + c] as f64).powi(2);
-            }
+            s2 += s * s;
+            sum += b;
+            peak = peak.max((a - b).abs() - 3.0 * s);
         }
+        e.peak[c] = peak.max(0.0) * used.len() as f64 / sum.max(1e-300);
         let den = den.max(1e-300);
         e.measured[c] = (num / den).sqrt();
         e.noise[c] = (s2 / den).sqrt();
@@ -223,6 +229,24 @@ pub fn false_colour(per_pixel: &[f32], full_scale: f32) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_blotch_moves_the_peak_far_more_than_the_rms() {
+        // 64x64 of 1.0, the render 9x in a 3x3 blotch inside one 4x4 bin.
+        let truth: Vec<f32> = (0..64 * 64).flat_map(|_| [1.0, 1.0, 1.0, 1.0]).collect();
+        let mut render = truth.clone();
+        for (x, y) in (0..3).flat_map(|x| (0..3).map(move |y| (x + 20, y + 8))) {
+            render[4 * (y * 64 + x) + 2] = 9.0;
+        }
+        let noise: Vec<f32> = (0..64 * 64).flat_map(|_| [0.01, 0.01, 0.01, 1.0]).collect();
+        let e = compare_binned(&render, &truth, Some(&noise), 64, 64, 4);
+        // The bin: 9 of its 16 pixels 8 high, 4.5 high on the mean of 1; three standard
+        // deviations of a bin's mean (0.01 / 4) off that.
+        assert!((e.peak[2] - (4.5 - 3.0 * 0.0025)).abs() < 1e-4, "{:?}", e.peak);
+        assert_eq!(e.peak[0], 0.0);
+        // The RMS over the 256 bins: 4.5 / 16.
+        assert!((e.rel_rms[2] - 4.5 / 16.0).abs() < 1e-3, "{:?}", e.rel_rms);
+    }
 
     #[test]
     fn metrics_of_known_errors() {

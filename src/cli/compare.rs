@@ -161,19 +161,21 @@ fn print_summary(
     for e in binned {
         if noise {
             println!(
-                "{0}x{0} bins ({1}): relative RMS {2} with the reference's noise ({3}) removed; measured {4}",
+                "{0}x{0} bins ({1}): relative RMS {2} with the reference's noise ({3}) removed; measured {4}; worst bin {5} of the mean off",
                 e.bin,
                 e.bins,
                 pct(e.rel_rms),
                 pct(e.noise),
-                pct(e.measured)
+                pct(e.measured),
+                pct(e.peak)
             );
         } else {
             println!(
-                "{0}x{0} bins ({1}): relative RMS {2}",
+                "{0}x{0} bins ({1}): relative RMS {2}; worst bin {3} of the mean off",
                 e.bin,
                 e.bins,
-                pct(e.rel_rms)
+                pct(e.rel_rms),
+                pct(e.peak)
             );
         }
     }
