@@ -2,13 +2,16 @@
 // The depth at which each shadow-map texel's light enters the object, without the shadow
 // pass's slope-scaled bias (a factor times the depth's largest slope per texel, which pushes
 // the stored depth away from the light): the slope is measured from the neighbouring texels
-// on the same surface (the smaller difference per axis; none across the silhouette). The
-// `single` pass reads it to measure how far light travels inside.
+// on the same surface (the smaller difference per axis; none across the silhouette). Beside the
+// depth it stores those slopes, signed, per texel along u and v, and which of them are known
+// (1 for u, 2 for v): the `single` pass places the surface within the texel with them, since
+// light grazing a face crosses many times the medium's free path in depth over one texel.
+// The `single` pass reads it to measure how far light travels inside.
 
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(set = 0, binding = 0) uniform sampler2DArray shadow_depth;
-layout(set = 0, binding = 1, r32f) uniform writeonly image2DArray entry_depth;
+layout(set = 0, binding = 1, rgba32f) uniform writeonly image2DArray entry_depth;
 
 layout(push_constant) uniform Push {
     float slope_bias;      // the shadow pass's slope-scaled depth bias factor
@@ -28,16 +31,26 @@ void main() {
         return;
     }
     float z = depth_at(p, size);
+    vec2 slopes = vec2(0.0);
+    float known = 0.0;
     if (z < 1.0) {
-        float slope = 0.0;
         for (int axis = 0; axis < 2; ++axis) {
             ivec3 o = axis == 0 ? ivec3(1, 0, 0) : ivec3(0, 1, 0);
             float a = depth_at(p + o, size);
             float b = depth_at(p - o, size);
-            float m = min(a < 1.0 ? abs(a - z) : 1.0, b < 1.0 ? abs(b - z) : 1.0);
-            slope = max(slope, m < 1.0 ? m : 0.0);
+            // The one-sided difference of the smaller size: the same surface. (Central
+            // differences, nearer on a curve, follow the depths' rounding on a face of a
+            // kilometre.)
+            float forward = a < 1.0 ? a - z : 2.0;
+            float backward = b < 1.0 ? z - b : 2.0;
+            float m = abs(forward) <= abs(backward) ? forward : backward;
+            if (abs(m) < 1.0) {
+                slopes[axis] = m;
+                known += axis == 0 ? 1.0 : 2.0;
+            }
         }
-        z -= push.slope_bias * slope;
+        // The bias the shadow pass added: its factor times the largest slope.
+        z -= push.slope_bias * max(abs(slopes.x), abs(slopes.y));
     }
-    imageStore(entry_depth, p, vec4(z));
+    imageStore(entry_depth, p, vec4(z, slopes, known));
 }

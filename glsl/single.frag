@@ -42,12 +42,27 @@ vec3 unproject(mat4 inverse_matrix, vec2 ndc, float z) {
     return w.xyz / w.w;
 }
 
+// The light-entry map's texel under shadow-map coordinates `uv` of `layer`: depth, slopes
+// along u and v per texel, which of them are known (`entry` pass); and the offset of `uv`
+// from the texel's centre, in texels.
+vec4 entry_texel(uint layer, vec2 uv, out vec2 offset) {
+    ivec2 size = textureSize(entry_depth, 0).xy;
+    vec2 f = uv * vec2(size);
+    ivec2 i = clamp(ivec2(floor(f)), ivec2(0), size - 1);
+    offset = f - (vec2(i) + 0.5);
+    return texelFetch(entry_depth, ivec3(i, int(layer)), 0);
+}
+
 // Where the light of `l` first meets the surface on its straight line through p: true with
-// that point, its shadow-map layer and coordinates, where the map sees a surface there.
-bool entry_point(Light l, vec3 p, out vec3 entry, out uint layer, out vec2 uv) {
+// that point, its shadow-map layer and coordinates and the entry texel's slopes (and which
+// are known), where the map sees a surface there. The surface is placed within the texel by
+// its slopes (exact on a plane): over one texel, light grazing a face crosses many times the
+// medium's free path in depth, at any scale.
+bool entry_point(Light l, vec3 p, out vec3 entry, out uint layer, out vec2 uv, out vec3 slopes) {
     layer = shadow_layer(l, p);
     entry = p;
     uv = vec2(0.0);
+    slopes = vec3(0.0);
     vec4 clip = frame.shadow_view_proj[layer] * vec4(p, 1.0);
     if (clip.w <= 0.0) {
         return false;
@@ -57,10 +72,13 @@ bool entry_point(Light l, vec3 p, out vec3 entry, out uint layer, out vec2 uv) {
     if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) {
         return false;
     }
-    float z = texture(entry_depth, vec3(uv, float(layer))).r;
-    if (z >= 1.0) {
+    vec2 offset;
+    vec4 e = entry_texel(layer, uv, offset);
+    if (e.r >= 1.0) {
         return false;
     }
+    slopes = e.gba;
+    float z = e.r + dot(e.gb, offset);
     entry = unproject(frame.shadow_inverse[layer], ndc.xy, z);
     return true;
 }
@@ -73,34 +91,27 @@ float light_depth(Light l, vec3 p, vec3 travel) {
     vec3 entry;
     uint layer;
     vec2 uv;
-    if (!entry_point(l, p, entry, layer, uv)) {
+    vec3 slopes;
+    if (!entry_point(l, p, entry, layer, uv, slopes)) {
         return 0.0;
     }
     return max(dot(p - entry, travel), 0.0);
 }
 
 // The unit normal, facing the light (against `travel`), of the surface the shadow map sees at
-// `entry` (layer, coordinates `uv`): from the depths one texel over in u and in v, the nearer
-// side where one of them falls off the object; -travel where neither does.
-vec3 entry_normal(vec3 entry, uint layer, vec2 uv, vec3 travel) {
-    vec2 texel = 1.0 / vec2(textureSize(entry_depth, 0).xy);
-    vec3 du = vec3(0.0);
-    vec3 dv = vec3(0.0);
-    for (int k = 0; k < 2; ++k) {
-        float sign = k == 0 ? 1.0 : -1.0;
-        vec2 ou = uv + vec2(sign * texel.x, 0.0);
-        vec2 ov = uv + vec2(0.0, sign * texel.y);
-        float zu = texture(entry_depth, vec3(ou, float(layer))).r;
-        float zv = texture(entry_depth, vec3(ov, float(layer))).r;
-        vec3 eu = unproject(frame.shadow_inverse[layer], ou * 2.0 - 1.0, zu) - entry;
-        vec3 ev = unproject(frame.shadow_inverse[layer], ov * 2.0 - 1.0, zv) - entry;
-        if (zu < 1.0 && (du == vec3(0.0) || dot(eu, eu) < dot(du, du))) {
-            du = sign * eu;
-        }
-        if (zv < 1.0 && (dv == vec3(0.0) || dot(ev, ev) < dot(dv, dv))) {
-            dv = sign * ev;
-        }
+// `entry` (layer, coordinates `uv`, the entry texel's slopes): from the surface one texel over
+// in u and in v along those slopes; -travel where either slope is unknown (the texel's
+// neighbours on both sides fall off the object).
+vec3 entry_normal(vec3 entry, uint layer, vec2 uv, vec3 slopes, vec3 travel) {
+    uint known = uint(slopes.z);
+    if (known != 3u) {
+        return -travel;
     }
+    vec2 texel = 1.0 / vec2(textureSize(entry_depth, 0).xy);
+    vec4 clip = frame.shadow_view_proj[layer] * vec4(entry, 1.0);
+    vec3 ndc = clip.xyz / clip.w;
+    vec3 du = unproject(frame.shadow_inverse[layer], ndc.xy + vec2(2.0 * texel.x, 0.0), ndc.z + slopes.x) - entry;
+    vec3 dv = unproject(frame.shadow_inverse[layer], ndc.xy + vec2(0.0, 2.0 * texel.y), ndc.z + slopes.y) - entry;
     vec3 normal = cross(du, dv);
     if (dot(normal, normal) == 0.0) {
         return -travel;
@@ -126,11 +137,12 @@ float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
     vec3 entry;
     uint layer;
     vec2 uv;
-    if (!entry_point(l, p, entry, layer, uv)) {
+    vec3 slopes;
+    if (!entry_point(l, p, entry, layer, uv, slopes)) {
         return 0.0;
     }
     float straight = max(dot(p - entry, travel), 0.0);
-    vec3 n = entry_normal(entry, layer, uv, travel);
+    vec3 n = entry_normal(entry, layer, uv, slopes, travel);
     cos_i = clamp(-dot(n, travel), 0.0, 1.0);
     vec3 t = refract(travel, n, 1.0 / eta);
     if (straight <= 0.0 || dot(t, t) == 0.0) {
@@ -142,24 +154,82 @@ float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
     vec3 e;
     uint lq;
     vec2 uq;
-    if (entry_point(l, q, e, lq, uq) && abs(dot(q - e, travel)) <= PLANE_TOLERANCE * planar) {
+    vec3 sq;
+    if (entry_point(l, q, e, lq, uq, sq) && abs(dot(q - e, travel)) <= PLANE_TOLERANCE * planar) {
         return planar;
     }
     return straight;
 }
 
-// The light of `l` at p inside the object: the distance it travels inside, and its irradiance
-// `e` (across its beam, from `light_at`) turned into the irradiance across the beam inside:
-// behind a refractive boundary the Fresnel transmittance of its entry times cos_i / cos_t (the
-// beam narrows as it bends towards the normal).
-float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, inout vec3 e) {
-    if (!refracts) {
-        return light_depth(l, p, travel);
+// Relative size of the rounding that the light's entry and the points along the view ray are
+// computed with: a few units of f32's 2^-23 of the largest coordinate, or of the light-space
+// depth's step there.
+const float ROUNDING = 16.0 / 8388608.0;
+
+// Where the light of `l` enters at the view ray's start x: whether x lies on the surface the
+// light enters (its straight path inside is zero there, within the rounding), that surface's
+// normal facing the light, and the rounding of a path length at x. Along the ray the path is
+// then measured from x itself (the ray's length times a ratio of cosines: no difference of
+// large coordinates) where the shadow map agrees with it within the rounding, so that an
+// object of a metre or a kilometre keeps the precision of one of a few millimetres.
+struct Anchor {
+    bool lit;
+    vec3 n;
+    float rounding;
+};
+
+Anchor anchor_at(Light l, vec3 x, vec3 travel) {
+    Anchor a;
+    a.lit = false;
+    a.n = -travel;
+    a.rounding = 0.0;
+    vec3 entry;
+    uint layer;
+    vec2 uv;
+    vec3 slopes;
+    if (!entry_point(l, x, entry, layer, uv, slopes)) {
+        return a;
     }
-    float cos_i;
-    float d = refracted_path(l, p, travel, eta, cos_i);
-    float cos_t = sqrt(max(1.0 - (1.0 - cos_i * cos_i) / (eta * eta), 0.0));
-    e *= fresnel_transmittance(eta, cos_i) * cos_i / max(cos_t, 1e-6);
+    vec3 m = max(abs(x), abs(entry));
+    vec4 clip = frame.shadow_view_proj[layer] * vec4(entry, 1.0);
+    vec3 ndc = clip.xyz / clip.w;
+    float dz = ROUNDING * max(abs(ndc.z), 1e-3);
+    float depth_step = length(unproject(frame.shadow_inverse[layer], ndc.xy, ndc.z + dz) - entry);
+    a.rounding = max(ROUNDING * max(m.x, max(m.y, m.z)), depth_step);
+    a.n = entry_normal(entry, layer, uv, slopes, travel);
+    a.lit = abs(dot(x - entry, travel)) <= a.rounding;
+    return a;
+}
+
+// The light of `l` at p = x + inside s inside the object: the distance it travels inside, and
+// its irradiance `e` (across its beam, from `light_at`) turned into the irradiance across the
+// beam inside: behind a refractive boundary the Fresnel transmittance of its entry times
+// cos_i / cos_t (the beam narrows as it bends towards the normal). Where x lies on the lit
+// surface (`a`) and the shadow map's path agrees with the plane's within the rounding, the
+// plane's, from s.
+float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Anchor a, vec3 inside,
+                   float s, inout vec3 e) {
+    float d;
+    // The depth below x's tangent plane and the path to it, along the light inside.
+    float below = -s * dot(inside, a.n);
+    float cos_in;
+    if (!refracts) {
+        d = light_depth(l, p, travel);
+        cos_in = -dot(travel, a.n);
+    } else {
+        float cos_i;
+        d = refracted_path(l, p, travel, eta, cos_i);
+        float cos_t = sqrt(max(1.0 - (1.0 - cos_i * cos_i) / (eta * eta), 0.0));
+        e *= fresnel_transmittance(eta, cos_i) * cos_i / max(cos_t, 1e-6);
+        vec3 t = refract(travel, a.n, 1.0 / eta);
+        cos_in = -dot(t, a.n);
+    }
+    if (a.lit && cos_in > 1e-3) {
+        float planar = max(below, 0.0) / cos_in;
+        if (abs(d - planar) <= 2.0 * a.rounding / cos_in) {
+            d = planar;
+        }
+    }
     return d;
 }
 
@@ -222,13 +292,16 @@ void main() {
     uint n = max(push.steps, 1u);
     uint lights = frame.counts.x;
     vec3 sum = vec3(0.0);
-    // Light depths and irradiances at the start of the interval, per light.
+    // Light depths and irradiances at the start of the interval, and where each light enters
+    // at x, per light.
     float d0[MAX_LIGHTS];
     vec3 e0[MAX_LIGHTS];
+    Anchor anchors[MAX_LIGHTS];
     for (uint i = 0u; i < lights; ++i) {
         vec3 wi;
         light_at(frame.lights[i], x, wi, e0[i]);
-        d0[i] = light_inside(frame.lights[i], x, -wi, refracts, eta, e0[i]);
+        anchors[i] = anchor_at(frame.lights[i], x, -wi);
+        d0[i] = light_inside(frame.lights[i], x, -wi, refracts, eta, anchors[i], inside, 0.0, e0[i]);
     }
     float s0 = 0.0;
     for (uint k = 0u; k < n; ++k) {
@@ -239,7 +312,7 @@ void main() {
             vec3 wi;
             vec3 e1;
             light_at(frame.lights[i], p, wi, e1);
-            float d1 = light_inside(frame.lights[i], p, -wi, refracts, eta, e1);
+            float d1 = light_inside(frame.lights[i], p, -wi, refracts, eta, anchors[i], inside, s1, e1);
             if (ds > 0.0) {
                 // s + d_l(s) linear over the interval: the exponential integrates exactly.
                 vec3 rate = sigma_t * max(1.0 + (d1 - d0[i]) / ds, 1e-4);

@@ -163,9 +163,9 @@ impl Item {
             | Item::Radiance
             | Item::RadianceReadback
             | Item::SingleScattering
+            | Item::EntryDepth
             | Item::EnvironmentMap => F::R32G32B32A32_SFLOAT,
             Item::GatherEntries => F::R32G32_SFLOAT,
-            Item::EntryDepth => F::R32_SFLOAT,
             Item::Texture => F::R8G8B8A8_SRGB,
             Item::ShadowMaps | Item::Depth | Item::BackDepth | Item::SingleDepth => F::D32_SFLOAT,
             Item::Display | Item::DisplayReadback => F::R8G8B8A8_UNORM,
@@ -312,7 +312,7 @@ mod tests {
         assert!(total > 0);
         assert_eq!(Item::Kernels.bytes(), 16);
         assert_eq!(Item::Texture.bytes(), 4);
-        assert_eq!(Item::EntryDepth.bytes(), 4);
+        assert_eq!(Item::EntryDepth.bytes(), 16);
         assert_eq!(Item::GatherEntries.bytes(), 8);
         assert_eq!(Item::ShadowMaps.bytes(), 4);
         let names: std::collections::BTreeSet<_> = Item::ALL.iter().map(|i| i.name()).collect();

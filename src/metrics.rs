@@ -242,7 +242,11 @@ mod tests {
         let e = compare_binned(&render, &truth, Some(&noise), 64, 64, 4);
         // The bin: 9 of its 16 pixels 8 high, 4.5 high on the mean of 1; three standard
         // deviations of a bin's mean (0.01 / 4) off that.
-        assert!((e.peak[2] - (4.5 - 3.0 * 0.0025)).abs() < 1e-4, "{:?}", e.peak);
+        assert!(
+            (e.peak[2] - (4.5 - 3.0 * 0.0025)).abs() < 1e-4,
+            "{:?}",
+            e.peak
+        );
         assert_eq!(e.peak[0], 0.0);
         // The RMS over the 256 bins: 4.5 / 16.
         assert!((e.rel_rms[2] - 4.5 / 16.0).abs() < 1e-3, "{:?}", e.rel_rms);
