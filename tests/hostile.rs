@@ -194,6 +194,28 @@ fn meaningless_settings_are_refused_by_name() {
     let mut c = bin();
     c.args(["view", "--script", ""]);
     fails_with(c, "--script has no commands");
+    // A discretisation too coarse for the object (the 50 mm bunny): a texel of 40 mm left its
+    // charts without texels and rendered black, a spacing of 100 mm gave one node.
+    for (command, flag, needle) in [
+        ("render", "--texel-mm=40", "leaves about 4 texels"),
+        (
+            "precompute",
+            "--texel-mm=20",
+            "at least 64 are needed to show it",
+        ),
+        (
+            "render",
+            "--node-spacing-mm=100",
+            "at least 8 are needed for the global response",
+        ),
+    ] {
+        let mut c = bin();
+        c.args([command, "--no-cache", flag]);
+        if command == "render" {
+            c.arg("--out").arg(dir.join("coarse"));
+        }
+        fails_with(c, needle);
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -79,6 +79,14 @@ pub struct Estimate {
     pub texels: u64,
     /// Global nodes.
     pub nodes: u64,
+    /// Nodes the spacing alone would place (before the vertex count caps them).
+    pub spacing_nodes: u64,
+    /// The mesh's surface area, mm^2.
+    pub area_mm2: f64,
+    /// The texel and the node spacing estimated with, mm.
+    pub texel_mm: f64,
+    /// See `texel_mm`.
+    pub node_spacing_mm: f64,
     /// Device bytes of the per-frame data that do not depend on pruning (kernels, atlas images).
     pub device_bytes_min: u64,
     /// Device bytes if nothing is pruned.
@@ -138,6 +146,13 @@ impl Work {
     }
 }
 
+/// Fewest texels over the object's surface that show it ([`Estimate::check_meaningful`]).
+pub const MIN_TEXELS: u64 = 64;
+
+/// Fewest nodes over the object's surface for a global response
+/// ([`Estimate::check_meaningful`]).
+pub const MIN_NODES: u64 = 8;
+
 /// Most atlas texels (with gutters) a preprocessing builds: a 16384 x 16384 image, the largest
 /// 2D image of common devices.
 pub const MAX_ATLAS_TEXELS: u64 = 16384 * 16384;
@@ -171,7 +186,12 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
         Item::LocalResponse,
         Item::ChartIds,
     ]);
-    let (h, sp) = (s.texel_mm, s.node_spacing_mm);
+    // The spacing of the nodes placed: the vertex count caps them on a coarse mesh.
+    let (h, sp) = (
+        s.texel_mm,
+        s.node_spacing_mm
+            .max((area / (0.866 * nodes.max(1) as f64)).sqrt()),
+    );
     let reach = 0.5 * operators::FIT_WINDOW_TEXELS * h * std::f64::consts::SQRT_2 + sp;
     let near_nodes = (std::f64::consts::PI * reach * reach / (0.866 * sp * sp)).max(1.0);
     let near_texels = std::f64::consts::PI * (reach + sp) * (reach + sp) / (h * h);
@@ -185,6 +205,10 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
     Estimate {
         texels,
         nodes,
+        spacing_nodes: by_spacing,
+        area_mm2: area,
+        texel_mm: s.texel_mm,
+        node_spacing_mm: s.node_spacing_mm,
         device_bytes_min,
         device_bytes_max: device_bytes_min + counts.bytes(Item::GlobalEntries),
         kernel_elements,
@@ -230,6 +254,7 @@ impl Estimate {
     /// host builds it all before the upload). Independent of the device ([`Estimate::check`]
     /// adds its own limits where one is open).
     pub fn check_host(&self) -> anyhow::Result<()> {
+        self.check_meaningful()?;
         let atlas = 4 * self.texels;
         if atlas > MAX_ATLAS_TEXELS {
             anyhow::bail!(
@@ -242,6 +267,32 @@ impl Estimate {
                 "the scene needs at least {} MiB of per-frame data, above half of this machine's {} MiB of memory, in which it is built; use a larger --texel-mm (or [settings] texel_mm) or a smaller --kernel",
                 self.device_bytes_min >> 20,
                 (2 * most) >> 20
+            );
+        }
+        Ok(())
+    }
+
+    /// Refuses a texel or a node spacing so coarse against the object that the image means
+    /// nothing: fewer than [`MIN_TEXELS`] texels over its surface (charts without a texel
+    /// render black, a few texels far too dark), or fewer than [`MIN_NODES`] nodes (the global
+    /// response interpolated between a handful of points).
+    pub fn check_meaningful(&self) -> anyhow::Result<()> {
+        if self.texels < MIN_TEXELS {
+            anyhow::bail!(
+                "a texel of {} mm leaves about {} texels on the object's {:.0} mm^2 of surface: at least {MIN_TEXELS} are needed to show it; use a texel of at most {:.3} mm (--texel-mm or [settings] texel_mm)",
+                self.texel_mm,
+                self.texels,
+                self.area_mm2,
+                (self.area_mm2 / MIN_TEXELS as f64).sqrt()
+            );
+        }
+        if self.spacing_nodes < MIN_NODES {
+            anyhow::bail!(
+                "a node spacing of {} mm leaves about {} nodes on the object's {:.0} mm^2 of surface: at least {MIN_NODES} are needed for the global response; use a spacing of at most {:.3} mm (--node-spacing-mm or [settings] node_spacing_mm)",
+                self.node_spacing_mm,
+                self.spacing_nodes,
+                self.area_mm2,
+                (self.area_mm2 / (0.866 * MIN_NODES as f64)).sqrt()
             );
         }
         Ok(())
