@@ -35,6 +35,16 @@ pub fn host_memory_bytes() -> u64 {
         .unwrap_or(16 << 30)
 }
 
+/// Refuses an image whose header declares more than `most_w` x `most_h` pixels, before its
+/// decoder allocates what the header claims (a few hundred bytes can ask for 24 GiB): "its
+/// header declares W x H pixels: at most ... are read".
+pub fn check_declared_size(w: u64, h: u64, most_w: u64, most_h: u64) -> Result<()> {
+    if w > most_w.max(most_h) || h > most_w.max(most_h) || w.saturating_mul(h) > most_w * most_h {
+        bail!("its header declares {w} x {h} pixels: at most {most_w} x {most_h} are read");
+    }
+    Ok(())
+}
+
 /// Reads `path` whole if it is a regular file (symbolic links followed) of at most `cap`
 /// bytes; otherwise an error naming `what`, the path and what it is instead.
 pub fn read_regular(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {

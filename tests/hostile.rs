@@ -219,8 +219,8 @@ fn meaningless_settings_are_refused_by_name() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// An EXR given to `compare` whose header declares more pixels than any image read back is
-/// refused before the decoder allocates them (a 344-byte file can ask for 24 GiB).
+/// An EXR given to `compare`, or a texture, whose header declares more pixels than any image
+/// read is refused before the decoder allocates them (a 344-byte file can ask for 24 GiB).
 #[test]
 fn declared_image_sizes_are_checked_before_allocation() {
     let dir = temp_dir("declared");
@@ -243,6 +243,31 @@ fn declared_image_sizes_are_checked_before_allocation() {
     common::fails_within(
         c,
         "declares 65536 x 32768 pixels: at most 16384 x 16384 are read",
+        std::time::Duration::from_secs(60),
+    );
+    // A JPEG texture whose frame header (SOF0: precision, height, width) declares 65535 x
+    // 65535 pixels in a few hundred bytes.
+    let jpeg = dir.join("huge.jpg");
+    image::RgbImage::from_pixel(8, 8, image::Rgb([200, 180, 160]))
+        .save(&jpeg)
+        .unwrap();
+    let mut bytes = std::fs::read(&jpeg).unwrap();
+    let sof = bytes.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap();
+    bytes[sof + 5..sof + 9].copy_from_slice(&[0xFF, 0xFF, 0xFF, 0xFF]);
+    std::fs::write(&jpeg, &bytes).unwrap();
+    let scene = dir.join("textured.toml");
+    std::fs::write(
+        &scene,
+        "[mesh]\nbuiltin = \"sphere\"\ntexture = \"huge.jpg\"\n",
+    )
+    .unwrap();
+    let mut c = bin();
+    c.args(["render", "--no-cache", "--out"])
+        .arg(dir.join("textured"))
+        .arg(&scene);
+    common::fails_within(
+        c,
+        "declares 65535 x 65535 pixels: at most 16384 x 16384 are read",
         std::time::Duration::from_secs(60),
     );
     let _ = std::fs::remove_dir_all(&dir);

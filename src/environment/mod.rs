@@ -467,14 +467,8 @@ pub fn decode(bytes: &[u8]) -> Result<(u32, u32, Vec<[f32; 3]>)> {
 /// Refuses a map whose header declares more than [`MAX_INPUT_WIDTH`] pixels a side, or more
 /// pixels than the widest equirectangular map read, before its pixels are allocated.
 fn check_declared_size(w: usize, h: usize) -> Result<()> {
-    let most = MAX_INPUT_WIDTH as usize;
-    if w > most || h > most || w.saturating_mul(h) > most * most / 2 {
-        bail!(
-            "its header declares {w} x {h} pixels: at most {MAX_INPUT_WIDTH} x {} are read",
-            MAX_INPUT_WIDTH / 2
-        );
-    }
-    Ok(())
+    let most = MAX_INPUT_WIDTH as u64;
+    crate::input::check_declared_size(w as u64, h as u64, most, most / 2)
 }
 
 /// The pixels within `r` of pixel `i` (itself included) of a `w` x `h` map, across its left

@@ -300,15 +300,11 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
     // The declared size, checked before the decoder allocates what the header claims.
     let header = exr::meta::MetaData::read_from_file(path, false)
         .with_context(|| format!("cannot read '{}'", path.display()))?;
-    let most = crate::input::MAX_IMAGE_SIDE as usize;
+    let most = crate::input::MAX_IMAGE_SIDE as u64;
     for layer in &header.headers {
         let (w, h) = (layer.layer_size.width(), layer.layer_size.height());
-        if w > most || h > most {
-            anyhow::bail!(
-                "'{}' declares {w} x {h} pixels: at most {most} x {most} are read",
-                path.display()
-            );
-        }
+        crate::input::check_declared_size(w as u64, h as u64, most, most)
+            .with_context(|| format!("'{}'", path.display()))?;
     }
     let image = read_first_rgba_layer_from_file(
         path,

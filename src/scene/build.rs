@@ -209,13 +209,26 @@ pub(super) fn load_texture(
             let p = base.join(t);
             let bytes = crate::input::read_regular(&p, crate::input::MAX_TEXTURE_BYTES, "texture")
                 .with_context(|| format!("cannot read texture '{}'", p.display()))?;
-            let img = image::load_from_memory(&bytes)
+            let img = decode_texture(&bytes)
                 .with_context(|| format!("cannot read texture '{}'", p.display()))?;
             md.texture = Some(absolute(&p));
             Some(img.to_rgba8())
         }
         None => None,
     })
+}
+
+/// A PNG or JPEG texture's pixels, its declared size checked against
+/// [`crate::input::MAX_IMAGE_SIDE`] a side before the decoder allocates them.
+fn decode_texture(bytes: &[u8]) -> Result<image::DynamicImage> {
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format()?;
+    let (w, h) = reader.into_dimensions()?;
+    let most = crate::input::MAX_IMAGE_SIDE as u64;
+    crate::input::check_declared_size(w as u64, h as u64, most, most)?;
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format()?;
+    // The image crate's own allocation limit (512 MiB) lies below a 16384 x 16384 RGBA image.
+    reader.no_limits();
+    Ok(reader.decode()?)
 }
 
 /// `[transform]`: units, scale, rotation and translation as one matrix.
