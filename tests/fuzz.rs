@@ -300,9 +300,16 @@ const CLI_VALUES: &[(&str, &[&str])] = &[
     ("--node-spacing-mm", &["1", "5", "0", "nan"]),
 ];
 
+/// The most resident memory a fuzzed run of the renderer may hold: its images are at most a few
+/// thousand pixels and its scenes small (a run holds about 130 MiB, most of it the Vulkan
+/// driver and the validation layer), so anything near this is input that allocated what it
+/// should have refused.
+const FUZZ_MEMORY_KIB: u64 = 2 << 20;
+
 /// Runs the renderer on `scene` with `args` (16 x 16 unless the values say otherwise, one
 /// frame, validated). Exit 0 must mean a finite, non-negative image; any other exit, a
-/// message naming the problem (an "error:" line, no panic); and no run may hang.
+/// message naming the problem (an "error:" line, no panic); no run may hang or hold more than
+/// [`FUZZ_MEMORY_KIB`] of memory.
 fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
     let scene_path = dir.join("scene.toml");
     std::fs::write(&scene_path, scene).unwrap();
@@ -340,7 +347,17 @@ fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
         .spawn()
         .unwrap();
     let start = std::time::Instant::now();
+    // The child's peak resident memory so far (VmHWM), read while it runs: a high-water mark,
+    // so the last reading before it exits holds all but its last few milliseconds.
+    let status_file = format!("/proc/{}/status", child.id());
+    let mut peak_kib = 0u64;
     let status = loop {
+        if let Some(kib) = std::fs::read_to_string(&status_file).ok().and_then(|t| {
+            let line = t.lines().find(|l| l.starts_with("VmHWM:"))?;
+            line.split_whitespace().nth(1)?.parse::<u64>().ok()
+        }) {
+            peak_kib = peak_kib.max(kib);
+        }
         if let Some(s) = child.try_wait().unwrap() {
             break s;
         }
@@ -356,7 +373,14 @@ fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
     let mut err = String::new();
     std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
     assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(
+        peak_kib <= FUZZ_MEMORY_KIB,
+        "render {flags:?} held {peak_kib} KiB, above the bound of {FUZZ_MEMORY_KIB} KiB, on {}",
+        String::from_utf8_lossy(scene)
+    );
     if status.success() {
+        // A render opens a Vulkan device: it runs long enough to be measured.
+        assert!(peak_kib > 0, "no memory reading of a whole render");
         let (_, _, rgba) = translucent::output::read_exr(&out.join("render.exr")).unwrap();
         let bad = rgba
             .iter()
