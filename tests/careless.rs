@@ -406,6 +406,41 @@ fn outputs_land_as_a_set() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `compare` writes its three files as a set too, and refuses an output folder where one of
+/// them would replace one of its input images.
+#[test]
+fn compare_lands_as_a_set_and_keeps_its_inputs() {
+    let dir = temp_dir("compare-set");
+    let (render, reference) = (dir.join("render.exr"), dir.join("error.exr"));
+    let image = |v: f32| [v, v, v, 1.0].repeat(4);
+    translucent::output::write_exr(&render, 2, 2, &image(0.5)).unwrap();
+    translucent::output::write_exr(&reference, 2, 2, &image(0.4)).unwrap();
+    let compare = |out: &Path| {
+        let mut c = bin();
+        c.arg("compare")
+            .arg(&render)
+            .arg(&reference)
+            .arg("--out")
+            .arg(out);
+        c
+    };
+    fails_with(compare(&dir), "would overwrite the input");
+    assert_eq!(
+        translucent::output::read_exr(&reference).unwrap().2,
+        image(0.4)
+    );
+    let out = dir.join("out");
+    let o = compare(&out).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["error.exr", "error.json", "error.png"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn longest_edge(m: &Mesh) -> f32 {
     m.edge_lengths().fold(0.0, f32::max)
 }

@@ -43,24 +43,32 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
             args.full_scale
         );
     }
-    output::check_targets(&args.out, &["error.exr", "error.png", "error.json"])?;
+    output::check_targets(&args.out, COMPARE_OUTPUTS)?;
     let Images { w, h, a, b, noise } = read_images(args)?;
     let (report, per_pixel) = metrics::compare(&a, &b, None);
     if report.pixels == 0 {
         bail!("no pixel is covered in both images");
     }
     refuse_black_reference(&a, &b, &args.reference)?;
-    output::create_dir(&args.out)?;
-    write_error_images(args, w, h, &per_pixel)?;
+    let inputs: Vec<PathBuf> = [
+        Some(&args.render),
+        Some(&args.reference),
+        args.noise.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    .cloned()
+    .collect();
+    let mut set = output::OutputSet::new(&args.out, COMPARE_OUTPUTS, &inputs)?;
+    write_error_images(&mut set, args, w, h, &per_pixel)?;
     let binned: Vec<metrics::BinnedError> = [1, 2, 4]
         .iter()
         .map(|&k| metrics::compare_binned(&a, &b, noise.as_deref(), w, h, k))
         .collect();
     let mut json = serde_json::to_value(&report)?;
     json["binned"] = serde_json::to_value(&binned)?;
-    output::write_atomic(&args.out.join("error.json"), |p| {
-        Ok(std::fs::write(p, serde_json::to_string_pretty(&json)?)?)
-    })?;
+    set.text("error.json", &serde_json::to_string_pretty(&json)?)?;
+    set.commit()?;
     print_summary(&report, &binned, noise.is_some());
     Ok(())
 }
@@ -113,8 +121,18 @@ fn refuse_black_reference(a: &[f32], b: &[f32], path: &std::path::Path) -> Resul
     Ok(())
 }
 
-/// Writes the per-pixel relative error as `error.exr` (grey) and `error.png` (false colour).
-fn write_error_images(args: &CompareArgs, w: u32, h: u32, per_pixel: &[f32]) -> Result<()> {
+/// What `compare` writes, as one set: all of it lands, or none.
+const COMPARE_OUTPUTS: &[&str] = &["error.exr", "error.png", "error.json"];
+
+/// Writes the per-pixel relative error into `set` as `error.exr` (grey) and `error.png` (false
+/// colour).
+fn write_error_images(
+    set: &mut output::OutputSet,
+    args: &CompareArgs,
+    w: u32,
+    h: u32,
+    per_pixel: &[f32],
+) -> Result<()> {
     let grey: Vec<f32> = per_pixel
         .iter()
         .flat_map(|&e| {
@@ -125,9 +143,9 @@ fn write_error_images(args: &CompareArgs, w: u32, h: u32, per_pixel: &[f32]) -> 
             }
         })
         .collect();
-    output::write_exr(&args.out.join("error.exr"), w, h, &grey)?;
-    output::write_png(
-        &args.out.join("error.png"),
+    output::encode_exr(&set.path("error.exr"), w, h, &grey)?;
+    output::encode_png(
+        &set.path("error.png"),
         w,
         h,
         &crate::metrics::false_colour(per_pixel, args.full_scale),

@@ -220,6 +220,25 @@ impl PreprocessArgs {
 /// CPU device; a count beyond that is a typo, refused before anything runs or is allocated.
 pub const MAX_FRAMES: usize = 100_000;
 
+/// Opens the set of a command's outputs `names` in `out`, refused where one would replace
+/// one of the scene's input files (the scene file, its mesh or texture).
+fn open_outputs(
+    out: &std::path::Path,
+    names: &'static [&'static str],
+    input: &SceneArgs,
+    scene: &Scene,
+) -> Result<output::OutputSet> {
+    let inputs: Vec<PathBuf> = [
+        input.scene.clone(),
+        scene.resolved.mesh.obj.clone(),
+        scene.resolved.mesh.texture.clone(),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    output::OutputSet::new(out, names, &inputs)
+}
+
 /// Refuses a frame count outside `min..=MAX_FRAMES`, naming the flag.
 fn frame_count(flag: &str, n: usize, min: usize) -> Result<()> {
     if n < min || n > MAX_FRAMES {

@@ -25,21 +25,20 @@ pub struct ReferenceArgs {
 /// Most surface samples `reference --spacing-mm` may ask for (a few GiB of samples).
 pub(super) const MAX_REFERENCE_SAMPLES: f64 = 5e7;
 
+/// What `reference` writes, as one set: all of it lands, or none.
+const REFERENCE_OUTPUTS: &[&str] = &[
+    "reference.exr",
+    "reference.png",
+    "vertices.csv",
+    "reference.json",
+];
+
 pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
     use crate::reference::Reference;
     let mut scene = args.input.load()?;
     apply_default_for_reference(&mut scene, preprocess::DEFAULT_TARGET_ERROR)?;
     let settings = reference_settings(args, &scene)?;
-    output::check_targets(
-        &args.out,
-        &[
-            "reference.exr",
-            "reference.png",
-            "vertices.csv",
-            "reference.json",
-        ],
-    )?;
-    output::create_dir(&args.out)?;
+    let mut set = super::open_outputs(&args.out, REFERENCE_OUTPUTS, &args.input, &scene)?;
     let start = std::time::Instant::now();
     let r = Reference::compute(&scene, settings);
     let seconds = start.elapsed().as_secs_f64();
@@ -47,16 +46,8 @@ pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
         "reference: spacing {:.3} mm, theta {:.2}: {} surface samples ({} lit), {:.1} s",
         settings.spacing_mm, settings.theta, r.samples, r.lit_samples, seconds
     );
-    let out = &args.out;
-    output::write_radiance(
-        out,
-        "reference",
-        r.width,
-        r.height,
-        &r.radiance,
-        scene.exposure,
-    )?;
-    write_vertices(out, &scene, &r)?;
+    set.radiance("reference", r.width, r.height, &r.radiance, scene.exposure)?;
+    write_vertices(&mut set, &scene, &r)?;
     let mut info = serde_json::json!({
         "spacing_mm": settings.spacing_mm, "theta": settings.theta, "samples": r.samples,
         "lit_samples": r.lit_samples, "seconds": seconds,
@@ -64,12 +55,11 @@ pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
     if args.refine {
         info["refinement"] = refine(&scene, settings, &r)?;
     }
-    output::write_atomic(&out.join("reference.json"), |p| {
-        Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
-    })?;
+    set.text("reference.json", &serde_json::to_string_pretty(&info)?)?;
+    set.commit()?;
     println!(
         "wrote reference.exr, reference.png, vertices.csv, reference.json to {}",
-        out.display()
+        args.out.display()
     );
     Ok(())
 }
@@ -105,9 +95,9 @@ fn reference_settings(
     Ok(settings)
 }
 
-/// Writes `vertices.csv` in `out`: B at every mesh vertex.
+/// Writes `vertices.csv` into `set`: B at every mesh vertex.
 fn write_vertices(
-    out: &std::path::Path,
+    set: &mut output::OutputSet,
     scene: &Scene,
     r: &crate::reference::Reference,
 ) -> Result<()> {
@@ -118,7 +108,7 @@ fn write_vertices(
             p.x, p.y, p.z, b[0], b[1], b[2]
         ));
     }
-    output::write_atomic(&out.join("vertices.csv"), |p| Ok(std::fs::write(p, &csv)?))
+    set.text("vertices.csv", &csv)
 }
 
 /// Computes the reference again with half the spacing and theta of `settings` (those of `r`)

@@ -63,7 +63,7 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
         scene.resolved.to_toml()
     );
-    let mut set = open_output_set(args, &scene)?;
+    let mut set = open_outputs(&args.out, RENDER_OUTPUTS, &args.input, &scene)?;
     let mut scene = scene;
     let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
     // The scene as rendered: the default model, which the saved scene names.
@@ -86,20 +86,6 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     print_summary(&report, &args.out);
     drop(renderer);
     check_validation(&gpu)
-}
-
-/// Opens the set of `render`'s outputs in `args.out`, refused where one would replace one of
-/// the scene's input files.
-fn open_output_set(args: &RenderArgs, scene: &Scene) -> Result<output::OutputSet> {
-    let inputs: Vec<PathBuf> = [
-        args.input.scene.clone(),
-        scene.resolved.mesh.obj.clone(),
-        scene.resolved.mesh.texture.clone(),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
-    output::OutputSet::new(&args.out, RENDER_OUTPUTS, &inputs)
 }
 
 /// Renders and times `args.frames` frames (the lights turning with `--orbit-light`, each

@@ -50,17 +50,7 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
     let settings = truth_settings(args);
     // Refuse before creating anything.
     truth::validate(&scene, &settings)?;
-    output::check_targets(
-        &args.out,
-        &[
-            "truth.exr",
-            "truth.png",
-            "noise.exr",
-            "truth_surface.exr",
-            "truth.json",
-        ],
-    )?;
-    output::create_dir(&args.out)?;
+    let mut set = super::open_outputs(&args.out, TRUTH_OUTPUTS, &args.input, &scene)?;
     let medium = truth::Medium::new(&scene.material, args.g);
     print_plan(args, &scene, &medium);
     let t = trace(&scene, &settings)?;
@@ -75,8 +65,9 @@ pub(super) fn truth(args: &TruthArgs) -> Result<()> {
     let out = &args.out;
     // The surface's reflection alone, where there is one (a refractive boundary).
     let refractive = scene.material.eta != 1.0;
-    write_images(out, &scene, &t, refractive)?;
-    write_info(args, &scene, &t, &figures)?;
+    write_images(&mut set, &scene, &t, refractive)?;
+    write_info(&mut set, args, &scene, &t, &figures)?;
+    set.commit()?;
     print_summary(&t, &figures, refractive, out);
     Ok(())
 }
@@ -134,19 +125,28 @@ fn trace(scene: &Scene, settings: &crate::truth::TruthSettings) -> Result<crate:
     Ok(t)
 }
 
-/// Writes `truth.exr`, `truth.png` and `noise.exr` in `out`, and `truth_surface.exr` where
+/// What `truth` writes, as one set: all of it lands, or none.
+const TRUTH_OUTPUTS: &[&str] = &[
+    "truth.exr",
+    "truth.png",
+    "noise.exr",
+    "truth_surface.exr",
+    "truth.json",
+];
+
+/// Writes `truth.exr`, `truth.png` and `noise.exr` into `set`, and `truth_surface.exr` where
 /// the boundary is `refractive`.
 fn write_images(
-    out: &std::path::Path,
+    set: &mut output::OutputSet,
     scene: &Scene,
     t: &crate::truth::Truth,
     refractive: bool,
 ) -> Result<()> {
-    output::write_radiance(out, "truth", t.width, t.height, &t.radiance, scene.exposure)?;
-    output::write_exr(&out.join("noise.exr"), t.width, t.height, &t.noise)?;
+    set.radiance("truth", t.width, t.height, &t.radiance, scene.exposure)?;
+    output::encode_exr(&set.path("noise.exr"), t.width, t.height, &t.noise)?;
     if refractive {
-        output::write_exr(
-            &out.join("truth_surface.exr"),
+        output::encode_exr(
+            &set.path("truth_surface.exr"),
             t.width,
             t.height,
             &t.surface,
@@ -155,8 +155,9 @@ fn write_images(
     Ok(())
 }
 
-/// Writes `truth.json`: the tracing's counts, the arguments and the figures.
+/// Writes `truth.json` into `set`: the tracing's counts, the arguments and the figures.
 fn write_info(
+    set: &mut output::OutputSet,
     args: &TruthArgs,
     scene: &Scene,
     t: &crate::truth::Truth,
@@ -177,9 +178,7 @@ fn write_info(
         "sigma_t": medium.sigma_t, "albedo": medium.albedo,
         "noise": noise, "object_mean": mean, "object_mean_stderr": stderr,
     });
-    output::write_atomic(&args.out.join("truth.json"), |p| {
-        Ok(std::fs::write(p, serde_json::to_string_pretty(&info)?)?)
-    })
+    set.text("truth.json", &serde_json::to_string_pretty(&info)?)
 }
 
 /// Prints the tracing's counts, the noise after each binning, the object's mean and the

@@ -160,6 +160,31 @@ impl OutputSet {
         tmp
     }
 
+    /// Writes `NAME.exr` (linear) and `NAME.png` (tone-mapped with `exposure`) of the set.
+    pub fn radiance(
+        &mut self,
+        name: &str,
+        width: u32,
+        height: u32,
+        radiance: &[f32],
+        exposure: f32,
+    ) -> Result<()> {
+        encode_exr(&self.path(&format!("{name}.exr")), width, height, radiance)?;
+        encode_png(
+            &self.path(&format!("{name}.png")),
+            width,
+            height,
+            &tonemap(radiance, exposure),
+        )
+    }
+
+    /// Writes the set's file `name` with `contents`.
+    pub fn text(&mut self, name: &str, contents: &str) -> Result<()> {
+        let path = self.path(name);
+        std::fs::write(&path, contents)
+            .with_context(|| format!("cannot write {}", self.dir.join(name).display()))
+    }
+
     /// Moves every file into place. Checks first that no final name is a folder (the one way
     /// a rename in the same folder fails), so that the set lands whole or not at all.
     pub fn commit(mut self) -> Result<()> {
@@ -270,25 +295,6 @@ pub fn encode_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<
         .non_parallel()
         .to_file(path)?;
     Ok(())
-}
-
-/// Writes a radiance image as `DIR/NAME.exr` (linear) and `DIR/NAME.png` (tone-mapped with
-/// `exposure`).
-pub fn write_radiance(
-    dir: &Path,
-    name: &str,
-    width: u32,
-    height: u32,
-    radiance: &[f32],
-    exposure: f32,
-) -> Result<()> {
-    write_exr(&dir.join(format!("{name}.exr")), width, height, radiance)?;
-    write_png(
-        &dir.join(format!("{name}.png")),
-        width,
-        height,
-        &tonemap(radiance, exposure),
-    )
 }
 
 /// Reads an RGBA EXR written by [`write_exr`] (for tests and comparisons).
