@@ -263,6 +263,30 @@ pub enum MaterialError {
     /// sigma_s' + sigma_a = 0: no extinction, the dipole is undefined.
     #[error("channel {0} has sigma_s' + sigma_a = 0: the medium does not interact with light")]
     NoExtinction(usize),
+    /// An albedo (`[material] albedo`) no medium of the given index shows.
+    #[error(
+        "albedo[{channel}] = {value} lies outside (0, {most:.4}): a half-space behind a boundary of eta = {eta} reflects at most {most:.4} of the light it is given (without absorption)"
+    )]
+    UnreachableAlbedo {
+        /// 0, 1, 2 for R, G, B.
+        channel: usize,
+        /// The value given.
+        value: f64,
+        /// The most that index allows.
+        most: f64,
+        /// The index.
+        eta: f64,
+    },
+    /// A scatter distance (`[material] scatter_distance_mm`) that is not a positive length.
+    #[error(
+        "scatter_distance_mm[{channel}] = {value} must be a finite length between 1e-6 and 1e9 mm"
+    )]
+    BadDistance {
+        /// 0, 1, 2 for R, G, B.
+        channel: usize,
+        /// The value given.
+        value: f64,
+    },
     /// eta out of the physical range the model supports.
     #[error("index of refraction eta = {0} is outside the supported range [1.0, 3.0]")]
     BadEta(f64),
@@ -298,6 +322,67 @@ impl Material {
                     PRESETS.iter().map(|p| p.0).collect::<Vec<_>>().join(", "),
                 )
             })
+    }
+
+    /// The medium an artist describes: `albedo`, the colour the object shows (the total
+    /// diffuse reflectance of a half-space under light along its normal, exact: the
+    /// half-space tables, the surface's mirror reflection left out), and `distance_mm`, each
+    /// channel's mean free path 1 / sigma_t' (how far light goes between scattering events,
+    /// as Blender's and Arnold's subsurface radius), behind a boundary of `eta`. The
+    /// single-scattering albedo that gives each channel's reflectance is found by bisection
+    /// (the reflectance rises with it).
+    pub fn from_appearance(
+        albedo: [f64; 3],
+        distance_mm: [f64; 3],
+        eta: f64,
+    ) -> Result<Material, MaterialError> {
+        // The reflectance of a half-space of single-scattering albedo `a` (scale-free).
+        let reflectance = |a: f64| -> Result<[f64; 3], MaterialError> {
+            Ok(Material::custom([a; 3], [1.0 - a; 3], eta)?
+                .with_model(Model::Halfspace)?
+                .total_reflectance())
+        };
+        let most = reflectance(1.0)?[0];
+        let mut sigma_s_prime = [0.0; 3];
+        let mut sigma_a = [0.0; 3];
+        for c in 0..3 {
+            let (target, d) = (albedo[c], distance_mm[c]);
+            if !(d.is_finite() && (1e-6..=1e9).contains(&d)) {
+                return Err(MaterialError::BadDistance {
+                    channel: c,
+                    value: d,
+                });
+            }
+            if !(target.is_finite() && target > 0.0 && target < most) {
+                return Err(MaterialError::UnreachableAlbedo {
+                    channel: c,
+                    value: target,
+                    most,
+                    eta,
+                });
+            }
+            let (mut lo, mut hi) = (0.0f64, 1.0f64);
+            for _ in 0..48 {
+                let mid = 0.5 * (lo + hi);
+                if reflectance(mid)?[0] < target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let a = 0.5 * (lo + hi);
+            sigma_s_prime[c] = a / d;
+            sigma_a[c] = (1.0 - a) / d;
+        }
+        Material::custom(sigma_s_prime, sigma_a, eta)
+    }
+
+    /// The albedo and scatter distance of [`Material::from_appearance`] that give this
+    /// material's coefficients.
+    pub fn appearance(&self) -> Result<([f64; 3], [f64; 3]), MaterialError> {
+        let total = self.with_model(Model::Halfspace)?.total_reflectance();
+        let distance = std::array::from_fn(|c| 1.0 / (self.sigma_s_prime[c] + self.sigma_a[c]));
+        Ok((total, distance))
     }
 
     /// Custom coefficients, validated.
@@ -450,6 +535,57 @@ impl Material {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_medium_given_by_its_appearance_shows_it() {
+        for name in ["skimmilk", "marble", "ketchup", "skin1"] {
+            for eta in [1.0, 1.3, 1.5] {
+                let m = Material::custom(
+                    Material::preset(name).unwrap().sigma_s_prime,
+                    Material::preset(name).unwrap().sigma_a,
+                    eta,
+                )
+                .unwrap();
+                let (albedo, distance) = m.appearance().unwrap();
+                let back = Material::from_appearance(albedo, distance, eta).unwrap();
+                for c in 0..3 {
+                    let (s, a) = (m.sigma_s_prime[c], m.sigma_a[c]);
+                    assert!(
+                        (back.sigma_s_prime[c] / s - 1.0).abs() < 1e-6,
+                        "{name} eta {eta}: sigma_s' {} vs {s}",
+                        back.sigma_s_prime[c]
+                    );
+                    // Absorption far below scattering is set by the reflectance's slope near
+                    // albedo 1: within 1e-4 of the extinction.
+                    assert!(
+                        (back.sigma_a[c] - a).abs() < 1e-4 * (s + a),
+                        "{name} eta {eta}: sigma_a {} vs {a}",
+                        back.sigma_a[c]
+                    );
+                }
+                let (again, d) = back.appearance().unwrap();
+                for c in 0..3 {
+                    assert!((again[c] - albedo[c]).abs() < 1e-9, "{again:?} {albedo:?}");
+                    assert!((d[c] / distance[c] - 1.0).abs() < 1e-12);
+                }
+            }
+        }
+        // What no medium shows, and lengths that are none, are refused by name.
+        for (albedo, distance, needle) in [
+            ([0.0, 0.5, 0.5], [1.0; 3], "albedo[0] = 0 lies outside"),
+            ([0.5, 1.0, 0.5], [1.0; 3], "albedo[1] = 1 lies outside"),
+            ([0.5, 0.5, f64::NAN], [1.0; 3], "albedo[2] = NaN"),
+            ([0.5; 3], [1.0, 0.0, 1.0], "scatter_distance_mm[1] = 0"),
+            (
+                [0.5; 3],
+                [1.0, 1.0, f64::INFINITY],
+                "scatter_distance_mm[2] = inf",
+            ),
+        ] {
+            let e = Material::from_appearance(albedo, distance, 1.3).unwrap_err();
+            assert!(e.to_string().contains(needle), "{e}");
+        }
+    }
 
     #[test]
     fn presets_by_loose_name() {

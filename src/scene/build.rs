@@ -593,13 +593,33 @@ fn lamp_light(i: usize, l: &mut LightDesc, center: Vec3, radiance: Vec3) -> Resu
     })
 }
 
-/// `[material]`: a preset or coefficients, the surface's roughness, and the model (by default
+/// `[material]`: a preset, coefficients or an appearance (albedo and scatter distance), the
+/// surface's roughness, and the model (by default
 /// the half-space profile under an environment); the medium and the roughness.
 pub(super) fn resolve_material(
     mat: &mut MaterialDesc,
     has_environment: bool,
 ) -> Result<(Material, f64)> {
+    let appearance = mat.albedo.is_some() || mat.scatter_distance_mm.is_some();
+    let coefficients = mat.sigma_s_prime.is_some() || mat.sigma_a.is_some();
+    if appearance && (coefficients || mat.preset.is_some()) {
+        bail!(
+            "[material] gives albedo / scatter_distance_mm and {}; choose one",
+            if coefficients {
+                "coefficients"
+            } else {
+                "a preset"
+            }
+        )
+    }
     let material = match (&mat.preset, mat.sigma_s_prime, mat.sigma_a) {
+        _ if appearance => match (mat.albedo, mat.scatter_distance_mm) {
+            (Some(albedo), Some(distance)) => {
+                let eta = *mat.eta.get_or_insert(1.3);
+                Material::from_appearance(albedo, distance, eta).context("[material]")?
+            }
+            _ => bail!("[material] needs both albedo and scatter_distance_mm"),
+        },
         (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
             bail!("[material] gives both a preset and coefficients; choose one")
         }

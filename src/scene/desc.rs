@@ -32,7 +32,8 @@
 //! rays = 256                 # rays per texel for the transfer (a square number)
 //!
 //! [material]
-//! preset = "skimmilk"        # or sigma_s_prime / sigma_a (1/mm, RGB) and eta
+//! preset = "skimmilk"        # or sigma_s_prime / sigma_a (1/mm, RGB), or albedo (linear
+//!                             # RGB) / scatter_distance_mm, and eta
 //!
 //! [output]
 //! width = 512
@@ -196,6 +197,23 @@ pub struct MaterialDesc {
     /// Absorption coefficient, 1/mm, RGB.
     #[serde(default, deserialize_with = "triple")]
     pub sigma_a: Option<[f64; 3]>,
+    /// The colour the object shows, linear RGB in (0, 1): the total diffuse reflectance of the
+    /// material's half-space (`physics::Material::from_appearance`); with
+    /// `scatter_distance_mm`, instead of a preset or coefficients.
+    #[serde(
+        default,
+        deserialize_with = "triple",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub albedo: Option<[f64; 3]>,
+    /// How far light goes inside between scattering events, per channel, mm (the mean free
+    /// path 1 / sigma_t', as the subsurface radius of Blender and Arnold); with `albedo`.
+    #[serde(
+        default,
+        deserialize_with = "triple",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub scatter_distance_mm: Option<[f64; 3]>,
     /// Relative index of refraction.
     pub eta: Option<f64>,
     /// The model of the material's response (`physics::Model`); by default the one the scene

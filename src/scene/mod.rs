@@ -287,6 +287,37 @@ mod tests {
         assert_eq!(again.lights, s.lights);
     }
 
+    /// A material given as an artist gives it (the colour shown and the scatter distance)
+    /// renders skim milk where those are skim milk's, and its printed scene keeps the keys.
+    #[test]
+    fn a_material_given_by_its_appearance() {
+        let milk = crate::physics::Material::preset("skimmilk").unwrap();
+        let (albedo, distance) = milk.appearance().unwrap();
+        let text = format!(
+            "[material]\nalbedo = {albedo:?}\nscatter_distance_mm = {distance:?}\neta = {}\n",
+            milk.eta
+        );
+        let s = Scene::from_desc(
+            SceneDesc::parse(&text).unwrap(),
+            Path::new(""),
+            &Overrides::default(),
+        )
+        .unwrap();
+        for c in 0..3 {
+            assert!((s.material.sigma_s_prime[c] / milk.sigma_s_prime[c] - 1.0).abs() < 1e-6);
+            assert!((s.material.sigma_a[c] - milk.sigma_a[c]).abs() < 1e-6);
+        }
+        let printed = s.resolved.to_toml();
+        assert!(printed.contains("scatter_distance_mm"), "{printed}");
+        let again = Scene::from_desc(
+            SceneDesc::parse(&printed).unwrap(),
+            Path::new(""),
+            &Overrides::default(),
+        )
+        .unwrap();
+        assert_eq!(again.material, s.material);
+    }
+
     #[test]
     fn a_light_turns_about_the_centre() {
         let l = Light {
@@ -394,6 +425,22 @@ mod tests {
                 "sigma_a",
             ),
             ("[material]\npreset = \"marble\"\neta = 0.0", "eta"),
+            (
+                "[material]\npreset = \"marble\"\nalbedo = [0.5, 0.5, 0.5]\nscatter_distance_mm = [1.0, 1.0, 1.0]",
+                "albedo / scatter_distance_mm and a preset",
+            ),
+            (
+                "[material]\nalbedo = [0.5, 0.5, 0.5]\nsigma_a = [1.0, 1.0, 1.0]",
+                "albedo / scatter_distance_mm and coefficients",
+            ),
+            (
+                "[material]\nalbedo = [0.5, 0.5, 0.5]",
+                "needs both albedo and scatter_distance_mm",
+            ),
+            (
+                "[material]\nalbedo = [0.5, 1.2, 0.5]\nscatter_distance_mm = [1.0, 1.0, 1.0]",
+                "albedo[1] = 1.2 lies outside",
+            ),
             (
                 "[material]\npreset = \"marble\"\nroughness = 1.5",
                 "roughness = 1.5 must lie between 0 (smooth) and 1",

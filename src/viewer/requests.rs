@@ -304,6 +304,9 @@ impl Running {
                 self.scene.material = w.material;
                 let md = &mut self.scene.resolved.material;
                 md.preset = w.preset.clone();
+                // The coefficients shown stand for the material now (an appearance given in
+                // the scene file would contradict them).
+                (md.albedo, md.scatter_distance_mm) = (None, None);
                 (md.sigma_s_prime, md.sigma_a, md.eta) = match &w.preset {
                     Some(_) => (None, None, Some(w.material.eta)),
                     None => (
