@@ -4,9 +4,9 @@
 // the stored depth away from the light): the slope is measured from the neighbouring texels
 // on the same surface (the smaller difference per axis; none across the silhouette). Beside the
 // depth it stores those slopes, signed, per texel along u and v, and which of them are known
-// (1 for u, 2 for v): the `single` pass places the surface within the texel with them, since
-// light grazing a face crosses many times the medium's free path in depth over one texel.
-// The `single` pass reads it to measure how far light travels inside.
+// (1 for u, 2 for v). The `single` pass reads it to measure how far light travels inside, and
+// places the surface within the texel by the slopes, since light grazing a face crosses many
+// times the medium's free path in depth over one texel.
 
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
@@ -38,9 +38,8 @@ void main() {
             ivec3 o = axis == 0 ? ivec3(1, 0, 0) : ivec3(0, 1, 0);
             float a = depth_at(p + o, size);
             float b = depth_at(p - o, size);
-            // The one-sided difference of the smaller size: the same surface. (Central
-            // differences, nearer on a curve, follow the depths' rounding on a face of a
-            // kilometre.)
+            // The one-sided difference of the smaller size: the same surface, where the other
+            // side falls off it or onto another surface (a central difference mixes them in).
             float forward = a < 1.0 ? a - z : 2.0;
             float backward = b < 1.0 ? z - b : 2.0;
             float m = abs(forward) <= abs(backward) ? forward : backward;

@@ -99,10 +99,10 @@ float light_depth(Light l, vec3 p, vec3 travel) {
 }
 
 // The unit normal, facing the light (against `travel`), of the surface the shadow map sees at
-// `entry` (layer, coordinates `uv`, the entry texel's slopes): from the surface one texel over
+// `entry` (in `layer`, with the entry texel's slopes): from the surface one texel over
 // in u and in v along those slopes; -travel where either slope is unknown (the texel's
 // neighbours on both sides fall off the object).
-vec3 entry_normal(vec3 entry, uint layer, vec2 uv, vec3 slopes, vec3 travel) {
+vec3 entry_normal(vec3 entry, uint layer, vec3 slopes, vec3 travel) {
     uint known = uint(slopes.z);
     if (known != 3u) {
         return -travel;
@@ -142,7 +142,7 @@ float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
         return 0.0;
     }
     float straight = max(dot(p - entry, travel), 0.0);
-    vec3 n = entry_normal(entry, layer, uv, slopes, travel);
+    vec3 n = entry_normal(entry, layer, slopes, travel);
     cos_i = clamp(-dot(n, travel), 0.0, 1.0);
     vec3 t = refract(travel, n, 1.0 / eta);
     if (straight <= 0.0 || dot(t, t) == 0.0) {
@@ -178,7 +178,7 @@ struct Anchor {
     float rounding;
 };
 
-Anchor anchor_at(Light l, vec3 x, vec3 travel) {
+Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 travel) {
     Anchor a;
     a.lit = false;
     a.n = -travel;
@@ -196,8 +196,9 @@ Anchor anchor_at(Light l, vec3 x, vec3 travel) {
     float dz = ROUNDING * max(abs(ndc.z), 1e-3);
     float depth_step = length(unproject(frame.shadow_inverse[layer], ndc.xy, ndc.z + dz) - entry);
     a.rounding = max(ROUNDING * max(m.x, max(m.y, m.z)), depth_step);
-    a.n = entry_normal(entry, layer, uv, slopes, travel);
-    a.lit = abs(dot(x - entry, travel)) <= a.rounding;
+    a.n = entry_normal(entry, layer, slopes, travel);
+    // On the surface the light enters: turned towards the light, and where the map sees it.
+    a.lit = dot(normal, travel) < 0.0 && abs(dot(x - entry, travel)) <= a.rounding;
     return a;
 }
 
@@ -300,7 +301,7 @@ void main() {
     for (uint i = 0u; i < lights; ++i) {
         vec3 wi;
         light_at(frame.lights[i], x, wi, e0[i]);
-        anchors[i] = anchor_at(frame.lights[i], x, -wi);
+        anchors[i] = anchor_at(frame.lights[i], x, normal, -wi);
         d0[i] = light_inside(frame.lights[i], x, -wi, refracts, eta, anchors[i], inside, 0.0, e0[i]);
     }
     float s0 = 0.0;

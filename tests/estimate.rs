@@ -20,8 +20,8 @@ const WALK_COLLISIONS: std::ops::RangeInclusive<f64> = 0.8..=3.0;
 
 /// The estimate bounds what the upload needs (kernel texel-buffer elements and the device
 /// bytes that do not depend on pruning, within 0.7x to 1.4x), the node count (0.5x to 2x) and
-/// the work (kernel taps as the kernel elements, the walks exactly, their collisions mostly
-/// from above, with and without a refractive boundary; entries of F and the fit follow from
+/// the work (kernel taps as the kernel elements, the walks within 0.8x to 1.2x, their
+/// collisions mostly from above, with and without a refractive boundary; entries of F and the fit follow from
 /// the nodes). The meshes are those an estimate can get wrong: long
 /// polygons (a 2000-gon coin, a 1000-segment cylinder, whose rim vertices must not all become
 /// nodes), 235 000 triangles, a kernel buffer that packs two taps to an element.
@@ -70,8 +70,8 @@ fn estimate_bounds_the_requirements() {
     let mut failures = Vec::new();
     for (text, what) in &cases {
         let scene = common::scene(text);
-        // The walked scenes with fewer walks than derived (their counts follow the walks; the
-        // derived ones take a minute of CI): skim milk's collide about 25 times as often.
+        // The walked scenes with fewer walks than derived (their counts follow the walks, and
+        // the derived ones take long): skim milk's walks collide far more often than ketchup's.
         let walks = if scene.material.model.walks() {
             Some(if what.starts_with("skim") { 256 } else { 1024 })
         } else {
@@ -131,7 +131,8 @@ fn estimate_bounds_the_requirements() {
                 0.7..=1.4,
             ),
         ];
-        // The walks' collisions: bounded from above (thin objects end their walks sooner).
+        // The walks and their collisions (mostly from above: thin objects end their walks
+        // sooner).
         if let Some(w) = &pre.ops.walks {
             println!(
                 "{what}: {} walks, {} collisions, {:.2} s",

@@ -194,8 +194,8 @@ fn meaningless_settings_are_refused_by_name() {
     let mut c = bin();
     c.args(["view", "--script", ""]);
     fails_with(c, "--script has no commands");
-    // A discretisation too coarse for the object (the 50 mm bunny): a texel of 40 mm left its
-    // charts without texels and rendered black, a spacing of 100 mm gave one node.
+    // A discretisation too coarse for the object (the 50 mm bunny): a texel of 40 mm leaves its
+    // charts without texels (a black image), a spacing of 100 mm one node.
     for (command, flag, needle) in [
         ("render", "--texel-mm=40", "leaves about 4 texels"),
         (

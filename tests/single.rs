@@ -164,7 +164,7 @@ fn the_pass_measures_the_view_rays_length_inside() {
     );
 }
 
-/// The single-scattering image of the 50 mm box of `scale_text` (a `[transform]` scale) seen
+/// The single-scattering image of the 50 mm box scaled by `scale` (`[transform] scale`) seen
 /// and lit at an angle, 64x64 under `halfspace-single`: the central 16x16 pixels (on the face
 /// in front), their mean per channel and the largest relative difference of a pixel from the
 /// mean of its four neighbours.
@@ -210,8 +210,8 @@ fn face_of_a_box(scale: f64) -> ([f64; 3], f64) {
 
 /// Precision at any scale: the light's path inside is measured from the view ray's own start
 /// where the shadow map agrees with the lit face's plane, so an evenly lit face of a metre and
-/// of a kilometre is as even as one of a few centimetres (the difference of two coordinates
-/// of a kilometre rounds to a tenth of a millimetre in f32, against a free path of 0.5-1.4 mm),
+/// of a kilometre is even, and both show the same radiance (the difference of two coordinates
+/// of a kilometre rounds to a tenth of a millimetre in f32, against a free path of about 1 mm),
 /// and the light within one of the shadow map's texels follows the face's slope (grazing
 /// light crosses many free paths in depth over one texel).
 #[test]

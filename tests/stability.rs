@@ -202,7 +202,7 @@ fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [[f64; 3]; 4] {
     // in its own blending); the last two on closed meshes only: NaN where the case's mesh is
     // open.
     // The first three columns are measured for the table only (`TRANSLUCENT_STABILITY_TABLE`):
-    // nothing asserts them, and they would take a third of the suite's time.
+    // nothing asserts them, and they would lengthen the suite much.
     let table = std::env::var_os("TRANSLUCENT_STABILITY_TABLE").is_some();
     [
         Model::Dipole,

@@ -91,7 +91,7 @@ fn check(
         );
         // No blotch or hole: a few pixels far off move the RMS little but one bin a lot.
         // No bin may be further off than half the object's mean beyond three times the
-        // model's bound (the figures sit at 0.05-0.35 of the mean where the model is near).
+        // model's bound.
         let peak = 0.5 + 3.0 * bound;
         assert!(
             e.peak[c] < peak,
@@ -208,8 +208,8 @@ fn small_and_thin_behind_a_boundary_with_walks() {
     );
 }
 
-/// The bunny in skim milk under every model at eta = 1, `halfspace` (single scattering in its
-/// kernels) included: a blotch of a few dozen pixels at several times the truth moves the RMS
+/// The bunny in skim milk at eta = 1 under the models without walks, `halfspace` (single
+/// scattering in its kernels) included: a blotch of a few dozen pixels at several times the truth moves the RMS
 /// little, and the peak check of every case catches it.
 #[test]
 fn bunny_in_skim_milk() {

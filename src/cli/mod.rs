@@ -221,13 +221,19 @@ impl PreprocessArgs {
 pub const MAX_FRAMES: usize = 100_000;
 
 /// Opens the set of a command's outputs `names` in `out`, refused where one would replace
-/// one of the scene's input files (the scene file, its mesh or texture).
+/// one of the scene's input files (the scene file, its mesh, texture or environment map).
 fn open_outputs(
     out: &std::path::Path,
     names: &'static [&'static str],
     input: &SceneArgs,
     scene: &Scene,
 ) -> Result<output::OutputSet> {
+    let maps = scene
+        .resolved
+        .lights
+        .iter()
+        .flatten()
+        .filter_map(|l| l.file.clone());
     let inputs: Vec<PathBuf> = [
         input.scene.clone(),
         scene.resolved.mesh.obj.clone(),
@@ -235,6 +241,7 @@ fn open_outputs(
     ]
     .into_iter()
     .flatten()
+    .chain(maps)
     .collect();
     output::OutputSet::new(out, names, &inputs)
 }

@@ -54,8 +54,8 @@ impl PrtSettings {
 }
 
 /// Seconds per ray and thread of the transfer (`preprocess::transfer::transfer`), calibrated on
-/// 2 cores on the bunny of 3674 and of 235 000 triangles (the BVH's depth barely shows), at 64x64
-/// and 256x256.
+/// 2 cores on the bunny as shipped and subdivided (the BVH's depth barely shows), at a few
+/// image sizes (docs/results/estimates.md).
 const SECONDS_PER_RAY: f64 = 9.0e-7;
 
 /// Estimated seconds of the transfer (`preprocess::transfer::transfer`) over `texels` texels on this machine's threads: its work,

@@ -185,8 +185,9 @@ impl OutputSet {
             .with_context(|| format!("cannot write {}", self.dir.join(name).display()))
     }
 
-    /// Moves every file into place. Checks first that no final name is a folder (the one way
-    /// a rename in the same folder fails), so that the set lands whole or not at all.
+    /// Moves every file into place, and removes the set's names it did not write (an older
+    /// set's). Checks first that no final name is a folder (the one way a rename in the same
+    /// folder fails), so that the set lands whole or not at all.
     pub fn commit(mut self) -> Result<()> {
         for (tmp, target) in &self.files {
             if !tmp.is_file() {
@@ -199,6 +200,15 @@ impl OutputSet {
                 .with_context(|| format!("cannot move {} into place", target.display()))?;
         }
         self.committed = true;
+        // A name of the set this run did not write belongs to an older set (`truth`'s surface
+        // image of a refractive scene beside an index-matched one): it goes.
+        for name in self.names {
+            let target = self.dir.join(name);
+            let written = self.files.iter().any(|(_, t)| *t == target);
+            if !written && std::fs::symlink_metadata(&target).is_ok_and(|m| m.is_file()) {
+                let _ = std::fs::remove_file(&target);
+            }
+        }
         Ok(())
     }
 }
@@ -510,6 +520,36 @@ mod tests {
         assert!(!stale.exists());
         assert!(fresh.exists() && foreign.exists());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A set lands whole: an uncommitted one leaves nothing, a committed one its files and
+    /// none of an older set's that it did not write.
+    #[test]
+    fn a_set_lands_whole_and_replaces_an_older_set() {
+        let dir = std::env::temp_dir().join(format!("translucent-set-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        const NAMES: &[&str] = &["a.txt", "b.txt", "c.txt"];
+        for name in NAMES {
+            std::fs::write(dir.join(name), b"old").unwrap();
+        }
+        {
+            let mut set = OutputSet::new(&dir, NAMES, &[]).unwrap();
+            set.text("a.txt", "new").unwrap();
+            // Dropped without a commit: a failure part way.
+        }
+        for name in NAMES {
+            assert_eq!(std::fs::read(dir.join(name)).unwrap(), b"old");
+        }
+        let mut set = OutputSet::new(&dir, NAMES, &[]).unwrap();
+        set.text("a.txt", "new").unwrap();
+        set.text("b.txt", "new").unwrap();
+        set.commit().unwrap();
+        assert_eq!(std::fs::read(dir.join("a.txt")).unwrap(), b"new");
+        assert_eq!(std::fs::read(dir.join("b.txt")).unwrap(), b"new");
+        assert!(!dir.join("c.txt").exists(), "an older set's file stayed");
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        assert_eq!(left.len(), 2, "temporaries left");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -128,7 +128,7 @@ pub struct Work {
 /// (a start, a shadow ray and the ray casts at both ends) and their collisions (a scattering
 /// event each, and a ray cast through the BVH for the flights that leave the ball around the
 /// last search free of the surface), fitted together on ketchup and skim-milk spheres with and
-/// without a refractive boundary (walks from 7 to 26 per 100 collisions).
+/// without a refractive boundary (few collisions per walk and many).
 mod cost {
     pub const KERNEL_TAP: f64 = 5.0e-7;
     pub const DENSE_ENTRY: f64 = 6.0e-7;
@@ -228,8 +228,8 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
 
 /// Collisions of the walks that fill F (`model = "volume"`; 0 otherwise): nodes x walks x
 /// collisions per walk. A walk from the surface of a half-space of albedo a collides about
-/// 1 / sqrt(1 - a) times; thin objects end their walks sooner, so this bounds the count from
-/// above there. Behind a refractive boundary the walks reflected back inside collide longer, by
+/// 1 / sqrt(1 - a) times; thin objects end their walks sooner, so this lies mostly above the
+/// count there. Behind a refractive boundary the walks reflected back inside collide longer, by
 /// the ratio of the light absorbed in a half-space with the boundary and without it (the
 /// dipole's 1 - R_total for each).
 pub fn walk_collisions(material: &Material, nodes: u64, walk_paths: u32) -> f64 {

@@ -119,6 +119,17 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
                     scale.max_texels, scale.area_mm2
                 );
             }
+            // However small the object is in the image, a discretisation that shows it
+            // (`preprocess::Estimate::check_meaningful`, with room).
+            let coarsest = (scale.area_mm2 / (4 * super::MIN_TEXELS) as f64).sqrt();
+            if h > coarsest {
+                h = coarsest;
+                why = format!(
+                    "texel {h:.3} mm: {} texels over the object's {:.0} mm^2 of surface, however few pixels show it",
+                    4 * super::MIN_TEXELS,
+                    scale.area_mm2
+                );
+            }
             reasons.push(why);
             h
         }
@@ -166,11 +177,23 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             // the tail, so a small tail tolerates proportionally coarser nodes (up to 4x).
             let relax = (0.25 / tail.max(1e-9)).sqrt().clamp(1.0, 4.0);
             let s = radius * relax;
-            reasons.push(format!(
-                "node spacing {s:.2} mm = kernel radius x {relax:.1} (the global response carries {:.0} % of R_total beyond the kernel)",
-                100.0 * tail
-            ));
-            s
+            // At least four times the nodes a global response needs
+            // (`preprocess::Estimate::check_meaningful`).
+            let coarsest = (scale.area_mm2 / (0.866 * (4 * super::MIN_NODES) as f64)).sqrt();
+            if s > coarsest {
+                reasons.push(format!(
+                    "node spacing {coarsest:.2} mm: {} nodes over the object's {:.0} mm^2 of surface (the kernel radius x {relax:.1} would leave fewer)",
+                    4 * super::MIN_NODES,
+                    scale.area_mm2
+                ));
+                coarsest
+            } else {
+                reasons.push(format!(
+                    "node spacing {s:.2} mm = kernel radius x {relax:.1} (the global response carries {:.0} % of R_total beyond the kernel)",
+                    100.0 * tail
+                ));
+                s
+            }
         }
     };
 

@@ -226,8 +226,13 @@ fn decode_texture(bytes: &[u8]) -> Result<image::DynamicImage> {
     let most = crate::input::MAX_IMAGE_SIDE as u64;
     crate::input::check_declared_size(w as u64, h as u64, most, most)?;
     let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format()?;
-    // The image crate's own allocation limit (512 MiB) lies below a 16384 x 16384 RGBA image.
-    reader.no_limits();
+    // The crate's default allocation limit lies below a 16384 x 16384 RGBA image: the limits
+    // are this program's, 16 bits per channel at the largest size.
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(crate::input::MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(crate::input::MAX_IMAGE_SIDE);
+    limits.max_alloc = Some(most * most * 8);
+    reader.limits(limits);
     Ok(reader.decode()?)
 }
 

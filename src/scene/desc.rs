@@ -197,8 +197,9 @@ pub struct MaterialDesc {
     /// Absorption coefficient, 1/mm, RGB.
     #[serde(default, deserialize_with = "triple")]
     pub sigma_a: Option<[f64; 3]>,
-    /// The colour the object shows, linear RGB in (0, 1): the total diffuse reflectance of the
-    /// material's half-space (`physics::Material::from_appearance`); with
+    /// The colour the object shows, linear RGB: the total diffuse reflectance of the material's
+    /// half-space (`physics::Material::from_appearance`), above 0 and below what the index
+    /// allows without absorption; with
     /// `scatter_distance_mm`, instead of a preset or coefficients.
     #[serde(
         default,

@@ -304,7 +304,7 @@ impl Running {
                 self.scene.material = w.material;
                 let md = &mut self.scene.resolved.material;
                 md.preset = w.preset.clone();
-                // The coefficients shown stand for the material now (an appearance given in
+                // The coefficients shown stand for the edited material (an appearance given in
                 // the scene file would contradict them).
                 (md.albedo, md.scatter_distance_mm) = (None, None);
                 (md.sigma_s_prime, md.sigma_a, md.eta) = match &w.preset {
