@@ -441,6 +441,55 @@ fn compare_lands_as_a_set_and_keeps_its_inputs() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `compare`'s picture: full red at three times the reference's per-pixel noise where that is
+/// above 10 % (the noise alone painted it red), and a colour bar below the image.
+#[test]
+fn compare_scales_its_picture_to_the_noise() {
+    let dir = temp_dir("compare-scale");
+    let image = |v: f32| [v, v, v, 1.0].repeat(4);
+    let (render, reference, noise) = (
+        dir.join("render.exr"),
+        dir.join("reference.exr"),
+        dir.join("noise.exr"),
+    );
+    translucent::output::write_exr(&render, 2, 2, &image(0.5)).unwrap();
+    translucent::output::write_exr(&reference, 2, 2, &image(0.4)).unwrap();
+    // 20 % per pixel.
+    translucent::output::write_exr(&noise, 2, 2, &image(0.08)).unwrap();
+    let out = dir.join("out");
+    let o = bin()
+        .arg("compare")
+        .arg(&render)
+        .arg(&reference)
+        .arg("--noise")
+        .arg(&noise)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("full red at 60.0 % relative error (three times"),
+        "{stdout}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("error.json")).unwrap()).unwrap();
+    assert!(
+        (json["full_scale"].as_f64().unwrap() - 0.6).abs() < 1e-6,
+        "{json}"
+    );
+    // The 2x2 image, a dark row and four rows of the bar, whose left end is black (no error)
+    // and right end red (the full scale).
+    let png = image::open(out.join("error.png")).unwrap().to_rgba8();
+    assert_eq!(png.dimensions(), (2, 7));
+    assert_eq!(png.get_pixel(0, 2).0, [0, 0, 0, 255]);
+    let (left, right) = (png.get_pixel(0, 6).0, png.get_pixel(1, 6).0);
+    assert!(right[0] > 200 && right[1] < 100, "{right:?}");
+    assert_eq!(left, [0, 0, 0, 255]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn longest_edge(m: &Mesh) -> f32 {
     m.edge_lengths().fold(0.0, f32::max)
 }

@@ -16,9 +16,10 @@ pub struct CompareArgs {
     /// Output folder for error.exr, error.png and error.json.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Relative error shown as full red in error.png.
-    #[arg(long, default_value_t = 0.1)]
-    pub full_scale: f32,
+    /// Relative error shown as full red in error.png; derived where not given: 10 %, or three
+    /// times the reference's median per-pixel relative noise (`--noise`) where that is more.
+    #[arg(long)]
+    pub full_scale: Option<f32>,
 }
 
 /// The images compared: the render, the reference and its noise, all of one size.
@@ -37,11 +38,8 @@ struct Images {
 
 pub(super) fn compare(args: &CompareArgs) -> Result<()> {
     use crate::metrics;
-    if !(args.full_scale.is_finite() && args.full_scale > 0.0) {
-        bail!(
-            "--full-scale {} must be a finite positive relative error (0.1 is 10 %)",
-            args.full_scale
-        );
+    if let Some(f) = args.full_scale.filter(|f| !(f.is_finite() && *f > 0.0)) {
+        bail!("--full-scale {f} must be a finite positive relative error (0.1 is 10 %)");
     }
     output::check_targets(&args.out, COMPARE_OUTPUTS)?;
     let Images { w, h, a, b, noise } = read_images(args)?;
@@ -60,13 +58,22 @@ pub(super) fn compare(args: &CompareArgs) -> Result<()> {
     .cloned()
     .collect();
     let mut set = output::OutputSet::new(&args.out, COMPARE_OUTPUTS, &inputs)?;
-    write_error_images(&mut set, args, w, h, &per_pixel)?;
+    let (full_scale, why) = match args.full_scale {
+        Some(f) => (f, "given".to_string()),
+        None => derived_full_scale(&b, noise.as_deref()),
+    };
+    println!(
+        "error.png: full red at {:.1} % relative error ({why}), the colour bar below the image",
+        100.0 * full_scale
+    );
+    write_error_images(&mut set, w, h, &per_pixel, full_scale)?;
     let binned: Vec<metrics::BinnedError> = [1, 2, 4]
         .iter()
         .map(|&k| metrics::compare_binned(&a, &b, noise.as_deref(), w, h, k))
         .collect();
     let mut json = serde_json::to_value(&report)?;
     json["binned"] = serde_json::to_value(&binned)?;
+    json["full_scale"] = serde_json::to_value(full_scale)?;
     set.text("error.json", &serde_json::to_string_pretty(&json)?)?;
     set.commit()?;
     print_summary(&report, &binned, noise.is_some());
@@ -124,14 +131,55 @@ fn refuse_black_reference(a: &[f32], b: &[f32], path: &std::path::Path) -> Resul
 /// What `compare` writes, as one set: all of it lands, or none.
 const COMPARE_OUTPUTS: &[&str] = &["error.exr", "error.png", "error.json"];
 
+/// The full scale of `error.png` where none is given, and why: 10 %, or three times the
+/// median over the covered pixels of the reference's relative noise (the mean over the
+/// channels of sigma / reference, as the error is) where that is more, so that the noise alone
+/// does not paint the picture red.
+fn derived_full_scale(reference: &[f32], noise: Option<&[f32]>) -> (f32, String) {
+    const DEFAULT: f32 = 0.1;
+    let Some(noise) = noise else {
+        return (DEFAULT, "the default".into());
+    };
+    let mut relative: Vec<f32> = reference
+        .chunks_exact(4)
+        .zip(noise.chunks_exact(4))
+        .filter(|(r, _)| r[3] > 0.5 && r[..3].iter().all(|v| *v > 0.0))
+        .map(|(r, s)| (0..3).map(|c| s[c] / r[c]).sum::<f32>() / 3.0)
+        .filter(|v| v.is_finite())
+        .collect();
+    if relative.is_empty() {
+        return (DEFAULT, "the default".into());
+    }
+    relative.sort_by(f32::total_cmp);
+    let median = relative[relative.len() / 2];
+    if 3.0 * median > DEFAULT {
+        (
+            3.0 * median,
+            format!(
+                "three times the reference's median per-pixel noise of {:.1} %",
+                100.0 * median
+            ),
+        )
+    } else {
+        (
+            DEFAULT,
+            format!(
+                "the default, above three times the reference's median per-pixel noise of {:.1} %",
+                100.0 * median
+            ),
+        )
+    }
+}
+
 /// Writes the per-pixel relative error into `set` as `error.exr` (grey) and `error.png` (false
-/// colour).
+/// colour up to `full_scale`, with a colour bar below the image from no error on the left to
+/// `full_scale` and above on the right, a dark row between them).
 fn write_error_images(
     set: &mut output::OutputSet,
-    args: &CompareArgs,
     w: u32,
     h: u32,
     per_pixel: &[f32],
+    full_scale: f32,
 ) -> Result<()> {
     let grey: Vec<f32> = per_pixel
         .iter()
@@ -144,12 +192,17 @@ fn write_error_images(
         })
         .collect();
     output::encode_exr(&set.path("error.exr"), w, h, &grey)?;
-    output::encode_png(
-        &set.path("error.png"),
-        w,
-        h,
-        &crate::metrics::false_colour(per_pixel, args.full_scale),
-    )
+    let mut picture = crate::metrics::false_colour(per_pixel, full_scale);
+    let bar_rows = (h / 16).max(4);
+    picture.extend((0..w).flat_map(|_| [0u8, 0, 0, 255]));
+    let ramp: Vec<f32> = (0..w)
+        .map(|x| x as f32 / (w - 1).max(1) as f32 * full_scale)
+        .collect();
+    let ramp = crate::metrics::false_colour(&ramp, full_scale);
+    for _ in 0..bar_rows {
+        picture.extend_from_slice(&ramp);
+    }
+    output::encode_png(&set.path("error.png"), w, h + 1 + bar_rows, &picture)
 }
 
 /// Prints the error per channel and after each binning (with the reference's noise removed
