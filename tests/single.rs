@@ -7,7 +7,24 @@ mod common;
 
 use translucent::metrics;
 use translucent::preprocess::settings::SettingsOverrides;
-use translucent::renderer::{Options, Renderer};
+use translucent::renderer::{Captured, Options, RenderOutput};
+use translucent::scene::Scene;
+
+/// One validated frame of `scene` (preprocessed at its derived settings) with the passes'
+/// images captured: the frame and the captures.
+fn render_captured(scene: &Scene) -> (RenderOutput, Captured) {
+    let pre = common::preprocess(scene, SettingsOverrides::default());
+    let gpu = common::gpu();
+    let options = Options {
+        capture: true,
+        ..Default::default()
+    };
+    let mut r = common::renderer(&gpu, scene, &pre, options);
+    let out = r.render(1).unwrap();
+    let c = r.captured(0, 0).unwrap().unwrap();
+    common::assert_no_validation_messages(&gpu);
+    (out, c)
+}
 
 /// The single-scattering image of `scene` (64x64) against `truth_dir`, relative RMS after 4x4
 /// binning with the truth's noise removed, per channel.
@@ -15,16 +32,7 @@ fn single_error(name: &str, truth_dir: &str) -> [f64; 3] {
     let scene = common::truth_scene(name, Some(64), None);
     assert!(scene.material.model.has_single_pass());
     let (w, h, truth, noise) = common::committed_truth(truth_dir);
-    let pre = common::preprocess(&scene, SettingsOverrides::default());
-    let gpu = common::gpu();
-    let options = Options {
-        capture: true,
-        ..Default::default()
-    };
-    let mut r = Renderer::new(&gpu, scene, &pre, None, options).unwrap();
-    let out = r.render(1).unwrap();
-    let c = r.captured(0, 0).unwrap().unwrap();
-    common::assert_no_validation_messages(&gpu);
+    let (out, c) = render_captured(&scene);
     // The pass's alpha is the view ray's length inside; coverage is the render's alpha, as the
     // truth's alpha marks its own.
     let single: Vec<f32> = c
@@ -115,17 +123,8 @@ fn the_pass_measures_the_view_rays_length_inside() {
     let scene = common::scene(&format!(
         "[mesh]\nbuiltin = \"sphere\"\nradius = {radius}\nsegments = 96\n[material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n[output]\nwidth = 64\nheight = 64\n"
     ));
-    let pre = common::preprocess(&scene, SettingsOverrides::default());
-    let gpu = common::gpu();
-    let options = Options {
-        capture: true,
-        ..Default::default()
-    };
     let (w, h) = (scene.width, scene.height);
-    let mut r = common::renderer(&gpu, &scene, &pre, options);
-    let out = r.render(1).unwrap();
-    let c = r.captured(0, 0).unwrap().unwrap();
-    common::assert_no_validation_messages(&gpu);
+    let (out, c) = render_captured(&scene);
     let (center, _) = scene.bounds();
     let center = center.as_dvec3();
     let r2 = radius * radius;
@@ -172,16 +171,7 @@ fn face_of_a_box(scale: f64) -> ([f64; 3], f64) {
     let scene = common::scene(&format!(
         "[mesh]\nbuiltin = \"box\"\nsize = [50.0, 50.0, 50.0]\nsegments = 8\n[transform]\nscale = {scale}\n[[lights]]\nkind = \"directional\"\ndirection = [0.2, -1.0, -0.3]\n[material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n[output]\nwidth = 64\nheight = 64\n"
     ));
-    let pre = common::preprocess(&scene, SettingsOverrides::default());
-    let gpu = common::gpu();
-    let options = Options {
-        capture: true,
-        ..Default::default()
-    };
-    let mut r = Renderer::new(&gpu, scene, &pre, None, options).unwrap();
-    r.render(1).unwrap();
-    let c = r.captured(0, 0).unwrap().unwrap();
-    common::assert_no_validation_messages(&gpu);
+    let (_, c) = render_captured(&scene);
     let at = |x: usize, y: usize| c.single[y * 64 + x];
     let (mut mean, mut worst) = ([0.0f64; 3], 0.0f64);
     for y in 24..40 {

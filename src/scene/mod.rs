@@ -261,6 +261,17 @@ pub fn camera_ray(scene: &Scene, x: u32, y: u32) -> (glam::DVec3, glam::DVec3) {
 mod tests {
     use super::*;
 
+    /// The scene of a description's text, relative paths from the working folder, nothing
+    /// overridden.
+    fn from_text(text: &str) -> Scene {
+        Scene::from_desc(
+            SceneDesc::parse(text).unwrap(),
+            Path::new(""),
+            &Overrides::default(),
+        )
+        .unwrap()
+    }
+
     #[test]
     fn default_scene_is_the_bunny_about_50_mm_tall() {
         let s = Scene::load(None, &Overrides::default()).unwrap();
@@ -277,12 +288,7 @@ mod tests {
         ] {
             assert!(text.contains(key), "{key} missing from\n{text}");
         }
-        let again = Scene::from_desc(
-            SceneDesc::parse(&text).unwrap(),
-            Path::new(""),
-            &Overrides::default(),
-        )
-        .unwrap();
+        let again = from_text(&text);
         assert_eq!(again.camera, s.camera);
         assert_eq!(again.lights, s.lights);
     }
@@ -297,24 +303,14 @@ mod tests {
             "[material]\nalbedo = {albedo:?}\nscatter_distance_mm = {distance:?}\neta = {}\n",
             milk.eta
         );
-        let s = Scene::from_desc(
-            SceneDesc::parse(&text).unwrap(),
-            Path::new(""),
-            &Overrides::default(),
-        )
-        .unwrap();
+        let s = from_text(&text);
         for c in 0..3 {
             assert!((s.material.sigma_s_prime[c] / milk.sigma_s_prime[c] - 1.0).abs() < 1e-6);
             assert!((s.material.sigma_a[c] - milk.sigma_a[c]).abs() < 1e-6);
         }
         let printed = s.resolved.to_toml();
         assert!(printed.contains("scatter_distance_mm"), "{printed}");
-        let again = Scene::from_desc(
-            SceneDesc::parse(&printed).unwrap(),
-            Path::new(""),
-            &Overrides::default(),
-        )
-        .unwrap();
+        let again = from_text(&printed);
         assert_eq!(again.material, s.material);
     }
 
@@ -353,16 +349,7 @@ mod tests {
 
     #[test]
     fn the_model_follows_the_index_unless_given() {
-        let load = |text: &str| {
-            Scene::from_desc(
-                SceneDesc::parse(text).unwrap(),
-                Path::new(""),
-                &Overrides::default(),
-            )
-            .unwrap()
-            .material
-            .model
-        };
+        let load = |text: &str| from_text(text).material.model;
         use crate::physics::Model;
         assert_eq!(load("[material]\npreset = \"skimmilk\""), Model::Halfspace);
         assert_eq!(
