@@ -458,6 +458,8 @@ fn colour(series: &str) -> RGBColor {
         "dipole" => RGBColor(110, 110, 110),
         "halfspace" => RGBColor(20, 170, 170),
         "volume" => RGBColor(170, 130, 0),
+        "halfspace-single" => RGBColor(120, 60, 200),
+        "halfspace-air" => RGBColor(60, 160, 90),
         _ => RGBColor(120, 60, 200),
     }
 }
@@ -512,6 +514,110 @@ where
     Ok(())
 }
 
+/// Which setting a point varies from the automatic one, by its label in [`sweep`] and
+/// [`walk_sweep`]: drawn as the point's marker, so that a point says its knob.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Knob {
+    Auto,
+    Kernel,
+    Texel,
+    Nodes,
+    Prune,
+    Walks,
+}
+
+impl Knob {
+    const ALL: [Knob; 6] = [
+        Knob::Auto,
+        Knob::Kernel,
+        Knob::Texel,
+        Knob::Nodes,
+        Knob::Prune,
+        Knob::Walks,
+    ];
+
+    fn of(setting: &str) -> Knob {
+        match setting.split(' ').next().unwrap_or("") {
+            "kernel" => Knob::Kernel,
+            "texel" => Knob::Texel,
+            "nodes" => Knob::Nodes,
+            "prune" => Knob::Prune,
+            "walks" => Knob::Walks,
+            _ => Knob::Auto,
+        }
+    }
+
+    /// The legend's words for the knob.
+    fn describe(self) -> &'static str {
+        match self {
+            Knob::Auto => "automatic settings",
+            Knob::Kernel => "kernel size varied",
+            Knob::Texel => "texel size varied",
+            Knob::Nodes => "node spacing varied",
+            Knob::Prune => "pruning varied",
+            Knob::Walks => "walks per node varied",
+        }
+    }
+
+    /// The knob's marker at pixel `at` in `colour`.
+    fn marker<DB: DrawingBackend>(
+        self,
+        area: &DrawingArea<DB, Shift>,
+        at: (i32, i32),
+        colour: RGBColor,
+    ) -> Result<()>
+    where
+        DB::ErrorType: 'static,
+    {
+        let (x, y) = at;
+        let r = 5;
+        let filled = colour.filled();
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
+        match self {
+            Knob::Auto => area.draw(&Circle::new(at, r, filled)).map_err(e),
+            Knob::Kernel => area
+                .draw(&Polygon::new(
+                    vec![(x, y - r - 1), (x - r - 1, y + r), (x + r + 1, y + r)],
+                    filled,
+                ))
+                .map_err(e),
+            Knob::Texel => area
+                .draw(&Rectangle::new([(x - r, y - r), (x + r, y + r)], filled))
+                .map_err(e),
+            Knob::Nodes => area
+                .draw(&Polygon::new(
+                    vec![
+                        (x, y - r - 2),
+                        (x + r + 2, y),
+                        (x, y + r + 2),
+                        (x - r - 2, y),
+                    ],
+                    filled,
+                ))
+                .map_err(e),
+            Knob::Prune => area
+                .draw(&Cross::new(at, r + 1, colour.stroke_width(3)))
+                .map_err(e),
+            Knob::Walks => area
+                .draw(&Circle::new(at, r, colour.stroke_width(2)))
+                .map_err(e),
+        }
+    }
+}
+
+/// An error as a percentage with three decimals, or "n/a" where there is none (NaN: the walks
+/// against an exact model, a scene without truth).
+pub fn percent(error: f64) -> String {
+    if error.is_nan() {
+        "n/a".into()
+    } else {
+        format!("{:.3} %", 100.0 * error)
+    }
+}
+
+/// Width of the legend's column beside each panel, pixels: the legend never covers data.
+const LEGEND_WIDTH: u32 = 230;
+
 fn panel<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     title: &str,
@@ -521,6 +627,7 @@ fn panel<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
     // Points without this panel's error (the walks against an exact model) are not drawn.
     let points: Vec<Point> = points
         .iter()
@@ -528,6 +635,8 @@ where
         .cloned()
         .collect();
     let points = &points[..];
+    let (plot_area, legend_area) =
+        root.split_horizontally(root.dim_in_pixel().0.saturating_sub(LEGEND_WIDTH));
     let xmax = points
         .iter()
         .map(|p| p.gpu_ms * (1.0 + p.gpu_spread))
@@ -541,7 +650,7 @@ where
         * 100.0
         * 0.7;
     let ymax = points.iter().map(what.error).fold(0.0, f64::max) * 100.0 * 1.4;
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(&plot_area)
         .caption(title, ("sans-serif", 20))
         .margin(15)
         .x_label_area_size(45)
@@ -550,14 +659,14 @@ where
             0.0..xmax.max(1e-3),
             (ymin..ymax.max(ymin * 2.0)).log_scale(),
         )
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(e)?;
     chart
         .configure_mesh()
         .x_desc("GPU frame time (ms): lowest round median, bar to the highest")
         .y_desc(what.y_desc)
         .label_style(("sans-serif", 14))
         .draw()
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(e)?;
     let primary = points.first().map(|p| p.model.as_str()).unwrap_or("");
     let mut names: Vec<&str> = Vec::new();
     for p in points {
@@ -566,63 +675,47 @@ where
             names.push(s);
         }
     }
-    for name in names {
-        let c = colour(name);
-        let series: Vec<(f64, f64)> = points
-            .iter()
-            .filter(|p| series_of(p, primary) == name)
-            .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
-            .collect();
-        // The first model's series are its modes; every other model's is its default one.
-        let label = if Blend::ALL.iter().any(|b| b.name() == name) {
-            format!("{primary}, {name}")
-        } else {
-            let mode = points
-                .iter()
-                .find(|p| p.model == name)
-                .map_or("optimized", |p| p.mode.as_str());
-            format!("{name}, {mode}")
-        };
-        // Each point's spread (its round medians) as a horizontal bar.
-        chart
-            .draw_series(
-                points
-                    .iter()
-                    .filter(|p| series_of(p, primary) == name)
-                    .map(|p| {
-                        let y = 100.0 * (what.error)(p);
-                        PathElement::new(
-                            vec![(p.gpu_ms, y), (p.gpu_ms * (1.0 + p.gpu_spread), y)],
-                            c.stroke_width(1),
-                        )
-                    }),
+    let at = |p: &Point| (p.gpu_ms, 100.0 * (what.error)(p));
+    // Each point's spread (its round medians) as a horizontal bar, then its marker: the
+    // series' colour, the knob's shape.
+    chart
+        .draw_series(points.iter().map(|p| {
+            let (x, y) = at(p);
+            PathElement::new(
+                vec![(x, y), (x * (1.0 + p.gpu_spread), y)],
+                colour(series_of(p, primary)).stroke_width(1),
             )
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-        chart
-            .draw_series(
-                series
-                    .iter()
-                    .map(|&(x, y)| Circle::new((x, y), 4, c.filled())),
-            )
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?
-            .label(label)
-            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+        }))
+        .map_err(e)?;
+    let plotting = chart.plotting_area().strip_coord_spec();
+    let (x0, y0) = plotting.get_base_pixel();
+    let pixel = |p: &Point| {
+        let (x, y) = chart.backend_coord(&at(p));
+        (x - x0, y - y0)
+    };
+    for p in points {
+        Knob::of(&p.setting).marker(&plotting, pixel(p), colour(series_of(p, primary)))?;
     }
-    let mut front: Vec<(f64, f64)> = points
+    // The scene's own model's optimized points name their setting, beside the marker.
+    let small = ("sans-serif", 12).into_font().color(&RGBColor(60, 60, 60));
+    for p in points
         .iter()
-        .filter(|p| (what.front)(p))
-        .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
-        .collect();
+        .filter(|p| p.model == primary && p.mode == "optimized" && !p.auto)
+    {
+        let (x, y) = pixel(p);
+        plotting
+            .draw(&Text::new(p.setting.clone(), (x + 9, y - 6), small.clone()))
+            .map_err(e)?;
+    }
+    let mut front: Vec<(f64, f64)> = points.iter().filter(|p| (what.front)(p)).map(at).collect();
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
     chart
         .draw_series(LineSeries::new(front, BLACK.stroke_width(2)))
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?
-        .label("Pareto front")
-        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(2)));
+        .map_err(e)?;
     let autos: Vec<(f64, f64)> = points
         .iter()
         .filter(|p| p.auto && p.mode == "optimized" && p.model == primary)
-        .map(|p| (p.gpu_ms, 100.0 * (what.error)(p)))
+        .map(at)
         .collect();
     chart
         .draw_series(
@@ -630,16 +723,53 @@ where
                 .iter()
                 .map(|&(x, y)| Circle::new((x, y), 9, BLACK.stroke_width(2))),
         )
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?
-        .label("automatic setting")
-        .legend(|(x, y)| Circle::new((x, y), 7, BLACK.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.9))
-        .label_font(("sans-serif", 14))
-        .draw()
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(e)?;
+
+    // The legend, in its own column: series (colour), knobs (shape), front, automatic point.
+    let font = ("sans-serif", 14).into_font();
+    let mut y = 60;
+    let line = 20;
+    let text =
+        |s: &str, y: i32| legend_area.draw(&Text::new(s.to_string(), (34, y - 7), font.clone()));
+    for name in &names {
+        // The first model's series are its modes; every other model's is its default one.
+        let label = if Blend::ALL.iter().any(|b| b.name() == *name) {
+            format!("{primary}, {name}")
+        } else {
+            let mode = points
+                .iter()
+                .find(|p| p.model == *name)
+                .map_or("optimized", |p| p.mode.as_str());
+            format!("{name}, {mode}")
+        };
+        legend_area
+            .draw(&Circle::new((18, y), 5, colour(name).filled()))
+            .map_err(e)?;
+        text(&label, y).map_err(e)?;
+        y += line;
+    }
+    y += line / 2;
+    for knob in Knob::ALL
+        .into_iter()
+        .filter(|k| points.iter().any(|p| Knob::of(&p.setting) == *k))
+    {
+        knob.marker(&legend_area, (18, y), RGBColor(40, 40, 40))?;
+        text(knob.describe(), y).map_err(e)?;
+        y += line;
+    }
+    y += line / 2;
+    legend_area
+        .draw(&PathElement::new(
+            vec![(8, y), (28, y)],
+            BLACK.stroke_width(2),
+        ))
+        .map_err(e)?;
+    text("Pareto front", y).map_err(e)?;
+    y += line;
+    legend_area
+        .draw(&Circle::new((18, y), 8, BLACK.stroke_width(2)))
+        .map_err(e)?;
+    text("automatic setting", y).map_err(e)?;
     Ok(())
 }
 
@@ -651,7 +781,7 @@ pub fn plot(dir: &Path, title: &str, points: &[Point]) -> Result<()> {
     } else {
         1
     };
-    let (w, h) = (900u32 * panels, 600u32);
+    let (w, h) = ((900 + LEGEND_WIDTH) * panels, 600u32);
     let svg_path = dir.join("chart.svg");
     crate::output::write_atomic(&svg_path, |tmp| {
         draw(
@@ -986,6 +1116,44 @@ mod tests {
         assert_eq!(full[3].1.texel_mm, Some(1.0));
         assert_eq!(full[3].1.walk_paths, Some(2576));
         assert_eq!(full[4].1.node_spacing_mm, Some(4.0));
+    }
+
+    /// Every swept setting's marker says the knob it varies, the automatic one its own; an
+    /// error that was not measured reads "n/a", not "NaN %".
+    #[test]
+    fn each_point_says_its_knob_and_missing_errors_read_na() {
+        let auto = crate::preprocess::settings::Settings {
+            texel_mm: 0.5,
+            kernel_size: 7,
+            node_spacing_mm: 2.0,
+            prune_tolerance: 0.01,
+            chart_angle_deg: 60.0,
+            walk_paths: 2576,
+            walk_lights: [None; crate::scene::MAX_LIGHTS],
+        };
+        let base = sweep(&auto, false)[0].1;
+        let mut seen = Vec::new();
+        for (label, o) in sweep(&auto, false).into_iter().chain(walk_sweep(&auto, false)) {
+            // The one setting that differs from the automatic one.
+            let expected = [
+                (o.kernel_size != base.kernel_size, Knob::Kernel),
+                (o.texel_mm != base.texel_mm, Knob::Texel),
+                (o.node_spacing_mm != base.node_spacing_mm, Knob::Nodes),
+                (o.prune_tolerance != base.prune_tolerance, Knob::Prune),
+                (o.walk_paths != base.walk_paths, Knob::Walks),
+            ]
+            .into_iter()
+            .find(|(differs, _)| *differs)
+            .map_or(Knob::Auto, |(_, k)| k);
+            let knob = Knob::of(&label);
+            assert_eq!(knob, expected, "{label}");
+            if !seen.contains(&knob) {
+                seen.push(knob);
+            }
+        }
+        assert_eq!(seen.len(), Knob::ALL.len(), "{seen:?}");
+        assert_eq!(percent(f64::NAN), "n/a");
+        assert_eq!(percent(0.01234), "1.234 %");
     }
 
     /// The committed charts (docs/chart-*.csv) mark as front exactly the points no other point

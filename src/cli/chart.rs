@@ -278,13 +278,13 @@ fn model_runs<'a>(
 fn print_points(points: &[crate::chart::Point]) {
     for p in points {
         println!(
-            "{:<12} {:<16} {:<10} {:>8.2} ms  {:>7.3} % RMS vs model  {:>7.3} % vs truth",
+            "{:<12} {:<16} {:<10} {:>8.2} ms  {:>9} RMS vs model  {:>9} vs truth",
             p.setting,
             p.model,
             p.mode,
             p.gpu_ms,
-            100.0 * p.rel_rms,
-            100.0 * p.rel_rms_truth
+            crate::chart::percent(p.rel_rms),
+            crate::chart::percent(p.rel_rms_truth)
         );
     }
 }
@@ -336,10 +336,10 @@ fn print_summary(
         .find(|p| p.auto && p.mode == "optimized" && p.model == own.name())
     {
         println!(
-            "automatic setting (optimized): {:.2} ms, {:.3} % RMS vs model, {:.3} % vs truth, {}",
+            "automatic setting (optimized): {:.2} ms, {} RMS vs model, {} vs truth, {}",
             a.gpu_ms,
-            100.0 * a.rel_rms,
-            100.0 * a.rel_rms_truth,
+            crate::chart::percent(a.rel_rms),
+            crate::chart::percent(a.rel_rms_truth),
             if a.pareto {
                 "on the Pareto front"
             } else {
