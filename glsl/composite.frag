@@ -1,9 +1,11 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
-// B = (B^l + B^g) T, L = F_t(eta, w_o) B / pi, plus the surface's own reflection (SURFACE).
+// B = (B^l + B^g) sqrt(T) / R, L = F_t(eta, w_o) B / pi, plus the surface's own reflection
+// (SURFACE).
 // B^l is filtered bilinearly over the covered texels of the atlas only (alpha 1), so chart
-// borders do not pull in gutter texels. Writes L
-// (linear) and its tone-mapped display value (exposure, sRGB curve); alpha marks coverage.
+// borders do not pull in gutter texels. Writes L (linear) and its tone-mapped display value
+// (exposure, sRGB curve); alpha marks coverage. The inputs are interpolated at the centroid of
+// the covered samples: a multisampled edge pixel's fragment stays inside its triangle.
 #include "frame.glsl"
 #include "shadow.glsl"
 
@@ -20,19 +22,19 @@ layout(std430, set = 0, binding = 6) readonly buffer EnvironmentMap {
     vec4 environment_map[];
 };
 
-layout(location = 0) in vec3 in_position;
-layout(location = 1) in vec3 in_normal;
-layout(location = 2) in vec2 in_uv;
-layout(location = 3) in vec2 in_atlas;
-layout(location = 4) in vec3 in_global;
+layout(location = 0) centroid in vec3 in_position;
+layout(location = 1) centroid in vec3 in_normal;
+layout(location = 2) centroid in vec2 in_uv;
+layout(location = 3) centroid in vec2 in_atlas;
+layout(location = 4) centroid in vec3 in_global;
 // Slope k of the exit lobe 1 + k (mu - 2/3) measured by the walks (0 elsewhere: the profile's
 // lobe in the uniforms applies).
-layout(location = 5) in vec3 in_exit_slope;
+layout(location = 5) centroid in vec3 in_exit_slope;
 // Drift a of the exit lobe along the surface per channel, measured by the walks (0 elsewhere):
 // light flowing along the surface leaves leaning the way it flows, + a . w_o.
-layout(location = 6) in vec3 in_drift_r;
-layout(location = 7) in vec3 in_drift_g;
-layout(location = 8) in vec3 in_drift_b;
+layout(location = 6) centroid in vec3 in_drift_r;
+layout(location = 7) centroid in vec3 in_drift_g;
+layout(location = 8) centroid in vec3 in_drift_b;
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_display;
@@ -92,7 +94,21 @@ vec3 local_response(vec2 atlas) {
     if (wsum > 0.0) {
         return sum / wsum;
     }
-    return imageLoad(local_b, ivec2(floor(atlas))).rgb;
+    // No covered texel among the four (a sliver of a chart that a multisampled pixel's sample
+    // meets between texel centres): the covered ones of the 3 x 3 around it, whose texture
+    // means bound the texture's variation there (`passes::data::texture_means`).
+    ivec2 c = ivec2(floor(atlas));
+    for (int j = -1; j <= 1; ++j) {
+        for (int i = -1; i <= 1; ++i) {
+            vec4 v = imageLoad(local_b, c + ivec2(i, j));
+            sum += v.a * v.rgb;
+            wsum += v.a;
+        }
+    }
+    if (wsum > 0.0) {
+        return sum / wsum;
+    }
+    return imageLoad(local_b, c).rgb;
 }
 
 // `volume`'s exit lobe of orders >= 2 at x (normal n, exit cosine mu) for the light the lamps
@@ -196,6 +212,31 @@ vec3 surface_reflection(vec3 x, vec3 n, vec3 v) {
     return l;
 }
 
+// The `single` pass's value at pixel p. That pass takes one sample per pixel, at its centre; a
+// multisampled silhouette pixel whose centre the object misses is shaded from its samples
+// inside, and takes the mean of its neighbours that the object covers (none: black).
+vec4 single_at(ivec2 p) {
+    vec4 s = texelFetch(single, p, 0);
+    if (s.a > 0.0 || any(greaterThan(s.rgb, vec3(0.0)))) {
+        return s;
+    }
+    ivec2 size = textureSize(single, 0);
+    vec4 sum = vec4(0.0);
+    float count = 0.0;
+    for (int k = 0; k < 4; ++k) {
+        ivec2 q = p + ivec2(k == 0 ? 1 : (k == 1 ? -1 : 0), k == 2 ? 1 : (k == 3 ? -1 : 0));
+        if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) {
+            continue;
+        }
+        vec4 v = texelFetch(single, q, 0);
+        if (v.a > 0.0) {
+            sum += v;
+            count += 1.0;
+        }
+    }
+    return count > 0.0 ? sum / count : s;
+}
+
 void main() {
     vec3 n = normalize(in_normal);
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
@@ -204,8 +245,13 @@ void main() {
     // texel a non-negative response (tests/preprocess.rs light_is_never_negative); where the
     // bound is met with equality the f32 sums of the passes round it to a few ulp either side.
     vec3 b = max(local_response(in_atlas) + in_global, vec3(0.0)) * frame.material.yzw;
+    // The texture T is the colour the object shows: light entered through sqrt(T) (the
+    // illumination pass) and leaves through sqrt(T) / R, R the untextured medium's.
+    vec3 shown = vec3(1.0);
     if (TEXTURED) {
-        b *= texture(albedo_texture, in_uv).rgb;
+        vec3 t = texture(albedo_texture, in_uv).rgb;
+        shown = t * frame.texture_scale.rgb;
+        b *= sqrt(t) * frame.texture_scale.rgb;
     }
     vec3 lobe = exit_lobe(cos_o) * max(1.0 + in_exit_slope * (cos_o - 2.0 / 3.0), vec3(0.0));
     if (OBLIQUE) {
@@ -219,11 +265,12 @@ void main() {
     lobe = max(lobe + vec3(dot(in_drift_r, t), dot(in_drift_g, t), dot(in_drift_b, t)), vec3(0.0));
     vec3 l = fresnel_transmittance(frame.material.x, cos_o) * lobe * b / PI;
     if (SINGLE) {
-        vec4 s = texelFetch(single, ivec2(gl_FragCoord.xy), 0);
+        vec4 s = single_at(ivec2(gl_FragCoord.xy));
         if (CHORD && s.a > 0.0) {
             l *= 1.0 - exp(-frame.sigma_t.rgb * s.a);
         }
-        l += s.rgb;
+        // Scattered once, near where it entered: through T / R, in and out at one place.
+        l += s.rgb * shown;
     }
     if (SURFACE) {
         l += surface_reflection(in_position, dot(n, v) < 0.0 ? -n : n, v);

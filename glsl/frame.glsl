@@ -54,6 +54,8 @@ layout(std140, set = 0, binding = 0) uniform Frame {
                             // zw: the environment map's width and height (0: no mirror image)
     vec4 environment_scale; // rgb: the environment light's radiance scale
     vec4 world_to_map[3];   // rows: world -> the environment map's frame
+    vec4 texture_scale;     // rgb: 1 / the medium's total diffuse reflectance (a texture T is
+                            //      the colour shown: light leaves through sqrt(T) / R)
 } frame;
 
 // The profile's exit radiance relative to a Lambertian exit at exit cosine mu (1 for the

@@ -14,6 +14,9 @@ layout(set = 0, binding = 1) uniform sampler2DArrayShadow shadow_maps;
 layout(set = 0, binding = 3) uniform sampler2DArray shadow_depths;
 // Per atlas texel, counts.w elements of eight f16 transfer coefficients.
 layout(set = 0, binding = 2) uniform usamplerBuffer transfer;
+// Per atlas texel, the texture's part of the light entering there: the mean of sqrt(T) over
+// the texel's footprint (TEXTURED).
+layout(set = 0, binding = 4) uniform samplerBuffer texture_entry;
 
 layout(push_constant) uniform Push {
     vec2 atlas_size;                     // texels
@@ -27,6 +30,9 @@ layout(constant_id = 0) const uint ENVIRONMENT = 0u;
 // others, whose factor is 1 (the lookup has a measurable cost on lavapipe even there:
 // docs/results/models.md).
 layout(constant_id = 1) const uint INCIDENCE = 0u;
+// 1 when the scene has a texture: the light enters through it (its square root; it leaves
+// through the other, in the composite). Compiled out otherwise.
+layout(constant_id = 2) const uint TEXTURED = 0u;
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
@@ -77,6 +83,10 @@ void main() {
         }
         // Without the negative ringing of a truncated series where little light arrives.
         e += max(sky, vec3(0.0));
+    }
+    if (TEXTURED != 0u) {
+        uvec2 t = uvec2(gl_FragCoord.xy);
+        e *= texelFetch(texture_entry, int(t.y * uint(push.atlas_size.x) + t.x)).rgb;
     }
     out_irradiance = vec4(e, 1.0);
 }

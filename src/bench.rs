@@ -228,7 +228,11 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
         ),
         PassName::Composite => (
             mesh + b(I::NodeRadiosity) + per(I::LocalResponse, c.pixels.min(c.texels)),
-            b(I::Radiance) + b(I::Depth) + b(I::Display),
+            b(I::Radiance)
+                + b(I::Depth)
+                + b(I::Display)
+                // Multisampled: the samples written, and read again by the resolve.
+                + 2 * (b(I::RadianceSamples) + b(I::DisplaySamples)),
         ),
         PassName::Readback | PassName::Capture => {
             let both = b(I::RadianceReadback) + b(I::DisplayReadback);

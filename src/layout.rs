@@ -47,8 +47,14 @@ pub enum Item {
     ShadowMaps,
     /// Linear radiance per output pixel.
     Radiance,
-    /// Depth per output pixel.
+    /// Depth per output sample.
     Depth,
+    /// Linear radiance per output sample, averaged into [`Item::Radiance`] (multisampled
+    /// output only).
+    RadianceSamples,
+    /// Tone-mapped value per output sample, averaged into [`Item::Display`] (multisampled
+    /// output only).
+    DisplaySamples,
     /// Tone-mapped display image.
     Display,
     /// Host-visible copy of the radiance.
@@ -66,6 +72,9 @@ pub enum Item {
     /// The environment's transfer per atlas texel: its spherical-harmonic coefficients as f16,
     /// eight to an element (scenes with an environment light; 1 element else).
     EnvironmentTransfer,
+    /// The texture's part of the light entering each atlas texel (textured scenes; 1 element
+    /// else).
+    TextureEntry,
     /// The environment map's radiance per pixel, host-visible, for the surface's mirror
     /// reflection (scenes whose surface reflects under an environment light, room for the
     /// largest map the viewer can switch to; 1 element else).
@@ -74,7 +83,7 @@ pub enum Item {
 
 impl Item {
     /// Every item, in the memory report's order.
-    pub const ALL: [Item; 29] = [
+    pub const ALL: [Item; 32] = [
         Item::AtlasVertices,
         Item::AtlasIndices,
         Item::CoveredTexels,
@@ -88,6 +97,7 @@ impl Item {
         Item::GlobalRows,
         Item::GlobalEntries,
         Item::Texture,
+        Item::TextureEntry,
         Item::IlluminationMap,
         Item::LocalResponse,
         Item::NodeIrradiance,
@@ -95,6 +105,8 @@ impl Item {
         Item::ShadowMaps,
         Item::Radiance,
         Item::Depth,
+        Item::RadianceSamples,
+        Item::DisplaySamples,
         Item::Display,
         Item::RadianceReadback,
         Item::DisplayReadback,
@@ -122,6 +134,7 @@ impl Item {
             Item::GlobalRows => "global rows",
             Item::GlobalEntries => "global entries",
             Item::Texture => "albedo texture",
+            Item::TextureEntry => "texture entry",
             Item::IlluminationMap => "illumination map",
             Item::LocalResponse => "local response",
             Item::NodeIrradiance => "node irradiance",
@@ -129,6 +142,8 @@ impl Item {
             Item::ShadowMaps => "shadow maps",
             Item::Radiance => "radiance",
             Item::Depth => "camera depth",
+            Item::RadianceSamples => "radiance samples",
+            Item::DisplaySamples => "display samples",
             Item::Display => "display",
             Item::RadianceReadback => "radiance readback",
             Item::DisplayReadback => "display readback",
@@ -161,14 +176,16 @@ impl Item {
             | Item::NodeIrradiance
             | Item::NodeRadiosity
             | Item::Radiance
+            | Item::RadianceSamples
             | Item::RadianceReadback
             | Item::SingleScattering
             | Item::EntryDepth
+            | Item::TextureEntry
             | Item::EnvironmentMap => F::R32G32B32A32_SFLOAT,
             Item::GatherEntries => F::R32G32_SFLOAT,
             Item::Texture => F::R8G8B8A8_SRGB,
             Item::ShadowMaps | Item::Depth | Item::BackDepth | Item::SingleDepth => F::D32_SFLOAT,
-            Item::Display | Item::DisplayReadback => F::R8G8B8A8_UNORM,
+            Item::Display | Item::DisplaySamples | Item::DisplayReadback => F::R8G8B8A8_UNORM,
         }
     }
 
@@ -226,12 +243,16 @@ pub struct Counts {
     pub global_pairs: u64,
     /// Texture pixels (1 without a texture).
     pub texture_pixels: u64,
+    /// Whether the scene has a texture.
+    pub textured: bool,
     /// Shadow-map side.
     pub shadow_side: u64,
     /// Shadow-map layers.
     pub shadow_layers: u64,
     /// Output pixels.
     pub pixels: u64,
+    /// Samples per output pixel (0 or 1: not multisampled).
+    pub samples: u64,
     /// Whether the model has the single-scattering passes.
     pub single: bool,
     /// Environment transfer elements per atlas texel (0 without an environment light).
@@ -256,13 +277,26 @@ impl Counts {
             Item::GatherEntries => self.gather_entries,
             Item::GlobalEntries => self.global_pairs,
             Item::Texture => self.texture_pixels,
+            Item::TextureEntry => {
+                if self.textured {
+                    self.atlas_texels
+                } else {
+                    0
+                }
+            }
             Item::NodeIrradiance | Item::NodeRadiosity => self.nodes,
             Item::ShadowMaps => self.shadow_side * self.shadow_side * self.shadow_layers,
-            Item::Radiance
-            | Item::Depth
-            | Item::Display
-            | Item::RadianceReadback
-            | Item::DisplayReadback => self.pixels,
+            Item::Radiance | Item::Display | Item::RadianceReadback | Item::DisplayReadback => {
+                self.pixels
+            }
+            Item::Depth => self.pixels * self.samples.max(1),
+            Item::RadianceSamples | Item::DisplaySamples => {
+                if self.samples > 1 {
+                    self.pixels * self.samples
+                } else {
+                    0
+                }
+            }
             Item::EnvironmentTransfer => self.atlas_texels * self.transfer_per_texel,
             Item::EnvironmentMap => self.environment_pixels,
             Item::EntryDepth => {

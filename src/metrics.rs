@@ -28,7 +28,21 @@ pub struct ErrorReport {
 /// keeps nearly black pixels from dominating the percentiles.
 pub const FLOOR: f64 = 0.05;
 
-/// Compares RGBA radiance images (alpha = coverage); `mask`, if given, restricts the pixels.
+/// The value of channel `c` of pixel `i` of an RGBA image premultiplied by its coverage
+/// (alpha): the mean radiance over the covered share.
+fn straight(img: &[f32], i: usize, c: usize) -> f64 {
+    let a = img[4 * i + 3];
+    let v = img[4 * i + c] as f64;
+    if a > 0.0 && a < 1.0 {
+        v / a as f64
+    } else {
+        v
+    }
+}
+
+/// Compares RGBA radiance images (alpha = coverage, the colour premultiplied by it: a pixel
+/// counts where the object covers more than half of it in both); `mask`, if given, restricts
+/// the pixels.
 /// Returns the figures and the per-pixel relative error (mean over channels; NaN where not
 /// compared).
 pub fn compare(
@@ -52,15 +66,11 @@ pub fn compare(
     }
     let mut rel: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(used.len())).collect();
     for c in 0..3 {
-        let mean = used
-            .iter()
-            .map(|&i| reference[4 * i + c] as f64)
-            .sum::<f64>()
-            / used.len() as f64;
+        let mean = used.iter().map(|&i| straight(reference, i, c)).sum::<f64>() / used.len() as f64;
         let floor = (FLOOR * mean).max(1e-30);
         let (mut num, mut den) = (0.0, 0.0);
         for &i in &used {
-            let (r, f) = (render[4 * i + c] as f64, reference[4 * i + c] as f64);
+            let (r, f) = (straight(render, i, c), straight(reference, i, c));
             num += (r - f) * (r - f);
             den += f * f;
             rel[c].push((r - f).abs() / f.max(floor));
@@ -85,11 +95,12 @@ pub fn compare(
     (report, per_pixel)
 }
 
-/// Means over `k` x `k` blocks of an RGBA image (alpha = coverage): a block is covered (alpha 1)
-/// when every pixel in it is, so that silhouettes, where a rasteriser and a ray caster may
-/// disagree by a pixel, do not enter; the pixels past the last whole block are dropped.
+/// Means over `k` x `k` blocks of an RGBA image (alpha = coverage, the colour premultiplied by
+/// it): a block is covered (alpha 1) when the object covers more than half of every pixel in
+/// it, so that silhouettes, where a rasteriser and a ray caster may disagree by a pixel, do
+/// not enter; the pixels past the last whole block are dropped.
 pub fn bin(img: &[f32], w: u32, h: u32, k: u32) -> (u32, u32, Vec<f32>) {
-    bin_with(img, w, h, k, |values| {
+    bin_with(img, w, h, k, true, |values| {
         values.iter().sum::<f64>() / values.len() as f64
     })
 }
@@ -97,7 +108,7 @@ pub fn bin(img: &[f32], w: u32, h: u32, k: u32) -> (u32, u32, Vec<f32>) {
 /// The standard deviation of [`bin`]'s means from per-pixel standard deviations (pixels
 /// traced independently): sqrt(sum sigma^2) / k^2.
 pub fn bin_noise(noise: &[f32], w: u32, h: u32, k: u32) -> (u32, u32, Vec<f32>) {
-    bin_with(noise, w, h, k, |values| {
+    bin_with(noise, w, h, k, false, |values| {
         values.iter().map(|s| s * s).sum::<f64>().sqrt() / values.len() as f64
     })
 }
@@ -107,6 +118,7 @@ fn bin_with(
     w: u32,
     h: u32,
     k: u32,
+    premultiplied: bool,
     reduce: impl Fn(&[f64]) -> f64,
 ) -> (u32, u32, Vec<f32>) {
     let k = k.max(1);
@@ -123,7 +135,13 @@ fn bin_with(
             let o = (4 * (by * bw + bx)) as usize;
             for c in 0..3 {
                 values.clear();
-                values.extend(pixels.clone().map(|p| img[4 * p + c] as f64));
+                values.extend(pixels.clone().map(|p| {
+                    if premultiplied {
+                        straight(img, p, c)
+                    } else {
+                        img[4 * p + c] as f64
+                    }
+                }));
                 out[o + c] = reduce(&values) as f32;
             }
             out[o + 3] = 1.0;

@@ -33,9 +33,12 @@ pub struct RenderOutput {
     pub width: u32,
     /// Image height.
     pub height: u32,
-    /// Linear radiance, RGBA f32, top row first; alpha 1 where the object covers the pixel.
+    /// Linear radiance, RGBA f32, top row first; alpha the share of the pixel the object
+    /// covers (1 inside, 0 off it, between on a multisampled silhouette), and the radiance
+    /// premultiplied by it (OpenEXR's convention).
     pub radiance: Vec<f32>,
-    /// Tone-mapped sRGB, RGBA8.
+    /// Tone-mapped sRGB, RGBA8, with straight alpha (PNG's convention): a silhouette pixel
+    /// holds the mean of its covered samples' values.
     pub display: Vec<u8>,
     /// Pass names in execution order.
     pub pass_names: Vec<String>,
@@ -499,7 +502,7 @@ impl Renderer {
             width: self.scene.width,
             height: self.scene.height,
             radiance: read_back(&self.hdr_readback, pixels * 4)?,
-            display: read_back(&self.display_readback, pixels * 4)?,
+            display: crate::output::unpremultiply(read_back(&self.display_readback, pixels * 4)?),
             pass_names: self.graph.pass_names(),
             frames,
         })

@@ -2,7 +2,7 @@
 //! - illum: the analytic irradiance L F_t(eta, cos) cos at each texel of a sphere;
 //! - local, gather, global: the CPU operators applied to the GPU's own inputs;
 //! - the whole pipeline on a slab: interior radiance = F_t E R_total / pi;
-//! - texture modulation: vertex-scale average kept, texture detail shown;
+//! - texture modulation: a wide checker's colours kept, a fine one's blurred as light is;
 //! - relighting: the image changes and nothing is preprocessed again.
 
 #![allow(clippy::needless_range_loop)]
@@ -397,21 +397,27 @@ fn slab_radiance_through_the_whole_pipeline() {
     }
 }
 
-#[test]
-fn texture_modulation_keeps_the_average_and_shows_the_detail() {
-    let dir = std::env::temp_dir().join(format!("translucent-texture-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    // 64 x 32 checker cells over the sphere's (u, v), about 2.5 mm: coarser than the 0.5 mm
-    // texels, finer than the 4 mm nodes. sRGB 255 and 137 (linear 1.0 and 0.25).
-    let img = image::RgbaImage::from_fn(512, 256, |x, y| {
-        let v = if ((x / 8) + (y / 8)) % 2 == 0 {
-            255
-        } else {
-            137
-        };
-        image::Rgba([v, v, v, 255])
+/// A textured skin1 sphere (radius 25 mm) and the same sphere plain, rendered with one
+/// preprocessing, lit from the front-left-top, seen from +z. `cells` x `cells / 2` checker cells
+/// over (u, v) in linear colours `a` and `b` (as sRGB bytes). Returns the pixels' (u, v) by an
+/// independent ray cast of the exact sphere (None off it), the ratio textured / plain per
+/// pixel and channel where both cover the whole pixel, and the medium's reflectance R.
+#[allow(clippy::type_complexity)]
+fn textured_sphere(
+    name: &str,
+    cells: u32,
+    a: [u8; 3],
+    b: [u8; 3],
+    settings: SettingsOverrides,
+) -> (Vec<Option<(f64, f64)>>, Vec<Option<[f64; 3]>>, [f64; 3]) {
+    let dir = common::temp_dir(name);
+    let (tw, th) = (64 * cells, 32 * cells);
+    let img = image::RgbaImage::from_fn(tw, th, |x, y| {
+        let c = if (x / 64 + y / 64) % 2 == 0 { a } else { b };
+        image::Rgba([c[0], c[1], c[2], 255])
     });
     img.save(dir.join("checker.png")).unwrap();
+    let size = 128usize;
     let text = |texture: &str| {
         format!(
             r#"
@@ -420,64 +426,193 @@ fn texture_modulation_keeps_the_average_and_shows_the_detail() {
             radius = 25.0
             segments = 64
             {texture}
+            [camera]
+            position = [0.0, 0.0, 120.0]
+            target = [0.0, 0.0, 0.0]
+            fov_deg = 30.0
             [[lights]]
             kind = "directional"
-            direction = [0.0, 0.0, -1.0]
+            direction = [0.3, -0.3, -1.0]
             [material]
             preset = "skin1"
             [output]
-            width = 128
-            height = 128
+            width = {size}
+            height = {size}
             "#
         )
     };
-    let plain = Scene::from_desc(
-        SceneDesc::parse(&text("")).unwrap(),
-        &dir,
-        &Overrides::default(),
-    )
-    .unwrap();
-    let textured = Scene::from_desc(
-        SceneDesc::parse(&text("texture = \"checker.png\"")).unwrap(),
-        &dir,
-        &Overrides::default(),
-    )
-    .unwrap();
-    let pre = common::preprocess(
-        &plain,
-        SettingsOverrides {
-            texel_mm: Some(0.5),
-            node_spacing_mm: Some(4.0),
-            ..Default::default()
-        },
-    );
-    let a = common::render(&plain, &pre, Options::default(), 1);
-    let b = common::render(&textured, &pre, Options::default(), 1);
-    // Central 32 x 32 pixels: the lit front of the sphere.
-    let (mut sa, mut sb, mut ratios) = (0.0, 0.0, Vec::new());
-    for y in 48..80 {
-        for x in 48..80 {
-            let i = 4 * (y * 128 + x);
-            sa += a.radiance[i] as f64;
-            sb += b.radiance[i] as f64;
-            ratios.push(b.radiance[i] as f64 / a.radiance[i] as f64);
+    let load = |t: &str| {
+        Scene::from_desc(
+            SceneDesc::parse(&text(t)).unwrap(),
+            &dir,
+            &Overrides::default(),
+        )
+        .unwrap()
+    };
+    let plain = load("");
+    let textured = load("texture = \"checker.png\"");
+    let pre = common::preprocess(&plain, settings);
+    let p = common::render(&plain, &pre, Options::default(), 1).radiance;
+    let t = common::render(&textured, &pre, Options::default(), 1).radiance;
+    let ratio = p
+        .chunks(4)
+        .zip(t.chunks(4))
+        .map(|(p, t)| {
+            (p[3] == 1.0 && t[3] == 1.0 && p[..3].iter().all(|v| *v > 0.0))
+                .then(|| [0, 1, 2].map(|c| t[c] as f64 / p[c] as f64))
+        })
+        .collect();
+    // The camera's rays: a 30-degree field of view along -z, y up, rows from the top.
+    let tan = (15.0f64).to_radians().tan();
+    let uv = (0..size * size)
+        .map(|i| {
+            let (x, y) = ((i % size) as f64 + 0.5, (i / size) as f64 + 0.5);
+            let d = glam::DVec3::new(
+                (2.0 * x / size as f64 - 1.0) * tan,
+                (1.0 - 2.0 * y / size as f64) * tan,
+                -1.0,
+            )
+            .normalize();
+            let o = glam::DVec3::new(0.0, 0.0, 120.0);
+            let (bq, cq) = (o.dot(d), o.length_squared() - 25.0 * 25.0);
+            let disc = bq * bq - cq;
+            (disc > 0.0).then(|| {
+                let n = (o + d * (-bq - disc.sqrt())) / 25.0;
+                // Mesh::sphere: n = (sin t cos f, cos t, -sin t sin f), u = f / 2 pi, v = t / pi.
+                let f = (-n.z).atan2(n.x).rem_euclid(std::f64::consts::TAU);
+                (
+                    f / std::f64::consts::TAU,
+                    n.y.clamp(-1.0, 1.0).acos() / std::f64::consts::PI,
+                )
+            })
+        })
+        .collect();
+    let r = textured.material.appearance().unwrap().0;
+    let _ = std::fs::remove_dir_all(&dir);
+    (uv, ratio, r)
+}
+
+/// The sRGB curve inverted, per byte.
+fn linear(c: [u8; 3]) -> [f64; 3] {
+    c.map(|v| {
+        let v = v as f64 / 255.0;
+        if v <= 0.04045 {
+            v / 12.92
+        } else {
+            ((v + 0.055) / 1.055).powf(2.4)
         }
+    })
+}
+
+/// A texture is the colour the object shows: on a skin1 sphere a checker of cells about 20 mm
+/// wide (several diffusion lengths in every channel) keeps, inside its cells, the texture's
+/// linear colours over the medium's own (T / R against the plain sphere), their ratio between
+/// cells, and an even level across each cell's centre.
+#[test]
+fn a_wide_checker_keeps_its_authored_colours() {
+    let (a, b) = ([240, 200, 170], [110, 60, 40]);
+    let (ta, tb) = (linear(a), linear(b));
+    let (uv, ratio, r) = textured_sphere("wide_checker", 8, a, b, coarse(0.5));
+    // Pixels whose (u, v) lies in the middle half of a cell, in either colour.
+    let mut levels: [Vec<[f64; 3]>; 2] = [Vec::new(), Vec::new()];
+    for (uv, q) in uv.iter().zip(&ratio) {
+        let (Some((u, v)), Some(q)) = (uv, q) else {
+            continue;
+        };
+        let (cu, cv) = (u * 8.0, v * 4.0);
+        if (cu.fract() - 0.5).abs() > 0.25 || (cv.fract() - 0.5).abs() > 0.25 {
+            continue;
+        }
+        levels[((cu as u32 + cv as u32) % 2) as usize].push(*q);
     }
-    // Modulation divides by the texture's mean at texel and node scale and multiplies by the
-    // texture, so the region's mean stays that of the untextured render.
+    let median = |v: &[[f64; 3]], c: usize| {
+        let mut x: Vec<f64> = v.iter().map(|q| q[c]).collect();
+        x.sort_by(f64::total_cmp);
+        x[x.len() / 2]
+    };
     assert!(
-        (sb / sa - 1.0).abs() < 0.05,
-        "textured mean / plain mean = {}",
-        sb / sa
+        levels.iter().all(|l| l.len() > 100),
+        "central pixels: {} and {}",
+        levels[0].len(),
+        levels[1].len()
     );
-    let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
-    let sd = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / ratios.len() as f64).sqrt();
+    let la = [0, 1, 2].map(|c| median(&levels[0], c));
+    let lb = [0, 1, 2].map(|c| median(&levels[1], c));
+    let within = levels
+        .iter()
+        .zip([la, lb])
+        .flat_map(|(l, m)| {
+            l.iter()
+                .map(move |q| (0..3).all(|c| (q[c] / m[c] - 1.0).abs() < 0.08))
+        })
+        .filter(|w| *w)
+        .count();
+    let central = levels[0].len() + levels[1].len();
+    for c in 0..3 {
+        let (shown_a, shown_b) = (la[c] * r[c], lb[c] * r[c]);
+        println!(
+            "channel {c}: cells show {shown_a:.4} and {shown_b:.4} (texture {:.4} and {:.4}); ratio {:.2} (texture {:.2})",
+            ta[c],
+            tb[c],
+            la[c] / lb[c],
+            ta[c] / tb[c]
+        );
+        assert!(
+            ((la[c] / lb[c]) / (ta[c] / tb[c]) - 1.0).abs() < 0.15,
+            "channel {c}: cell ratio {} against the texture's {}",
+            la[c] / lb[c],
+            ta[c] / tb[c]
+        );
+        assert!(
+            (shown_a / ta[c] - 1.0).abs() < 0.1 && (shown_b / tb[c] - 1.0).abs() < 0.15,
+            "channel {c}: cells show {shown_a} and {shown_b} for {} and {}",
+            ta[c],
+            tb[c]
+        );
+    }
+    println!("{within} of {central} central pixels within 8 % of their cell's level");
     assert!(
-        sd / mean > 0.3,
-        "texture detail missing: relative deviation {}",
+        within * 10 >= central * 6,
+        "{within} of {central} central pixels within 8 % of their cell's level"
+    );
+}
+
+/// Detail finer than the light's spread under the surface blurs as that light does: a checker
+/// of cells about 2.5 mm (linear 1 and 0.25) on the same sphere. The light enters through
+/// sqrt(T), which the scattering averages over the cells, and leaves through sqrt(T) / R: the
+/// region's mean is mean(sqrt T)^2 / R of the plain sphere's, and its contrast that of sqrt(T)
+/// (1 : 0.5), not T's (1 : 0.25).
+#[test]
+fn fine_texture_detail_blurs_as_the_light_under_the_surface() {
+    let (uv, ratio, r) = textured_sphere("fine_checker", 64, [255; 3], [137; 3], coarse(0.5));
+    let mean_root: f64 = (1.0 + 0.25f64.sqrt()) / 2.0;
+    let values: Vec<f64> = uv
+        .iter()
+        .zip(&ratio)
+        .filter_map(|(uv, q)| {
+            // The front of the sphere, away from its rim.
+            let (u, v) = (*uv)?;
+            ((u - 0.75).abs() < 0.08 && (v - 0.5).abs() < 0.15).then_some((*q)?[1] * r[1])
+        })
+        .collect();
+    assert!(values.len() > 500, "{} pixels", values.len());
+    let mean = values.iter().sum::<f64>() / values.len() as f64;
+    let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
+    println!(
+        "mean shown {mean:.4} (mean(sqrt T)^2 = {:.4}), relative deviation {:.3} (sqrt T: 0.333, T: 0.6)",
+        mean_root * mean_root,
         sd / mean
     );
-    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        (mean / (mean_root * mean_root) - 1.0).abs() < 0.05,
+        "mean shown {mean} against {}",
+        mean_root * mean_root
+    );
+    assert!(
+        (0.2..0.45).contains(&(sd / mean)),
+        "relative deviation {}: detail lost or not blurred",
+        sd / mean
+    );
 }
 
 #[test]
@@ -640,7 +775,8 @@ fn the_interface_is_drawn_over_the_display() {
                     let expect = if x < 15 && y < 15 {
                         square[c]
                     } else if x > 16 || y > 16 {
-                        display[i + c] as f32 / 255.0
+                        // The output's straight alpha, over black as the window shows it.
+                        display[i + c] as f32 / 255.0 * display[i + 3] as f32 / 255.0
                     } else {
                         continue; // the square's anti-aliased edge
                     };
@@ -1055,14 +1191,14 @@ fn oblique_light_leaves_with_the_half_spaces_lobe() {
 /// pixel, with the view direction's part t along the top, their ratio is (L + a . t) / L, L the
 /// half-space's lobe at normal incidence with the walks' slope, h(mu, 1) (1 + (k - k_h(1)) (mu -
 /// 2/3)). The camera looks at the top 14 degrees above it, so that t is long and a . t differs
-/// from pixel to pixel.
+/// from pixel to pixel; one sample per pixel, at the centre where the test takes its ray.
 #[test]
 fn the_exit_lobe_leans_along_the_walks_drift() {
     let text = "[mesh]\nbuiltin = \"box\"\nsize = [120.0, 4.0, 120.0]\nsegments = 16\n\
          [camera]\nposition = [0.0, 22.0, 80.0]\ntarget = [0.0, 2.0, 0.0]\nup = [0.0, 1.0, 0.0]\nfov_deg = 30.0\n\
          [[lights]]\nkind = \"directional\"\ndirection = [0.0, -1.0, 0.0]\n\
          [material]\npreset = \"marble\"\neta = 1.0\nmodel = \"volume\"\n\
-         [output]\nwidth = 48\nheight = 48\n";
+         [output]\nwidth = 48\nheight = 48\nsamples = 1\n";
     let box_ = scene(text);
     let mut pre = common::preprocess(
         &box_,

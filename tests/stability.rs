@@ -255,7 +255,8 @@ const STABILITY_WALKS: u32 = 1024;
 const LIGHT_ABOVE: &str = "[[lights]]\nkind = \"directional\"\ndirection = [0.3, -1.0, -0.2]\n";
 const CAMERA_ABOVE: &str =
     "[camera]\nposition = [0.0, 120.0, 60.0]\ntarget = [0.0, 0.0, 0.0]\nfov_deg = 35.0\n";
-const SMALL: &str = "[output]\nwidth = 64\nheight = 64\n";
+/// Small images, one sample per pixel at its centre: where the reference evaluates the pixel.
+const SMALL: &str = "[output]\nwidth = 64\nheight = 64\nsamples = 1\n";
 
 #[test]
 fn thin_slab_lit_from_behind() {

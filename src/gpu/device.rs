@@ -140,8 +140,18 @@ pub struct DeviceInfo {
     /// Whether compute shaders may shuffle within a subgroup (`subgroupShuffleXor`): the global
     /// pass sums a row over several lanes only where they can.
     pub subgroup_shuffle: bool,
+    /// Sample counts (bit k: 2^k samples) at which the camera view's attachments (radiance,
+    /// display and depth) can all be multisampled.
+    pub output_sample_counts: u32,
     /// Why the device cannot be used, if it cannot.
     pub unsupported: Option<String>,
+}
+
+impl DeviceInfo {
+    /// Whether the camera view's attachments can have `samples` samples per pixel.
+    pub fn supports_samples(&self, samples: u32) -> bool {
+        samples.is_power_of_two() && self.output_sample_counts & samples != 0
+    }
 }
 
 /// The open device: everything a pass needs to create and record Vulkan work.
@@ -350,9 +360,41 @@ fn describe(
             && subgroup
                 .supported_operations
                 .contains(vk::SubgroupFeatureFlags::SHUFFLE),
+        output_sample_counts: output_sample_counts(instance, pd, &props),
         unsupported: unsupported_reason(instance, pd, &props),
     };
     (info, props)
+}
+
+/// The sample counts the framebuffer limits and each of the camera view's attachment formats
+/// allow together.
+fn output_sample_counts(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    props: &vk::PhysicalDeviceProperties,
+) -> u32 {
+    use crate::layout::Item;
+    let limits = &props.limits;
+    let mut counts =
+        limits.framebuffer_color_sample_counts & limits.framebuffer_depth_sample_counts;
+    for (item, usage) in [
+        (Item::RadianceSamples, vk::ImageUsageFlags::COLOR_ATTACHMENT),
+        (Item::DisplaySamples, vk::ImageUsageFlags::COLOR_ATTACHMENT),
+        (Item::Depth, vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT),
+    ] {
+        let format = unsafe {
+            instance.get_physical_device_image_format_properties(
+                pd,
+                item.format(),
+                vk::ImageType::TYPE_2D,
+                vk::ImageTiling::OPTIMAL,
+                usage,
+                vk::ImageCreateFlags::empty(),
+            )
+        };
+        counts &= format.map_or(vk::SampleCountFlags::TYPE_1, |f| f.sample_counts);
+    }
+    counts.as_raw() | 1
 }
 
 fn load_entry() -> GpuResult<ash::Entry> {
@@ -915,6 +957,7 @@ mod tests {
             device_local_bytes: 1 << 31,
             subgroup_size: 32,
             subgroup_shuffle: true,
+            output_sample_counts: 1 | 4,
             unsupported: unsupported.map(Into::into),
         }
     }

@@ -137,6 +137,8 @@ pub struct GraphicsDesc<'a> {
     /// Specialization constants of the fragment shader: `constant_id = i` gets value i (32-bit
     /// words; a `bool` constant reads 0 or 1). Compiled in, so a branch on one costs nothing.
     pub fragment_constants: &'a [u32],
+    /// Samples per pixel of the attachments (1, or a multisampled target's count).
+    pub samples: u32,
 }
 
 /// A pipeline with its layout and its bound descriptor set.
@@ -402,7 +404,7 @@ impl Pipeline {
             .depth_bias_slope_factor(bias_slope)
             .line_width(1.0);
         let multisample = vk::PipelineMultisampleStateCreateInfo::default()
-            .rasterization_samples(vk::SampleCountFlags::TYPE_1);
+            .rasterization_samples(vk::SampleCountFlags::from_raw(desc.samples.max(1)));
         let has_depth = desc.depth_format != vk::Format::UNDEFINED;
         let depth = vk::PipelineDepthStencilStateCreateInfo::default()
             .depth_test_enable(has_depth)

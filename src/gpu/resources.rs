@@ -192,6 +192,8 @@ pub struct ImageInfo {
     pub layers: u32,
     /// How the image will be used.
     pub usage: vk::ImageUsageFlags,
+    /// Samples per pixel (1 but for a multisampled attachment).
+    pub samples: u32,
 }
 
 impl ImageInfo {
@@ -202,6 +204,7 @@ impl ImageInfo {
             extent: vk::Extent2D { width, height },
             layers: 1,
             usage,
+            samples: 1,
         }
     }
 }
@@ -276,7 +279,7 @@ impl Image {
             })
             .mip_levels(1)
             .array_layers(info.layers.max(1))
-            .samples(vk::SampleCountFlags::TYPE_1)
+            .samples(vk::SampleCountFlags::from_raw(info.samples.max(1)))
             .tiling(vk::ImageTiling::OPTIMAL)
             .usage(info.usage)
             .sharing_mode(vk::SharingMode::EXCLUSIVE)

@@ -41,6 +41,8 @@ pub struct ImageDesc {
     pub layers: u32,
     /// Make the full view a 2D array view even with one layer.
     pub array_view: bool,
+    /// Samples per pixel (a multisampled attachment when above 1).
+    pub samples: u32,
 }
 
 impl ImageDesc {
@@ -51,6 +53,15 @@ impl ImageDesc {
             extent: vk::Extent2D { width, height },
             layers: 1,
             array_view: false,
+            samples: 1,
+        }
+    }
+
+    /// A single-layer 2D image with `samples` samples per pixel.
+    pub fn multisampled(format: vk::Format, width: u32, height: u32, samples: u32) -> ImageDesc {
+        ImageDesc {
+            samples,
+            ..ImageDesc::new(format, width, height)
         }
     }
 
@@ -61,6 +72,7 @@ impl ImageDesc {
             extent: vk::Extent2D { width, height },
             layers,
             array_view: true,
+            samples: 1,
         }
     }
 }
@@ -275,6 +287,7 @@ impl RenderGraph {
                         extent: desc.extent,
                         layers: desc.layers,
                         usage,
+                        samples: desc.samples,
                     };
                     Physical::Image(Arc::new(Image::new(
                         gpu,

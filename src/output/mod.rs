@@ -350,7 +350,22 @@ pub fn create_dir(dir: &Path) -> Result<()> {
         .with_context(|| format!("cannot create output folder '{}'", dir.display()))
 }
 
-/// Linear radiance to sRGB RGBA8 with `exposure`, as `glsl/composite.frag` does (alpha kept).
+/// RGBA8 premultiplied by alpha (the mean of a pixel's samples, transparent black off the
+/// object) to straight alpha: each colour over the covered share.
+pub fn unpremultiply(mut rgba: Vec<u8>) -> Vec<u8> {
+    for p in rgba.chunks_exact_mut(4) {
+        let a = p[3] as u32;
+        if a > 0 && a < 255 {
+            for c in &mut p[..3] {
+                *c = ((*c as u32 * 255 + a / 2) / a).min(255) as u8;
+            }
+        }
+    }
+    rgba
+}
+
+/// Linear radiance (premultiplied by alpha) to sRGB RGBA8 with straight alpha and `exposure`,
+/// as `glsl/composite.frag` does for a fully covered pixel.
 pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
     let encode = |c: f32| {
         let c = (c * exposure).clamp(0.0, 1.0);
@@ -364,11 +379,13 @@ pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
     radiance
         .chunks(4)
         .flat_map(|p| {
+            let a = p[3].clamp(0.0, 1.0);
+            let straight = if a > 0.0 { 1.0 / a } else { 1.0 };
             [
-                encode(p[0]),
-                encode(p[1]),
-                encode(p[2]),
-                (p[3].clamp(0.0, 1.0) * 255.0 + 0.5) as u8,
+                encode(p[0] * straight),
+                encode(p[1] * straight),
+                encode(p[2] * straight),
+                (a * 255.0 + 0.5) as u8,
             ]
         })
         .collect()

@@ -1,7 +1,10 @@
-//! `composite`: the camera view. B = (B^l + B^g) T and L = F_t(eta, w_o) B / pi into a linear
-//! HDR image whose alpha marks covered pixels, and the same radiance tone-mapped (exposure,
-//! sRGB curve) into the RGBA8 display image as a second attachment. (Tone mapping here costs
-//! the covered fragments only, where a compute pass of its own would visit every pixel.)
+//! `composite`: the camera view. B = (B^l + B^g) sqrt(T) / R (the light entered through
+//! sqrt(T); T the texture, R the untextured medium's reflectance) and L = F_t(eta, w_o) B / pi
+//! into a linear HDR image whose alpha marks covered pixels, and the same radiance tone-mapped
+//! (exposure, sRGB curve) into the RGBA8 display image as a second attachment. (Tone mapping
+//! here costs the covered fragments only, where a compute pass of its own would visit every
+//! pixel.) With several samples per pixel both are drawn multisampled and averaged: a
+//! silhouette pixel's alpha is the share the object covers.
 //! For `volume` the lamps' shadow maps are read too: orders >= 2 leave with the half-space's
 //! lobe of the incidence at which the lamps' light enters each pixel (`oblique_exit` in
 //! glsl/composite.frag). Behind a refractive boundary the surface's own reflection is added:
@@ -68,13 +71,18 @@ pub struct CompositeTargets {
     pub hdr: ResourceId,
     /// Tone-mapped radiance ([`DISPLAY_FORMAT`]).
     pub display: ResourceId,
-    /// Camera depth ([`DEPTH_FORMAT`]), discarded after the pass.
+    /// Camera depth ([`DEPTH_FORMAT`]), discarded after the pass; multisampled with the
+    /// colour where `samples` is given.
     pub depth: ResourceId,
+    /// Multisampled radiance and display images and their samples per pixel, where the view
+    /// is multisampled: the pass draws into them and averages each into `hdr` and `display`
+    /// (alpha then the share of the pixel covered, the radiance premultiplied by it).
+    pub samples: Option<(ResourceId, ResourceId, u32)>,
 }
 
 /// Declares `composite`, writing `hdr`, `display = srgb(exposure * hdr)` and `depth`.
 pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exposure: f32) {
-    graph
+    let mut pass = graph
         .pass(PassName::Composite.as_str())
         .access(i.frame, Access::Uniform(Stage::Vertex))
         .mesh(i.vertices, i.indices)
@@ -86,53 +94,69 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
         .access(i.environment, Access::StorageRead(Stage::Fragment))
         .access(t.hdr, Access::ColorAttachment)
         .access(t.display, Access::ColorAttachment)
-        .access(t.depth, Access::DepthAttachment)
-        .setup(move |gpu, res| {
-            let set = res
-                .bind()
-                .uniform(0, i.frame)
-                .texel(1, i.node_radiosity, Item::NodeRadiosity.format())
-                .storage_image(2, i.local)
-                .sampled(3, i.texture, Sampler::linear(gpu, true)?)
-                .sampled(4, i.single, Sampler::nearest(gpu)?)
-                .sampled(5, i.shadow_maps, Sampler::shadow(gpu)?)
-                .storage_buffer(6, i.environment)
-                .finish()?;
-            let pipeline = Pipeline::graphics::<f32>(
-                gpu,
-                PassName::Composite.as_str(),
-                &GraphicsDesc {
-                    vertex: shaders::COMPOSITE_VERT,
-                    fragment: Some(shaders::COMPOSITE_FRAG),
-                    vertex_bindings: &ATLAS_VERTEX_BINDINGS,
-                    vertex_attributes: &ATLAS_VERTEX_ATTRIBUTES,
-                    color_formats: &[HDR_FORMAT, DISPLAY_FORMAT],
-                    depth_format: DEPTH_FORMAT,
-                    cull: vk::CullModeFlags::NONE,
-                    depth_bias: None,
-                    fragment_constants: &[
-                        i.textured as u32,
-                        i.single_pass as u32,
-                        i.chord as u32,
-                        i.oblique as u32,
-                        i.surface as u32,
-                    ],
-                },
-                set,
-            )?;
-            let hdr = res.image(t.hdr).clone();
-            let display = res.image(t.display).clone();
-            let depth = res.image(t.depth).clone();
-            let mesh = MeshDraw::of(res, i.vertices, i.indices, i.index_count);
-            Ok(Box::new(move |rec| {
-                let target = DrawTarget {
-                    color: &[hdr.view, display.view],
-                    depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),
-                    extent: hdr.info.extent,
-                };
-                draw_mesh(rec, &target, &pipeline, mesh, || {
-                    pipeline.push(rec.cmd, &exposure)
-                });
-            }))
-        });
+        .access(t.depth, Access::DepthAttachment);
+    if let Some((hdr, display, _)) = t.samples {
+        pass = pass
+            .access(hdr, Access::ColorAttachment)
+            .access(display, Access::ColorAttachment);
+    }
+    pass.setup(move |gpu, res| {
+        let set = res
+            .bind()
+            .uniform(0, i.frame)
+            .texel(1, i.node_radiosity, Item::NodeRadiosity.format())
+            .storage_image(2, i.local)
+            .sampled(3, i.texture, Sampler::linear(gpu, true)?)
+            .sampled(4, i.single, Sampler::nearest(gpu)?)
+            .sampled(5, i.shadow_maps, Sampler::shadow(gpu)?)
+            .storage_buffer(6, i.environment)
+            .finish()?;
+        let pipeline = Pipeline::graphics::<f32>(
+            gpu,
+            PassName::Composite.as_str(),
+            &GraphicsDesc {
+                vertex: shaders::COMPOSITE_VERT,
+                fragment: Some(shaders::COMPOSITE_FRAG),
+                vertex_bindings: &ATLAS_VERTEX_BINDINGS,
+                vertex_attributes: &ATLAS_VERTEX_ATTRIBUTES,
+                color_formats: &[HDR_FORMAT, DISPLAY_FORMAT],
+                depth_format: DEPTH_FORMAT,
+                cull: vk::CullModeFlags::NONE,
+                depth_bias: None,
+                fragment_constants: &[
+                    i.textured as u32,
+                    i.single_pass as u32,
+                    i.chord as u32,
+                    i.oblique as u32,
+                    i.surface as u32,
+                ],
+                samples: t.samples.map_or(1, |s| s.2),
+            },
+            set,
+        )?;
+        let hdr = res.image(t.hdr).view;
+        let display = res.image(t.display).view;
+        let extent = res.image(t.hdr).info.extent;
+        let depth = res.image(t.depth).view;
+        // Drawn into the samples and averaged into the outputs, or drawn into the outputs.
+        let (color, resolve) = match t.samples {
+            Some((h, d, _)) => (
+                vec![res.image(h).view, res.image(d).view],
+                vec![hdr, display],
+            ),
+            None => (vec![hdr, display], Vec::new()),
+        };
+        let mesh = MeshDraw::of(res, i.vertices, i.indices, i.index_count);
+        Ok(Box::new(move |rec| {
+            let target = DrawTarget {
+                color: &color,
+                resolve: &resolve,
+                depth: Some((depth, vk::AttachmentStoreOp::DONT_CARE)),
+                extent,
+            };
+            draw_mesh(rec, &target, &pipeline, mesh, || {
+                pipeline.push(rec.cmd, &exposure)
+            });
+        }))
+    });
 }

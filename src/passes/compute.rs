@@ -488,6 +488,7 @@ mod tests {
             device_local_bytes: 1 << 34,
             subgroup_size,
             subgroup_shuffle,
+            output_sample_counts: 1 | 4,
             unsupported: None,
         }
     }

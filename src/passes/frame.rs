@@ -40,6 +40,7 @@ pub struct FrameUniforms {
     surface: [f32; 4],
     environment_scale: [f32; 4],
     world_to_map: [[f32; 4]; 3],
+    texture_scale: [f32; 4],
 }
 
 /// Spherical-harmonic coefficients of the environment in the uniforms (`MAX_SH_COEFFICIENTS`
@@ -66,6 +67,7 @@ pub struct MaterialUniforms {
     halfspace_h: [[f32; 4]; INCIDENCE_SAMPLES],
     halfspace_flux: [[f32; 4]; INCIDENCE_SAMPLES],
     halfspace_slope: [[f32; 4]; INCIDENCE_SAMPLES],
+    texture_scale: [f32; 4],
 }
 
 impl MaterialUniforms {
@@ -121,11 +123,25 @@ impl MaterialUniforms {
             halfspace_flux,
             halfspace_slope,
             material: [m.eta as f32, 1.0, 1.0, 1.0],
+            texture_scale: texture_scale(m),
             sigma_s: [s[0] as f32, s[1] as f32, s[2] as f32, 0.0],
             sigma_t: [t[0], t[1], t[2], 0.0],
             exit_lobe,
         }
     }
+}
+
+/// 1 / R per channel, R the total diffuse reflectance of `m`'s medium (all orders, the
+/// half-space's under its boundary: the colour the untextured object shows): a texture T
+/// gives the light sqrt(T) as it enters and sqrt(T) / R as it leaves, so that a wide region
+/// shows T itself.
+fn texture_scale(m: &Material) -> [f32; 4] {
+    let total = m
+        .appearance()
+        .map(|(albedo, _)| albedo)
+        .unwrap_or_else(|_| m.total_reflectance());
+    let inv = total.map(|r| (1.0 / r.max(1e-6)) as f32);
+    [inv[0], inv[1], inv[2], 1.0]
 }
 
 impl FrameUniforms {
@@ -154,6 +170,7 @@ impl FrameUniforms {
         u.halfspace_h = material.halfspace_h;
         u.halfspace_flux = material.halfspace_flux;
         u.halfspace_slope = material.halfspace_slope;
+        u.texture_scale = material.texture_scale;
         if scene.surface.reflects(&scene.material) {
             u.surface[0] = crate::physics::surface::alpha(scene.surface.roughness) as f32;
         }
@@ -297,6 +314,7 @@ mod tests {
                 surface,
                 environment_scale,
                 world_to_map,
+                texture_scale,
             });
             same(name, &frame, std::mem::size_of::<FrameUniforms>(), &block);
             let lights = &block.iter().find(|m| m.name == "lights").unwrap().members;

@@ -26,6 +26,10 @@ pub struct IllumInputs {
     pub shadow_maps: ResourceId,
     /// The environment's transfer per atlas texel.
     pub transfer: ResourceId,
+    /// The texture's part of the light entering each atlas texel (`data::texture_entry`).
+    pub texture_entry: ResourceId,
+    /// Whether the scene has a texture (`texture_entry` is read); compiled out otherwise.
+    pub textured: bool,
     /// Whether the scene has an environment light (the last light of the uniforms is then its
     /// sun, and the transfer is read).
     pub environment: bool,
@@ -42,6 +46,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
         .mesh(inputs.vertices, inputs.indices)
         .access(inputs.shadow_maps, Access::Sampled(Stage::Fragment))
         .access(inputs.transfer, Access::TexelRead(Stage::Fragment))
+        .access(inputs.texture_entry, Access::TexelRead(Stage::Fragment))
         .access(map, Access::ColorAttachment)
         .setup(move |gpu, res| {
             let set = res
@@ -50,6 +55,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                 .sampled(1, inputs.shadow_maps, Sampler::shadow(gpu)?)
                 .texel(2, inputs.transfer, Item::EnvironmentTransfer.format())
                 .sampled(3, inputs.shadow_maps, Sampler::nearest(gpu)?)
+                .texel(4, inputs.texture_entry, Item::TextureEntry.format())
                 .finish()?;
             let pipeline = Pipeline::graphics::<[f32; 2]>(
                 gpu,
@@ -67,7 +73,12 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
                     color_formats: &[FORMAT],
                     depth_format: vk::Format::UNDEFINED,
                     cull: vk::CullModeFlags::NONE,
-                    fragment_constants: &[inputs.environment as u32, inputs.incidence as u32],
+                    fragment_constants: &[
+                        inputs.environment as u32,
+                        inputs.incidence as u32,
+                        inputs.textured as u32,
+                    ],
+                    samples: 1,
                     depth_bias: None,
                 },
                 set,
@@ -78,6 +89,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[map.view],
+                    resolve: &[],
                     depth: None,
                     extent: map.info.extent,
                 };

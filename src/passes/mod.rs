@@ -138,9 +138,14 @@ pub const MAX_COLOR_ATTACHMENTS: usize = 2;
 
 /// Where a mesh pass draws: up to [`MAX_COLOR_ATTACHMENTS`] colour attachments (cleared to zero)
 /// and an optional depth attachment (cleared to 1, stored or discarded), all of `extent`.
+/// Multisampled colour attachments are averaged into single-sampled images at the end.
 pub struct DrawTarget<'a> {
     /// Colour attachment views, in the order of the fragment shader's outputs.
     pub color: &'a [vk::ImageView],
+    /// Where the colour attachments are multisampled: one single-sampled image per attachment
+    /// that gets the mean of its samples (the multisampled ones are then discarded). Empty
+    /// otherwise.
+    pub resolve: &'a [vk::ImageView],
     /// Depth attachment view and what to do with the depth afterwards.
     pub depth: Option<(vk::ImageView, vk::AttachmentStoreOp)>,
     /// Size of the attachments.
@@ -189,8 +194,12 @@ pub fn draw_mesh(
         target.color.len() <= MAX_COLOR_ATTACHMENTS,
         "a mesh pass writes at most {MAX_COLOR_ATTACHMENTS} colour attachments"
     );
+    assert!(
+        target.resolve.is_empty() || target.resolve.len() == target.color.len(),
+        "a multisampled pass resolves every colour attachment"
+    );
     let mut color = [vk::RenderingAttachmentInfo::default(); MAX_COLOR_ATTACHMENTS];
-    for (a, &view) in color.iter_mut().zip(target.color) {
+    for (k, (a, &view)) in color.iter_mut().zip(target.color).enumerate() {
         *a = vk::RenderingAttachmentInfo::default()
             .image_view(view)
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
@@ -199,6 +208,13 @@ pub fn draw_mesh(
             .clear_value(vk::ClearValue {
                 color: vk::ClearColorValue { float32: [0.0; 4] },
             });
+        if let Some(&resolve) = target.resolve.get(k) {
+            *a = a
+                .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                .resolve_mode(vk::ResolveModeFlags::AVERAGE)
+                .resolve_image_view(resolve)
+                .resolve_image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL);
+        }
     }
     let color = &color[..target.color.len()];
     let depth = target.depth.map(|(view, store)| {

@@ -53,6 +53,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                     depth_format: FORMAT,
                     cull: vk::CullModeFlags::NONE,
                     fragment_constants: &[],
+                    samples: 1,
                     depth_bias: Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE)),
                 },
                 set,
@@ -63,6 +64,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                 for layer in 0..inputs.layers {
                     let target = DrawTarget {
                         color: &[],
+                        resolve: &[],
                         depth: Some((
                             maps.layer_views[layer as usize],
                             vk::AttachmentStoreOp::STORE,

@@ -83,6 +83,7 @@ fn camera_desc<'a>(fragment: &'a [u8], color: &'a [vk::Format]) -> GraphicsDesc<
         cull: vk::CullModeFlags::NONE,
         depth_bias: None,
         fragment_constants: &[],
+        samples: 1,
     }
 }
 
@@ -106,6 +107,7 @@ pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[],
+                    resolve: &[],
                     depth: Some((back.view, vk::AttachmentStoreOp::STORE)),
                     extent: back.info.extent,
                 };
@@ -158,6 +160,7 @@ pub fn single(
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[out.view],
+                    resolve: &[],
                     depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),
                     extent: out.info.extent,
                 };

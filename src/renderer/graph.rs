@@ -30,6 +30,7 @@ struct Imported {
     transfer: ResourceId,
     charts: ResourceId,
     texture: ResourceId,
+    texture_entry: ResourceId,
     local: ResourceId,
     hdr_rb: ResourceId,
     display_rb: ResourceId,
@@ -58,6 +59,7 @@ impl Imported {
         let transfer = g.import_buffer(data.transfer.clone(), None);
         let charts = g.import_image(data.charts.clone(), Access::Sampled(Stage::Compute));
         let texture = g.import_image(data.texture.clone(), Access::Sampled(Stage::Fragment));
+        let texture_entry = g.import_buffer(data.texture_entry.clone(), None);
         let local = g.import_image(local_image, Access::StorageRead(Stage::Fragment));
         let hdr_rb = g.import_buffer(host.hdr_readback.clone(), Some(Access::HostRead));
         let display_rb = g.import_buffer(host.display_readback.clone(), Some(Access::HostRead));
@@ -77,6 +79,7 @@ impl Imported {
             transfer,
             charts,
             texture,
+            texture_entry,
             local,
             hdr_rb,
             display_rb,
@@ -98,6 +101,9 @@ struct Transients {
     hdr: ResourceId,
     depth: ResourceId,
     display: ResourceId,
+    /// The radiance and display samples averaged into `hdr` and `display`, where the scene
+    /// multisamples its camera view.
+    samples: Option<(ResourceId, ResourceId)>,
 }
 
 impl Transients {
@@ -128,14 +134,24 @@ impl Transients {
             Item::Radiance.name(),
             ImageDesc::new(passes::composite::HDR_FORMAT, w, h),
         );
+        let n = scene.samples;
         let depth = g.image(
             Item::Depth.name(),
-            ImageDesc::new(passes::composite::DEPTH_FORMAT, w, h),
+            ImageDesc::multisampled(passes::composite::DEPTH_FORMAT, w, h, n),
         );
         let display = g.image(
             Item::Display.name(),
             ImageDesc::new(passes::composite::DISPLAY_FORMAT, w, h),
         );
+        let samples = (n > 1).then(|| {
+            let image = |g: &mut RenderGraph, item: Item| {
+                g.image(item.name(), ImageDesc::multisampled(item.format(), w, h, n))
+            };
+            (
+                image(g, Item::RadianceSamples),
+                image(g, Item::DisplaySamples),
+            )
+        });
         Transients {
             layers,
             shadow_size: s,
@@ -146,6 +162,7 @@ impl Transients {
             hdr,
             depth,
             display,
+            samples,
         }
     }
 }
@@ -202,6 +219,7 @@ impl<'a> Assembly<'a> {
             vertices,
             indices,
             transfer,
+            texture_entry,
             ..
         } = self.imported;
         let Transients {
@@ -230,6 +248,8 @@ impl<'a> Assembly<'a> {
                 index_count: data.index_count,
                 shadow_maps,
                 transfer,
+                texture_entry,
+                textured: scene.texture.is_some(),
                 environment: scene.environment.is_some(),
                 incidence: scene.material.takes_incidence_factor(),
             },
@@ -374,6 +394,7 @@ impl<'a> Assembly<'a> {
             hdr,
             depth,
             display,
+            samples,
             ..
         } = self.transient;
         passes::composite::add(
@@ -399,6 +420,7 @@ impl<'a> Assembly<'a> {
                 hdr,
                 display,
                 depth,
+                samples: samples.map(|(hdr, display)| (hdr, display, scene.samples)),
             },
             scene.exposure,
         );
@@ -433,6 +455,7 @@ impl<'a> Assembly<'a> {
                         usage: vk::ImageUsageFlags::STORAGE
                             | vk::ImageUsageFlags::COLOR_ATTACHMENT
                             | vk::ImageUsageFlags::TRANSFER_SRC,
+                        samples: 1,
                     },
                     false,
                 )?);

@@ -661,6 +661,10 @@ pub(super) fn resolve_material(
     Ok((material, roughness))
 }
 
+/// Samples per pixel where the scene does not say: four, the count every Vulkan device
+/// supports for the camera view's attachments, gives the silhouette five levels of coverage.
+pub const DEFAULT_SAMPLES: u32 = 4;
+
 /// `[output]` resolved, with the scene's `[settings]`.
 pub(super) struct Output {
     /// The surface's own reflection.
@@ -675,6 +679,8 @@ pub(super) struct Output {
     pub(super) shadow_map: Option<u32>,
     /// Radiance -> display multiplier.
     pub(super) exposure: f64,
+    /// Samples per pixel of the camera view.
+    pub(super) samples: u32,
 }
 
 /// `[output]` and `[settings]`: the surface, the image size, the preprocessing settings, the
@@ -716,8 +722,13 @@ pub(super) fn resolve_output(
             bail!("[output] shadow_map = {s} must lie between 16 and 16384");
         }
     }
+    let samples = *od.samples.get_or_insert(DEFAULT_SAMPLES);
+    if ![1, 2, 4, 8].contains(&samples) {
+        bail!("[output] samples = {samples} must be 1, 2, 4 or 8 (samples per pixel)");
+    }
     let exposure = resolve_exposure(od, lit, center)?;
     Ok(Output {
+        samples,
         surface,
         width,
         height,

@@ -235,6 +235,9 @@ pub struct OutputDesc {
     pub height: Option<u32>,
     /// Multiplier from radiance to display value before the sRGB curve.
     pub exposure: Option<f64>,
+    /// Samples per pixel of the camera view (1, 2, 4 or 8): above 1 the silhouette's pixels
+    /// get the share of the pixel the object covers (alpha) and the mean radiance over it.
+    pub samples: Option<u32>,
     /// Shadow-map edge length in texels.
     pub shadow_map: Option<u32>,
     /// Whether the image holds the surface's own reflection (eta != 1): the environment in

@@ -110,6 +110,8 @@ pub struct Scene {
     pub height: u32,
     /// Radiance -> display multiplier.
     pub exposure: f32,
+    /// Samples per pixel of the camera view (1: none averaged; the silhouette is then hard).
+    pub samples: u32,
     /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
     /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
@@ -212,6 +214,7 @@ impl Scene {
             width: output.width,
             height: output.height,
             exposure: output.exposure as f32,
+            samples: output.samples,
             shadow_map: output.shadow_map,
             surface: output.surface,
             settings: output.settings,
@@ -455,6 +458,10 @@ mod tests {
             (
                 "[output]\nshadow_map = 15",
                 "shadow_map = 15 must lie between 16 and 16384",
+            ),
+            (
+                "[output]\nsamples = 3",
+                "samples = 3 must be 1, 2, 4 or 8",
             ),
             (
                 "[output]\nshadow_map = 16385",
