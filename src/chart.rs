@@ -1133,7 +1133,10 @@ mod tests {
         };
         let base = sweep(&auto, false)[0].1;
         let mut seen = Vec::new();
-        for (label, o) in sweep(&auto, false).into_iter().chain(walk_sweep(&auto, false)) {
+        for (label, o) in sweep(&auto, false)
+            .into_iter()
+            .chain(walk_sweep(&auto, false))
+        {
             // The one setting that differs from the automatic one.
             let expected = [
                 (o.kernel_size != base.kernel_size, Knob::Kernel),

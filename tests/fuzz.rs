@@ -114,16 +114,35 @@ fn mutate(seed: &[u8], edits: &[Edit]) -> Vec<u8> {
     s
 }
 
+/// Whatever a mesh parser accepts must be renderable: finite, in range, with area, unit
+/// normals, one normal and texture coordinate per vertex.
+fn check_mesh(mesh: &Mesh) {
+    mesh.validate("fuzz").unwrap();
+    assert_eq!(mesh.normals.len(), mesh.positions.len());
+    assert_eq!(mesh.uvs.len(), mesh.positions.len());
+    assert!(mesh
+        .normals
+        .iter()
+        .all(|n| n.is_finite() && (n.length() - 1.0).abs() < 1e-3));
+}
+
 fn check_obj(bytes: &[u8]) {
     let text = String::from_utf8_lossy(bytes);
     if let Ok(mesh) = Mesh::parse_obj("fuzz", &text) {
-        // Whatever is accepted must be renderable: finite, in range, with area, unit normals.
-        mesh.validate("fuzz").unwrap();
-        assert_eq!(mesh.normals.len(), mesh.positions.len());
-        assert!(mesh
-            .normals
-            .iter()
-            .all(|n| n.is_finite() && (n.length() - 1.0).abs() < 1e-3));
+        check_mesh(&mesh);
+    }
+}
+
+fn check_ply(bytes: &[u8]) {
+    if let Ok(mesh) = Mesh::parse_ply("fuzz", bytes) {
+        check_mesh(&mesh);
+    }
+}
+
+fn check_gltf(bytes: &[u8]) {
+    // External files resolve against a folder that does not exist.
+    if let Ok(g) = Mesh::parse_gltf("fuzz", bytes, Path::new("/nonexistent-translucent-fuzz")) {
+        check_mesh(&g.mesh);
     }
 }
 
@@ -256,6 +275,24 @@ proptest! {
     }
 
     #[test]
+    fn ply_parser_survives_mutated_seeds(edits in prop::collection::vec(edit(), 1..12)) {
+        check_ply(&mutate(&seeds("ply")[0], &edits));
+    }
+
+    #[test]
+    fn ply_parser_survives_random_bytes(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
+        let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
+        ply.extend_from_slice(&bytes);
+        check_ply(&ply);
+        check_ply(&bytes);
+    }
+
+    #[test]
+    fn gltf_parser_survives_mutated_seeds(edits in prop::collection::vec(edit(), 1..12)) {
+        check_gltf(&mutate(&seeds("gltf")[0], &edits));
+    }
+
+    #[test]
     fn scene_parser_survives_mutated_seeds(seed in 0usize..16, edits in prop::collection::vec(edit(), 1..12)) {
         let seeds = seeds("toml");
         check_scene(&mutate(&seeds[seed % seeds.len()], &edits));
@@ -272,6 +309,11 @@ fn every_seed_is_valid_as_it_stands() {
     for s in seeds("obj") {
         Mesh::parse_obj("seed", &String::from_utf8_lossy(&s)).unwrap();
     }
+    let square = Mesh::parse_ply("seed", &seeds("ply")[0]).unwrap();
+    assert_eq!(square.triangle_count(), 2);
+    let tri = Mesh::parse_gltf("seed", &seeds("gltf")[0], Path::new("")).unwrap();
+    // Placed by both nodes: scaled by 2, then moved 1 along z.
+    assert_eq!(tri.mesh.positions[1], glam::Vec3::new(2.0, 0.0, 1.0));
     for s in seeds("toml") {
         let desc = SceneDesc::parse(&String::from_utf8_lossy(&s)).unwrap();
         Scene::from_desc(desc, Path::new(""), &Overrides::default()).unwrap();

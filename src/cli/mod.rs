@@ -102,7 +102,7 @@ pub enum Command {
 pub struct SceneArgs {
     /// Scene file (TOML); the default scene (the bunny in skim milk) without one.
     pub scene: Option<PathBuf>,
-    /// OBJ mesh replacing the scene's.
+    /// Mesh file (OBJ, PLY, glTF or GLB) replacing the scene's.
     #[arg(long)]
     pub mesh: Option<PathBuf>,
     /// Material preset replacing the scene's (e.g. skimmilk, marble, ketchup).
@@ -236,7 +236,7 @@ fn open_outputs(
         .filter_map(|l| l.file.clone());
     let inputs: Vec<PathBuf> = [
         input.scene.clone(),
-        scene.resolved.mesh.obj.clone(),
+        scene.resolved.mesh.file.clone(),
         scene.resolved.mesh.texture.clone(),
     ]
     .into_iter()

@@ -6,6 +6,7 @@ use super::desc::{
     CameraDesc, LightDesc, LightKind, MaterialDesc, MeshDesc, OutputDesc, SceneDesc, TransformDesc,
     Units,
 };
+use super::mesh::gltf::{GltfMaterial, ImageSource};
 use super::mesh::Mesh;
 use super::{
     absolute, Camera, Light, Overrides, Surface, BUNNY_OBJ, LONG_EDGE_SPACINGS, MAX_LIGHTS,
@@ -75,7 +76,7 @@ pub(super) fn apply_overrides(desc: &mut SceneDesc, overrides: &Overrides) {
     if let Some(obj) = &overrides.mesh {
         // From the command line: relative to the working folder, and the built-in mesh's
         // sizes go with the built-in mesh.
-        desc.mesh.obj = Some(absolute(obj));
+        desc.mesh.file = Some(absolute(obj));
         desc.mesh.builtin = None;
         desc.mesh.radius = None;
         desc.mesh.size = None;
@@ -106,12 +107,43 @@ pub(super) fn apply_overrides(desc: &mut SceneDesc, overrides: &Overrides) {
     }
 }
 
-/// `[mesh]`: the keys that apply to the chosen mesh, units, subdivision steps, and the mesh
-/// loaded or built and subdivided.
-pub(super) fn load_mesh(md: &mut MeshDesc, base: &Path) -> Result<(Mesh, Units)> {
+/// The mesh file formats read, by extension.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Format {
+    Obj,
+    Ply,
+    Gltf,
+}
+
+impl Format {
+    fn of(path: &Path) -> Result<Format> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        Ok(match ext.as_str() {
+            "obj" => Format::Obj,
+            "ply" => Format::Ply,
+            "gltf" | "glb" => Format::Gltf,
+            _ => bail!(
+                "mesh file '{}': '.{ext}' is not a format read here (OBJ, PLY, glTF: .obj, .ply, .gltf, .glb)",
+                path.display()
+            ),
+        })
+    }
+}
+
+/// `[mesh]`: the keys that apply to the chosen mesh, units (metres by default for glTF, whose
+/// unit they are; millimetres otherwise), subdivision steps, and the mesh loaded or built and
+/// subdivided, with what a glTF's material says of the medium.
+pub(super) fn load_mesh(
+    md: &mut MeshDesc,
+    base: &Path,
+) -> Result<(Mesh, Units, Option<GltfMaterial>)> {
     // Keys that mean nothing for the chosen mesh are refused, not ignored.
-    let kind = match (&md.obj, md.builtin.as_deref()) {
-        (Some(_), _) => "obj",
+    let kind = match (&md.file, md.builtin.as_deref()) {
+        (Some(_), _) => "file",
         (None, Some(b)) => b,
         (None, None) => "bunny",
     };
@@ -128,38 +160,50 @@ pub(super) fn load_mesh(md: &mut MeshDesc, base: &Path) -> Result<(Mesh, Units)>
             bail!("[mesh] {key} does not apply to the {kind} mesh (radius: builtin sphere; size: builtin box; segments: both)");
         }
     }
-    let units = *md.units.get_or_insert(Units::Mm);
+    let format = md.file.as_deref().map(Format::of).transpose()?;
+    let units = *md.units.get_or_insert(if format == Some(Format::Gltf) {
+        Units::M
+    } else {
+        Units::Mm
+    });
     let steps = *md.subdivide.get_or_insert(0);
     if steps > 4 {
         bail!("[mesh] subdivide = {steps}: at most 4 steps (each quadruples the triangles)");
     }
-    let mut mesh = build_mesh(md, base, steps)?;
+    let (mut mesh, material) = build_mesh(md, base, steps)?;
     for _ in 0..steps {
         mesh = mesh.subdivide();
     }
-    Ok((mesh, units))
+    Ok((mesh, units, material))
 }
 
-/// The `[mesh]` OBJ file or built-in mesh, refused where it would have too many triangles after
-/// `steps` subdivisions.
-fn build_mesh(md: &mut MeshDesc, base: &Path, steps: u32) -> Result<Mesh> {
-    Ok(match (&md.obj, &md.builtin) {
-        (Some(_), Some(b)) => bail!("[mesh] gives both obj and builtin = {b:?}; choose one"),
-        (Some(obj), None) => {
-            let p = base.join(obj);
+/// The `[mesh]` file or built-in mesh, refused where it would have too many triangles after
+/// `steps` subdivisions, with a glTF's material.
+fn build_mesh(md: &mut MeshDesc, base: &Path, steps: u32) -> Result<(Mesh, Option<GltfMaterial>)> {
+    Ok(match (&md.file, &md.builtin) {
+        (Some(_), Some(b)) => bail!("[mesh] gives both a file and builtin = {b:?}; choose one"),
+        (Some(file), None) => {
+            let p = base.join(file);
             if !p.exists() {
                 bail!("mesh file '{}' does not exist", p.display());
             }
-            let mesh = Mesh::load_obj(&p)?;
+            let (mesh, material) = match Format::of(&p)? {
+                Format::Obj => (Mesh::load_obj(&p)?, None),
+                Format::Ply => (Mesh::load_ply(&p)?, None),
+                Format::Gltf => {
+                    let g = Mesh::load_gltf(&p)?;
+                    (g.mesh, Some(g.material))
+                }
+            };
             check_triangles(mesh.triangle_count() as u64, steps)?;
             // The resolved scene (saved beside the render) names it from anywhere.
-            md.obj = Some(absolute(&p));
-            mesh
+            md.file = Some(absolute(&p));
+            (mesh, material)
         }
         (None, builtin) => {
             let name = builtin.clone().unwrap_or_else(|| "bunny".into());
             md.builtin = Some(name.clone());
-            match name.as_str() {
+            let mesh = match name.as_str() {
                 "bunny" => {
                     let mesh = Mesh::parse_obj("builtin bunny", BUNNY_OBJ)?;
                     check_triangles(mesh.triangle_count() as u64, steps)?;
@@ -190,17 +234,31 @@ fn build_mesh(md: &mut MeshDesc, base: &Path, steps: u32) -> Result<Mesh> {
                     Mesh::cuboid(vec3(size), s)
                 }
                 other => bail!("unknown builtin mesh '{other}'; choose bunny, sphere or box"),
-            }
+            };
+            (mesh, None)
         }
     })
 }
 
-/// `[mesh] texture`: the diffuse texture, RGBA8, where the mesh has texture coordinates.
+/// `[mesh] texture`: the diffuse texture, RGBA8, where the mesh has texture coordinates; without
+/// the key, a glTF's base-colour texture (`from_file`).
 pub(super) fn load_texture(
     md: &mut MeshDesc,
     base: &Path,
     mesh: &Mesh,
+    from_file: Option<&ImageSource>,
 ) -> Result<Option<image::RgbaImage>> {
+    if md.texture.is_none() {
+        match from_file {
+            Some(ImageSource::File(p)) => md.texture = Some(p.clone()),
+            Some(ImageSource::Embedded(bytes)) if mesh.has_uvs => {
+                let img =
+                    decode_texture(bytes).context("cannot read the glTF's base-colour texture")?;
+                return Ok(Some(img.to_rgba8()));
+            }
+            _ => {}
+        }
+    }
     Ok(match &md.texture {
         Some(t) => {
             if !mesh.has_uvs {
@@ -601,6 +659,40 @@ fn lamp_light(i: usize, l: &mut LightDesc, center: Vec3, radiance: Vec3) -> Resu
 /// `[material]`: a preset, coefficients or an appearance (albedo and scatter distance), the
 /// surface's roughness, and the model (by default
 /// the half-space profile under an environment); the medium and the roughness.
+/// A glTF's material as the scene's `[material]`, where the scene gives no medium of its own
+/// (no preset, coefficients, appearance or index): `KHR_materials_ior` as eta, and with
+/// `KHR_materials_volume` the base colour as the colour shown and the attenuation's 1/e
+/// distance per channel (in the mesh's `units`) as the scatter distance. Returns whether it
+/// did, with a note of what it took.
+pub(super) fn take_file_material(
+    mat: &mut MaterialDesc,
+    g: &GltfMaterial,
+    units: Units,
+    notes: &mut Vec<String>,
+) -> bool {
+    let given = mat.preset.is_some()
+        || mat.sigma_s_prime.is_some()
+        || mat.sigma_a.is_some()
+        || mat.albedo.is_some()
+        || mat.scatter_distance_mm.is_some()
+        || mat.eta.is_some();
+    if given || (g.ior.is_none() && g.volume.is_none()) {
+        return false;
+    }
+    let mut took = Vec::new();
+    if let Some(ior) = g.ior {
+        mat.eta = Some(ior);
+        took.push(format!("eta {ior} (KHR_materials_ior)"));
+    }
+    if let Some((colour, distance)) = g.volume {
+        mat.albedo = Some(colour);
+        mat.scatter_distance_mm = Some(distance.map(|d| d * units.to_mm()));
+        took.push("albedo and scatter distance (base colour, KHR_materials_volume)".into());
+    }
+    notes.push(format!("[material] from the glTF: {}", took.join(", ")));
+    true
+}
+
 pub(super) fn resolve_material(
     mat: &mut MaterialDesc,
     has_environment: bool,

@@ -2,7 +2,7 @@
 //!
 //! ```toml
 //! [mesh]
-//! builtin = "bunny"          # or: obj = "model.obj"; builtin "sphere" and "box" take sizes
+//! builtin = "bunny"          # or: file = "model.obj" (.ply, .gltf, .glb); builtin "sphere" and "box" take sizes
 //! units = "mm"               # units of the OBJ: mm, cm, m, in
 //! texture = "albedo.png"     # optional diffuse texture (needs texture coordinates)
 //!
@@ -92,8 +92,10 @@ impl Units {
 pub struct MeshDesc {
     /// A built-in mesh: "bunny" (default), "sphere" or "box".
     pub builtin: Option<String>,
-    /// Path of an OBJ file, relative to the scene file.
-    pub obj: Option<PathBuf>,
+    /// Path of a mesh file (OBJ, PLY, glTF or GLB, by its extension), relative to the scene
+    /// file (`obj` is read as this key too).
+    #[serde(alias = "obj")]
+    pub file: Option<PathBuf>,
     /// Units of the mesh's coordinates.
     pub units: Option<Units>,
     /// Diffuse texture (PNG or JPEG), relative to the scene file.

@@ -1,8 +1,11 @@
-//! Triangle meshes: OBJ loading (tobj), checks, normals, and procedural test shapes.
+//! Triangle meshes: OBJ (tobj), PLY and glTF loading, checks, normals, and procedural test
+//! shapes.
 
 use glam::{Vec2, Vec3};
 
+pub mod gltf;
 mod obj;
+mod ply;
 
 pub use obj::MAX_POLYGON_WARP;
 
@@ -33,6 +36,22 @@ pub enum MeshError {
         /// File.
         path: String,
         /// Parser's reason.
+        reason: String,
+    },
+    /// The glTF could not be read.
+    #[error("cannot read glTF '{path}': {reason}")]
+    Gltf {
+        /// File.
+        path: String,
+        /// Why.
+        reason: String,
+    },
+    /// The PLY could not be parsed.
+    #[error("cannot read PLY '{path}': {reason}")]
+    Ply {
+        /// File.
+        path: String,
+        /// Why.
         reason: String,
     },
     /// No triangles.
@@ -78,6 +97,26 @@ pub enum MeshError {
 }
 
 impl Mesh {
+    /// A mesh read from a file, checked, its normals made unit or computed from the faces where
+    /// the file gave none (`given_normals` false) or some that are unusable.
+    fn finish(mut self, name: &str, given_normals: bool) -> Result<Mesh, MeshError> {
+        self.validate(name)?;
+        if !given_normals
+            || self
+                .normals
+                .iter()
+                .any(|n| !n.is_finite() || n.length() <= 1e-6)
+        {
+            self.compute_normals();
+            self.normals_from_faces = true;
+        } else {
+            for n in &mut self.normals {
+                *n = n.normalize();
+            }
+        }
+        Ok(self)
+    }
+
     /// Checks indices, finiteness and that some triangle has area.
     pub fn validate(&self, name: &str) -> Result<(), MeshError> {
         if self.indices.len() < 3 {

@@ -8,7 +8,7 @@ pub mod settings;
 pub mod shadow;
 
 use crate::physics::Material;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use desc::{LightKind, SceneDesc};
 use glam::{Mat4, Vec3};
 pub use light::{Light, MAX_LIGHTS, MAX_RADIANCE};
@@ -27,7 +27,7 @@ pub const MAX_TRIANGLES: usize = 4_000_000;
 /// Command-line values that replace the scene file's.
 #[derive(Debug, Clone, Default)]
 pub struct Overrides {
-    /// `--mesh`: an OBJ file instead of the scene's mesh.
+    /// `--mesh`: a mesh file instead of the scene's mesh.
     pub mesh: Option<PathBuf>,
     /// `--material`: a preset name.
     pub material: Option<String>,
@@ -182,17 +182,26 @@ impl Scene {
     /// in turn, each filling its defaults into the description kept as `resolved`.
     pub fn from_desc(mut desc: SceneDesc, base: &Path, overrides: &Overrides) -> Result<Scene> {
         build::apply_overrides(&mut desc, overrides);
-        let (mut mesh, units) = build::load_mesh(&mut desc.mesh, base)?;
-        let texture = build::load_texture(&mut desc.mesh, base, &mesh)?;
+        let (mut mesh, units, file_material) = build::load_mesh(&mut desc.mesh, base)?;
+        let file_texture = file_material.as_ref().and_then(|m| m.texture.as_ref());
+        let texture = build::load_texture(&mut desc.mesh, base, &mesh, file_texture)?;
         let mut warnings = Vec::new();
         let placement = build::place_mesh(&mut desc.transform, units, &mut mesh, &mut warnings)?;
         let mut notes = Vec::new();
+        let from_file = file_material
+            .as_ref()
+            .is_some_and(|m| build::take_file_material(&mut desc.material, m, units, &mut notes));
         build::split_long_triangles(&mut mesh, &mut notes);
         let (camera, position) =
             build::resolve_camera(&mut desc.camera, placement.center, placement.radius)?;
         let lit = build::resolve_lights(&mut desc.lights, base, placement.center)?;
-        let (material, roughness) =
-            build::resolve_material(&mut desc.material, lit.environment.is_some())?;
+        let resolved = build::resolve_material(&mut desc.material, lit.environment.is_some());
+        let (material, roughness) = if from_file {
+            resolved
+                .context("the mesh file's material (a [material] of the scene's replaces it)")?
+        } else {
+            resolved?
+        };
         let output = build::resolve_output(
             &mut desc,
             &material,

@@ -89,21 +89,7 @@ impl Mesh {
             mesh.indices.extend(indices.iter().map(|i| i + base));
         }
         mesh.has_uvs = all_have_uvs && !models.is_empty();
-        mesh.validate(name)?;
-        if !all_have_normals
-            || mesh
-                .normals
-                .iter()
-                .any(|n| !n.is_finite() || n.length() <= 1e-6)
-        {
-            mesh.compute_normals();
-            mesh.normals_from_faces = true;
-        } else {
-            for n in &mut mesh.normals {
-                *n = n.normalize();
-            }
-        }
-        Ok(mesh)
+        mesh.finish(name, all_have_normals)
     }
 }
 
@@ -163,7 +149,7 @@ pub const MAX_POLYGON_WARP: f32 = 0.05;
 /// `arities` is empty). Polygons are triangulated by ear clipping in their best-fit plane
 /// (Newell's normal), so a concave polygon keeps its outline; one that bends out of its plane
 /// by more than [`MAX_POLYGON_WARP`] of its size, or that crosses itself, is refused by number.
-fn triangulate(
+pub(super) fn triangulate(
     name: &str,
     positions: &[Vec3],
     indices: &[u32],
