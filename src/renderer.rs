@@ -99,6 +99,9 @@ pub struct Options {
 pub struct WindowOutput {
     /// The swapchain encodes sRGB itself: the window image holds linear values.
     pub linear: bool,
+    /// Columns left of the image, for the panel to float over: the window image is this much
+    /// wider than the scene's.
+    pub left: u32,
     /// The interface to draw over the image (the `ui` pass), if any.
     pub ui: Option<passes::ui::SharedUi>,
 }
@@ -107,6 +110,7 @@ impl std::fmt::Debug for WindowOutput {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("WindowOutput")
             .field("linear", &self.linear)
+            .field("left", &self.left)
             .field("ui", &self.ui.is_some())
             .finish()
     }

@@ -687,13 +687,15 @@ fn a_still_light_skips_the_light_passes() {
 }
 
 /// The viewer's `window` and `ui` passes, headless: the window image is the display image
-/// (sRGB-encoded for a UNORM swapchain, decoded to linear for an sRGB one) but where the
-/// interface drew, there its colour (egui's sRGB colour, encoded like the image); the
+/// (sRGB-encoded for a UNORM swapchain, decoded to linear for an sRGB one) right of the panel's
+/// columns, a plain background in them, but where the interface drew, there its colour (egui's sRGB colour, encoded like the image); the
 /// readback runs only on request, and skipping it keeps every layout transition valid
 /// (validation on).
 #[test]
 fn the_interface_is_drawn_over_the_display() {
     use std::sync::{Arc, Mutex};
+    // Columns left of the image, for the panel.
+    const LEFT: u32 = 24;
     use translucent::passes::ui::UiLayer;
     use translucent::renderer::WindowOutput;
     let s = scene("[output]\nwidth = 96\nheight = 64\n");
@@ -716,7 +718,7 @@ fn the_interface_is_drawn_over_the_display() {
         let input = egui::RawInput {
             screen_rect: Some(egui::Rect::from_min_size(
                 egui::Pos2::ZERO,
-                egui::vec2(96.0, 64.0),
+                egui::vec2(96.0 + LEFT as f32, 64.0),
             )),
             ..Default::default()
         };
@@ -749,6 +751,7 @@ fn the_interface_is_drawn_over_the_display() {
         let options = Options {
             window: Some(WindowOutput {
                 linear,
+                left: LEFT,
                 ui: Some(layer.clone()),
             }),
             ..Default::default()
@@ -764,19 +767,23 @@ fn the_interface_is_drawn_over_the_display() {
         assert!(t.pass_ms[readback] > 0.0, "readback was requested");
         let display = r.output(Vec::new()).unwrap().display;
         let window = r.read_window_image().unwrap();
-        assert_eq!(window.len(), display.len());
-        let (w, h) = (96usize, 64usize);
+        let (w, h, left) = (96usize, 64usize, LEFT as usize);
+        assert_eq!(window.len(), 4 * (w + left) * h);
         let square = [1.0, 128.0 / 255.0, 0.0];
         for y in 0..h {
-            for x in 0..w {
-                let i = 4 * (y * w + x);
+            for x in 0..w + left {
+                let i = 4 * (y * (w + left) + x);
                 for c in 0..3 {
                     let got = window[i + c];
                     let expect = if x < 15 && y < 15 {
                         square[c]
+                    } else if x < left && (x > 16 || y > 16) {
+                        // The panel's background.
+                        0.16
                     } else if x > 16 || y > 16 {
                         // The output's straight alpha, over black as the window shows it.
-                        display[i + c] as f32 / 255.0 * display[i + 3] as f32 / 255.0
+                        let d = 4 * (y * w + x - left) + c;
+                        display[d] as f32 / 255.0 * display[d - c + 3] as f32 / 255.0
                     } else {
                         continue; // the square's anti-aliased edge
                     };

@@ -1,6 +1,7 @@
 //! `window` (viewer only): the tone-mapped display written into the image the viewer blits to
 //! its swapchain, in the swapchain's terms (sRGB-encoded RGBA8, or linear RGBA16F for a
-//! swapchain that encodes sRGB itself). The `ui` pass then draws the interface over it.
+//! swapchain that encodes sRGB itself), `left` columns from the window's left edge (a plain
+//! background there, for the panel). The `ui` pass then draws the interface over it.
 
 use super::PassName;
 use crate::gpu::{shaders, Pipeline};
@@ -21,8 +22,15 @@ pub fn format(linear: bool) -> vk::Format {
 /// Workgroup edge of `glsl/window.comp`.
 const GROUP: u32 = 8;
 
-/// Declares the `window` pass: `window = display`, linear when `linear_out`.
-pub fn add(graph: &mut RenderGraph, display: ResourceId, window: ResourceId, linear_out: bool) {
+/// Declares the `window` pass: `window = display` shifted right by `left` columns, linear when
+/// `linear_out`.
+pub fn add(
+    graph: &mut RenderGraph,
+    display: ResourceId,
+    window: ResourceId,
+    linear_out: bool,
+    left: u32,
+) {
     graph
         .pass(PassName::Window.as_str())
         .access(display, Access::StorageRead(Stage::Compute))
@@ -34,7 +42,7 @@ pub fn add(graph: &mut RenderGraph, display: ResourceId, window: ResourceId, lin
                 .storage_image(0, display)
                 .storage_image(1, window)
                 .finish()?;
-            let pipeline = Pipeline::compute::<()>(
+            let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Window.as_str(),
                 if linear_out {
@@ -47,6 +55,7 @@ pub fn add(graph: &mut RenderGraph, display: ResourceId, window: ResourceId, lin
             let extent = out.info.extent;
             Ok(Box::new(move |rec| {
                 pipeline.bind(rec.cmd);
+                pipeline.push(rec.cmd, &left);
                 unsafe {
                     rec.gpu.device.cmd_dispatch(
                         rec.cmd,

@@ -448,7 +448,7 @@ impl<'a> Assembly<'a> {
                     crate::gpu::ImageInfo {
                         format: passes::window::format(out.linear),
                         extent: vk::Extent2D {
-                            width: w,
+                            width: w + out.left,
                             height: h,
                         },
                         layers: 1,
@@ -476,7 +476,7 @@ impl<'a> Assembly<'a> {
                     )
                 })?;
                 let window_id = g.import_image(image.clone(), Access::TransferRead);
-                passes::window::add(g, display, window_id, out.linear);
+                passes::window::add(g, display, window_id, out.linear, out.left);
                 if let Some(ui) = &out.ui {
                     passes::ui::add(g, window_id, ui.clone());
                 }

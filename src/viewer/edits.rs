@@ -71,14 +71,26 @@ impl Running {
                 self.shots += 1;
                 self.shot = Some(name);
             }
-            Action::ToggleUi => self.ui_visible = !self.ui_visible,
+            Action::ToggleUi => {
+                // The image takes the panel's columns, or gives them back.
+                self.ui_visible = !self.ui_visible;
+                self.size_changed = true;
+            }
             Action::Reset => {
                 v = View::default();
                 self.reset_lights()?;
             }
             Action::Resize(w, h) => {
-                // The Resized event that follows re-creates the swapchain.
-                let _ = self.window.request_inner_size(PhysicalSize::new(w, h));
+                // The image's size, with the panel's columns beside it. The Resized event that
+                // follows re-creates the swapchain.
+                let left = if self.ui_visible {
+                    super::panel::SPACE
+                } else {
+                    0
+                };
+                let _ = self
+                    .window
+                    .request_inner_size(PhysicalSize::new(w + left, h));
             }
             Action::Quit => return Ok(false),
         }

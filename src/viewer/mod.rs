@@ -206,6 +206,7 @@ struct App {
 fn renderer_options(
     mode: Blend,
     linear: bool,
+    left: u32,
     ui: &SharedUi,
     global: Option<crate::passes::compute::GlobalVariant>,
 ) -> Options {
@@ -213,6 +214,7 @@ fn renderer_options(
         mode,
         window: Some(WindowOutput {
             linear,
+            left,
             ui: Some(ui.clone()),
         }),
         global_layout: global.map_or(crate::passes::compute::GlobalLayout::Auto, |v| v.layout),
@@ -242,14 +244,25 @@ impl Running {
     }
 
     /// Builds the renderer for the current scene, data and swapchain size.
+    /// Columns left of the image, for the panel: [`panel::SPACE`] while the panel shows,
+    /// less in a window too narrow to leave [`panel::MIN_VIEW`] columns beside it.
+    fn left(&self) -> u32 {
+        if self.ui_visible {
+            panel::SPACE.min(self.swapchain.extent.width.saturating_sub(panel::MIN_VIEW))
+        } else {
+            0
+        }
+    }
+
     fn rebuild(&mut self) -> Result<()> {
         let extent = self.swapchain.extent;
         let max = self.gpu.info.max_image_dimension_2d;
-        self.scene.width = extent.width.clamp(1, max);
+        let left = self.left();
+        self.scene.width = (extent.width - left).clamp(1, max);
         self.scene.height = extent.height.clamp(1, max);
         // The old graph's memory goes before the new one is allocated.
         self.renderer = None;
-        let options = renderer_options(self.mode, self.linear(), &self.ui_layer, self.global);
+        let options = renderer_options(self.mode, self.linear(), left, &self.ui_layer, self.global);
         let renderer = Renderer::with_data(&self.gpu, self.scene.clone(), &self.data, options)?;
         // Measured once per uploaded data: a resize or a new light keeps the variant (and
         // does not stall for the measurement again).
@@ -261,7 +274,7 @@ impl Running {
     fn reupload(&mut self) -> Result<()> {
         self.renderer = None;
         self.global = None;
-        let options = renderer_options(self.mode, self.linear(), &self.ui_layer, None);
+        let options = renderer_options(self.mode, self.linear(), 0, &self.ui_layer, None);
         self.data = Renderer::upload(
             &self.gpu,
             &self.scene,

@@ -93,11 +93,27 @@ fn kind_name(k: LightKind) -> &'static str {
     }
 }
 
+/// The panel's width, and its margin to the window's edges.
+const WIDTH: f32 = 300.0;
+const MARGIN: f32 = 8.0;
+
+/// Columns the window keeps left of the image for the panel: the object is framed beside it,
+/// not under it.
+pub const SPACE: u32 = (WIDTH + 2.0 * MARGIN) as u32;
+
+/// Columns of image the window keeps at the least, beside the panel.
+pub const MIN_VIEW: u32 = 64;
+
 /// Lays the panel out and appends what the user did to `actions`.
 pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mut Vec<Action>) {
+    // As tall as the window at most: the rest scrolls.
+    let height = ctx.content_rect().height() - 2.0 * MARGIN;
     egui::Window::new("translucent")
-        .default_pos([8.0, 8.0])
-        .default_width(300.0)
+        .default_pos([MARGIN, MARGIN])
+        .default_width(WIDTH)
+        .max_width(WIDTH)
+        .default_height(height.max(100.0))
+        .max_height(height.max(100.0))
         .resizable(false)
         .show(ctx, |ui| {
             ui.label(format!("{}  {:.1} fps", s.device, s.fps));
@@ -116,33 +132,36 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
                 }
             });
             // Taller than a small window: the rest scrolls.
-            egui::ScrollArea::vertical().show(ui, |ui| {
-                egui::CollapsingHeader::new("Material")
-                    .default_open(true)
-                    .show(ui, |ui| material(ui, s, actions));
-                egui::CollapsingHeader::new("Settings")
-                    .default_open(false)
-                    .show(ui, |ui| settings(ui, s, st, actions));
-                egui::CollapsingHeader::new("Lights")
-                    .default_open(true)
-                    .show(ui, |ui| lights(ui, s, st, actions));
-                egui::CollapsingHeader::new("GPU time per pass")
-                    .default_open(true)
-                    .show(ui, |ui| plot(ui, s));
-                // What comes and goes stays last: the controls above keep their places.
-                if let Some((what, stage, done, seconds)) = &s.progress {
-                    ui.add(
-                        egui::ProgressBar::new(*done)
-                            .text(format!("preparing {what}: {stage} ({seconds:.1} s)")),
-                    );
-                }
-                if let Some(shown) = &s.shown {
-                    ui.label(format!("shown meanwhile: {shown}"));
-                }
-                if !s.status.is_empty() {
-                    ui.label(&s.status);
-                }
-            });
+            egui::ScrollArea::vertical()
+                .max_height(ui.available_height())
+                .auto_shrink([false, true])
+                .show(ui, |ui| {
+                    egui::CollapsingHeader::new("Material")
+                        .default_open(true)
+                        .show(ui, |ui| material(ui, s, actions));
+                    egui::CollapsingHeader::new("Settings")
+                        .default_open(false)
+                        .show(ui, |ui| settings(ui, s, st, actions));
+                    egui::CollapsingHeader::new("Lights")
+                        .default_open(true)
+                        .show(ui, |ui| lights(ui, s, st, actions));
+                    egui::CollapsingHeader::new("GPU time per pass")
+                        .default_open(true)
+                        .show(ui, |ui| plot(ui, s));
+                    // What comes and goes stays last: the controls above keep their places.
+                    if let Some((what, stage, done, seconds)) = &s.progress {
+                        ui.add(
+                            egui::ProgressBar::new(*done)
+                                .text(format!("preparing {what}: {stage} ({seconds:.1} s)")),
+                        );
+                    }
+                    if let Some(shown) = &s.shown {
+                        ui.label(format!("shown meanwhile: {shown}"));
+                    }
+                    if !s.status.is_empty() {
+                        ui.label(&s.status);
+                    }
+                });
         });
 }
 

@@ -39,7 +39,7 @@ impl App {
         let swapchain = Swapchain::new(&gpu, size.width.max(1), size.height.max(1), config.vsync)?;
         let linear = swapchain::is_srgb(swapchain.format);
         let ui = Interface::new(&gpu, &window, linear)?;
-        let options = renderer_options(config.mode, linear, &ui.layer, None);
+        let options = renderer_options(config.mode, linear, 0, &ui.layer, None);
         let data = Renderer::upload(
             &gpu,
             &config.scene,
@@ -64,11 +64,15 @@ impl App {
     }
 }
 
-/// Opens the window at the scene's image size and the device that draws into it.
+/// Opens the window at the scene's image size with the panel's columns beside it, and the
+/// device that draws into it.
 fn open_window(el: &ActiveEventLoop, config: &ViewConfig) -> Result<(Window, Arc<Gpu>)> {
     let attrs = Window::default_attributes()
         .with_title(format!("translucent: {}", preset_name(&config.scene)))
-        .with_inner_size(PhysicalSize::new(config.scene.width, config.scene.height));
+        .with_inner_size(PhysicalSize::new(
+            config.scene.width + super::panel::SPACE,
+            config.scene.height,
+        ));
     let window = el
         .create_window(attrs)
         .context("cannot create the window")?;
