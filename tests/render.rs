@@ -298,32 +298,62 @@ fn timings_cover_every_pass_and_add_up_to_the_frame() {
 }
 
 /// The display image `composite` writes against the CPU's `output::tonemap` of the radiance it
-/// writes, at one sample per pixel: within one 8-bit step everywhere (the shader uses a
-/// square-root approximation of the sRGB curve; with several samples an edge pixel's display is
-/// the mean of its samples' curves, not the curve of their mean).
+/// writes, at one sample per pixel, under each tone curve at an exposure that takes the lit
+/// side past 1: within one 8-bit step everywhere (the shader uses a square-root approximation
+/// of the sRGB curve; with several samples an edge pixel's display is the mean of its samples'
+/// curves, not the curve of their mean). The filmic curves keep highlights the clip loses.
 #[test]
-fn display_matches_the_srgb_curve_of_the_radiance() {
+fn display_matches_the_tone_curve_of_the_radiance() {
+    use translucent::output::ToneMap;
     let mut scene = bunny_scene(128, 128);
     scene.samples = 1;
-    let exposure = scene.exposure;
-    let out = render(scene, 1);
-    let cpu = translucent::output::tonemap(&out.radiance, exposure);
-    assert_eq!(cpu.len(), out.display.len());
-    let mut worst = 0i32;
-    let mut mid = 0;
-    for (g, c) in out.display.iter().zip(&cpu) {
-        worst = worst.max((*g as i32 - *c as i32).abs());
-        if (30..220).contains(c) {
-            mid += 1;
+    scene.exposure *= 3.0;
+    let pre = common::preprocess(
+        &scene,
+        SettingsOverrides {
+            texel_mm: Some(1.0),
+            ..Default::default()
+        },
+    );
+    let mut clipped = Vec::new();
+    for curve in ToneMap::ALL {
+        scene.tonemap = curve;
+        let out = common::render(&scene, &pre, Options::default(), 1);
+        let cpu = translucent::output::tonemap(&out.radiance, scene.exposure, curve);
+        assert_eq!(cpu.len(), out.display.len());
+        let mut worst = 0i32;
+        let mut mid = 0;
+        for (g, c) in out.display.iter().zip(&cpu) {
+            worst = worst.max((*g as i32 - *c as i32).abs());
+            if (30..220).contains(c) {
+                mid += 1;
+            }
         }
+        // Covered pixels at full white in green.
+        let white = out
+            .display
+            .chunks(4)
+            .filter(|p| p[3] == 255 && p[1] == 255)
+            .count();
+        println!(
+            "{}: {white} white pixels, worst {worst} steps",
+            curve.name()
+        );
+        clipped.push(white);
+        assert!(
+            mid > 1000,
+            "{}: too few mid-tone values ({mid}) to test the curve",
+            curve.name()
+        );
+        assert!(
+            worst <= 1,
+            "{}: display differs from the curve by {worst} steps",
+            curve.name()
+        );
     }
     assert!(
-        mid > 1000,
-        "too few mid-tone values ({mid}) to test the curve"
-    );
-    assert!(
-        worst <= 1,
-        "display differs from the sRGB curve by {worst} steps"
+        clipped[0] > 300 && clipped[1] * 10 < clipped[0] && clipped[2] * 10 < clipped[0],
+        "white pixels (srgb, neutral, agx): {clipped:?}"
     );
 }
 

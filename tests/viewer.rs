@@ -326,6 +326,7 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
                   sigma-a 0.004 0.01 0.05; frames 1; screenshot preview; wait; frames 2\n\
                   screenshot exact; eta 1.0; model halfspace; wait; frames 2\n\
                   light-colour 0 1 0.6 0.4; light-intensity 0 1.5; light-direction 0 1 -1 -0.5\n\
+                  exposure 3; tonemap agx\n\
                   add-light point; frames 2; screenshot edited; save-scene edited\n\
                   settings texel=0.9; wait; frames 2; screenshot coarse\n\
                   remove-light 1; light-kind 0 spot; frames 2; screenshot spot; quit";
@@ -364,6 +365,8 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     assert_eq!(edited["eta"], 1.0);
     assert_eq!(edited["model"], "halfspace");
     assert_eq!(edited["lights"], 2);
+    assert_eq!(edited["exposure"], 3.0);
+    assert_eq!(edited["tonemap"], "agx");
     let coarse = json(&dir.join("coarse.json"));
     assert_eq!(coarse["settings"]["texel_mm"], 0.9);
     assert_eq!(
@@ -426,12 +429,26 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
         m1[0] / m1[2]
     );
 
-    // The saved scene renders the edited view: the same image to 0.1 %.
+    // The saved scene renders the edited view: the same image to 0.1 %, shown the same way
+    // (its exposure and tone curve) within one 8-bit step but on a few silhouette pixels.
     render_into(&cache, &dir.join("render"), Some(&dir.join("edited.toml")));
     assert_same_image(
         &dir.join("edited.exr"),
         &dir.join("render/render.exr"),
         "the saved scene and the viewer",
+    );
+    let (shown, rendered) = (
+        rgb(&dir.join("edited.png")),
+        rgb(&dir.join("render/render.png")),
+    );
+    let apart = shown
+        .pixels()
+        .zip(rendered.pixels())
+        .filter(|(p, q)| (0..3).any(|c| (p.0[c] as i32 - q.0[c] as i32).abs() > 1))
+        .count();
+    assert!(
+        apart * 100 < (shown.width() * shown.height()) as usize,
+        "{apart} display pixels differ by more than a step"
     );
 }
 

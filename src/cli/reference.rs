@@ -46,7 +46,13 @@ pub(super) fn reference(args: &ReferenceArgs) -> Result<()> {
         "reference: spacing {:.3} mm, theta {:.2}: {} surface samples ({} lit), {:.1} s",
         settings.spacing_mm, settings.theta, r.samples, r.lit_samples, seconds
     );
-    set.radiance("reference", r.width, r.height, &r.radiance, scene.exposure)?;
+    set.radiance(
+        "reference",
+        r.width,
+        r.height,
+        &r.radiance,
+        (scene.exposure, scene.tonemap),
+    )?;
     write_vertices(&mut set, &scene, &r)?;
     let mut info = serde_json::json!({
         "spacing_mm": settings.spacing_mm, "theta": settings.theta, "samples": r.samples,

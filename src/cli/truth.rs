@@ -142,7 +142,13 @@ fn write_images(
     t: &crate::truth::Truth,
     refractive: bool,
 ) -> Result<()> {
-    set.radiance("truth", t.width, t.height, &t.radiance, scene.exposure)?;
+    set.radiance(
+        "truth",
+        t.width,
+        t.height,
+        &t.radiance,
+        (scene.exposure, scene.tonemap),
+    )?;
     output::encode_exr(&set.path("noise.exr"), t.width, t.height, &t.noise)?;
     if refractive {
         output::encode_exr(

@@ -2,6 +2,10 @@
 //! Every file is written to a temporary name in the same folder and renamed into place, so an
 //! interrupted run never leaves a partial file under the final name.
 
+mod tonemap;
+
+pub use tonemap::ToneMap;
+
 use crate::graph::timing::{FrameTiming, TimingReport};
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
@@ -160,21 +164,22 @@ impl OutputSet {
         tmp
     }
 
-    /// Writes `NAME.exr` (linear) and `NAME.png` (tone-mapped with `exposure`) of the set.
+    /// Writes `NAME.exr` (linear) and `NAME.png` (tone-mapped with `exposure` and `curve`) of
+    /// the set.
     pub fn radiance(
         &mut self,
         name: &str,
         width: u32,
         height: u32,
         radiance: &[f32],
-        exposure: f32,
+        (exposure, curve): (f32, ToneMap),
     ) -> Result<()> {
         encode_exr(&self.path(&format!("{name}.exr")), width, height, radiance)?;
         encode_png(
             &self.path(&format!("{name}.png")),
             width,
             height,
-            &tonemap(radiance, exposure),
+            &tonemap(radiance, exposure, curve),
         )
     }
 
@@ -364,11 +369,11 @@ pub fn unpremultiply(mut rgba: Vec<u8>) -> Vec<u8> {
     rgba
 }
 
-/// Linear radiance (premultiplied by alpha) to sRGB RGBA8 with straight alpha and `exposure`,
-/// as `glsl/composite.frag` does for a fully covered pixel.
-pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
+/// Linear radiance (premultiplied by alpha) to sRGB RGBA8 with straight alpha: times
+/// `exposure`, through `curve`, sRGB-encoded, as `glsl/composite.frag` does for a fully
+/// covered pixel.
+pub fn tonemap(radiance: &[f32], exposure: f32, curve: ToneMap) -> Vec<u8> {
     let encode = |c: f32| {
-        let c = (c * exposure).clamp(0.0, 1.0);
         let s = if c <= 0.0031308 {
             12.92 * c
         } else {
@@ -380,11 +385,12 @@ pub fn tonemap(radiance: &[f32], exposure: f32) -> Vec<u8> {
         .chunks(4)
         .flat_map(|p| {
             let a = p[3].clamp(0.0, 1.0);
-            let straight = if a > 0.0 { 1.0 / a } else { 1.0 };
+            let straight = exposure / if a > 0.0 { a } else { 1.0 };
+            let c = curve.apply([p[0] * straight, p[1] * straight, p[2] * straight]);
             [
-                encode(p[0] * straight),
-                encode(p[1] * straight),
-                encode(p[2] * straight),
+                encode(c[0]),
+                encode(c[1]),
+                encode(c[2]),
                 (a * 255.0 + 0.5) as u8,
             ]
         })

@@ -80,8 +80,13 @@ pub struct CompositeTargets {
     pub samples: Option<(ResourceId, ResourceId, u32)>,
 }
 
-/// Declares `composite`, writing `hdr`, `display = srgb(exposure * hdr)` and `depth`.
-pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exposure: f32) {
+/// Declares `composite`, writing `hdr`, `display = srgb(curve(exposure * hdr))` and `depth`.
+pub fn add(
+    graph: &mut RenderGraph,
+    i: CompositeInputs,
+    t: CompositeTargets,
+    (exposure, curve): (f32, crate::output::ToneMap),
+) {
     let mut pass = graph
         .pass(PassName::Composite.as_str())
         .access(i.frame, Access::Uniform(Stage::Vertex))
@@ -129,6 +134,7 @@ pub fn add(graph: &mut RenderGraph, i: CompositeInputs, t: CompositeTargets, exp
                     i.chord as u32,
                     i.oblique as u32,
                     i.surface as u32,
+                    curve.constant(),
                 ],
                 samples: t.samples.map_or(1, |s| s.2),
             },

@@ -422,7 +422,7 @@ impl<'a> Assembly<'a> {
                 depth,
                 samples: samples.map(|(hdr, display)| (hdr, display, scene.samples)),
             },
-            scene.exposure,
+            (scene.exposure, scene.tonemap),
         );
     }
 

@@ -773,6 +773,8 @@ pub(super) struct Output {
     pub(super) exposure: f64,
     /// Samples per pixel of the camera view.
     pub(super) samples: u32,
+    /// The display's tone curve.
+    pub(super) tonemap: crate::output::ToneMap,
 }
 
 /// `[output]` and `[settings]`: the surface, the image size, the preprocessing settings, the
@@ -818,9 +820,11 @@ pub(super) fn resolve_output(
     if ![1, 2, 4, 8].contains(&samples) {
         bail!("[output] samples = {samples} must be 1, 2, 4 or 8 (samples per pixel)");
     }
+    let tonemap = *od.tonemap.get_or_insert_default();
     let exposure = resolve_exposure(od, lit, center)?;
     Ok(Output {
         samples,
+        tonemap,
         surface,
         width,
         height,

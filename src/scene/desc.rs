@@ -235,8 +235,11 @@ pub struct OutputDesc {
     pub width: Option<u32>,
     /// Image height in pixels.
     pub height: Option<u32>,
-    /// Multiplier from radiance to display value before the sRGB curve.
+    /// Multiplier from radiance to display value before the tone curve.
     pub exposure: Option<f64>,
+    /// The tone curve of the display image (PNG, the viewer): "srgb" (clip), "neutral"
+    /// (Khronos PBR Neutral) or "agx".
+    pub tonemap: Option<crate::output::ToneMap>,
     /// Samples per pixel of the camera view (1, 2, 4 or 8): above 1 the silhouette's pixels
     /// get the share of the pixel the object covers (alpha) and the mean radiance over it.
     pub samples: Option<u32>,

@@ -112,6 +112,8 @@ pub struct Scene {
     pub exposure: f32,
     /// Samples per pixel of the camera view (1: none averaged; the silhouette is then hard).
     pub samples: u32,
+    /// The display's tone curve.
+    pub tonemap: crate::output::ToneMap,
     /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
     /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
@@ -224,6 +226,7 @@ impl Scene {
             height: output.height,
             exposure: output.exposure as f32,
             samples: output.samples,
+            tonemap: output.tonemap,
             shadow_map: output.shadow_map,
             surface: output.surface,
             settings: output.settings,

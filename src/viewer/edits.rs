@@ -80,6 +80,16 @@ impl Running {
                 v = View::default();
                 self.reset_lights()?;
             }
+            Action::Exposure(e) => {
+                self.scene.exposure = e as f32;
+                self.scene.resolved.output.exposure = Some(e);
+                self.rebuild()?;
+            }
+            Action::ToneMap(curve) => {
+                self.scene.tonemap = curve;
+                self.scene.resolved.output.tonemap = Some(curve);
+                self.rebuild()?;
+            }
             Action::Resize(w, h) => {
                 // The image's size, with the panel's columns beside it. The Resized event that
                 // follows re-creates the swapchain.

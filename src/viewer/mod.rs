@@ -344,6 +344,8 @@ impl Running {
         let up = back.cross(right);
         let report = self.report();
         panel::Snapshot {
+            exposure: self.scene.exposure as f64,
+            tonemap: self.scene.tonemap,
             device: format!("{} ({})", self.gpu.info.name, self.gpu.info.device_type),
             fps: self.fps(),
             frame_ms: report

@@ -58,6 +58,10 @@ pub struct Snapshot {
     pub passes: Vec<(String, Vec<f64>)>,
     /// The GPU time of each of the last frames, ms.
     pub frames: Vec<f64>,
+    /// The display's exposure.
+    pub exposure: f64,
+    /// The display's tone curve.
+    pub tonemap: crate::output::ToneMap,
 }
 
 /// What the panel keeps between frames (not part of the scene).
@@ -145,6 +149,9 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
                     egui::CollapsingHeader::new("Lights")
                         .default_open(true)
                         .show(ui, |ui| lights(ui, s, st, actions));
+                    egui::CollapsingHeader::new("Look")
+                        .default_open(false)
+                        .show(ui, |ui| look(ui, s, actions));
                     egui::CollapsingHeader::new("GPU time per pass")
                         .default_open(true)
                         .show(ui, |ui| plot(ui, s));
@@ -162,6 +169,34 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
                         ui.label(&s.status);
                     }
                 });
+        });
+}
+
+/// The display: exposure (in stops about the scene's) and tone curve.
+fn look(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
+    let mut stops = s.exposure.log2();
+    if ui
+        .add(
+            egui::Slider::new(&mut stops, -10.0..=10.0)
+                .text("exposure (stops)")
+                .step_by(0.1),
+        )
+        .changed()
+    {
+        actions.push(Action::Exposure(2f64.powf(stops)));
+    }
+    egui::ComboBox::from_label("tone curve")
+        .selected_text(s.tonemap.name())
+        .show_ui(ui, |ui| {
+            for curve in crate::output::ToneMap::ALL {
+                if ui
+                    .selectable_label(curve == s.tonemap, curve.name())
+                    .clicked()
+                    && curve != s.tonemap
+                {
+                    actions.push(Action::ToneMap(curve));
+                }
+            }
         });
 }
 
@@ -401,6 +436,44 @@ fn sphere(ui: &mut egui::Ui, s: &Snapshot, l: &Light, behind: &mut bool) -> Opti
         r,
         Color32::from_gray(40),
         Stroke::new(1.0, Color32::GRAY),
+    );
+    // Where the camera looks from (the centre), and the sides as the image shows them.
+    let label = egui::FontId::proportional(9.0);
+    for (text, at, align) in [
+        (
+            "up",
+            Pos2::new(c.x, c.y - r + 2.0),
+            egui::Align2::CENTER_TOP,
+        ),
+        (
+            "down",
+            Pos2::new(c.x, c.y + r - 2.0),
+            egui::Align2::CENTER_BOTTOM,
+        ),
+        (
+            "left",
+            Pos2::new(c.x - r + 3.0, c.y),
+            egui::Align2::LEFT_CENTER,
+        ),
+        (
+            "right",
+            Pos2::new(c.x + r - 3.0, c.y),
+            egui::Align2::RIGHT_CENTER,
+        ),
+    ] {
+        painter.text(at, align, text, label.clone(), Color32::from_gray(140));
+    }
+    painter.line_segment(
+        [c - Vec2::new(3.0, 0.0), c + Vec2::new(3.0, 0.0)],
+        Stroke::new(1.0, Color32::from_gray(140)),
+    );
+    painter.line_segment(
+        [c - Vec2::new(0.0, 3.0), c + Vec2::new(0.0, 3.0)],
+        Stroke::new(1.0, Color32::from_gray(140)),
+    );
+    let response = response.on_hover_text(
+        "where the light comes from, seen from the camera (the cross): filled in front of the \
+         object, hollow behind it; drag to move it",
     );
     let from = -l.direction.normalize_or(Vec3::NEG_Z);
     let (x, y, z) = (from.dot(right), from.dot(up), from.dot(back));

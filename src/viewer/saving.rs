@@ -137,6 +137,8 @@ impl Running {
             "sigma_s_prime": self.scene.material.sigma_s_prime,
             "sigma_a": self.scene.material.sigma_a,
             "eta": self.scene.material.eta,
+            "exposure": self.scene.exposure,
+            "tonemap": self.scene.tonemap.name(),
             "model": self.scene.material.model.name(),
             "preview": self.preview,
             "lights": self.scene.lights.len(),

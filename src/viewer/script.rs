@@ -77,6 +77,10 @@ pub enum Action {
     Reset,
     /// Ask the window system for this inner size.
     Resize(u32, u32),
+    /// The display's exposure (radiance to display value, before the tone curve).
+    Exposure(f64),
+    /// The display's tone curve.
+    ToneMap(crate::output::ToneMap),
     /// Close the viewer.
     Quit,
 }
@@ -222,6 +226,19 @@ fn view_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> {
             )),
             2,
         ),
+        "exposure" => {
+            let e = real(0, "exposure")?;
+            if !(e > 0.0 && e.is_finite()) {
+                bail!("exposure {e} must be a positive number");
+            }
+            (Step::Act(Action::Exposure(e as f64)), 1)
+        }
+        "tonemap" => {
+            let name = *args.first().context("missing tone curve")?;
+            let curve = crate::output::ToneMap::parse(name)
+                .with_context(|| format!("unknown tone curve '{name}' (srgb, neutral, agx)"))?;
+            (Step::Act(Action::ToneMap(curve)), 1)
+        }
         "zoom" => {
             let f = real(0, "zoom factor")?;
             if f <= 0.0 {
