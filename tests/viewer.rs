@@ -329,7 +329,9 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
                   exposure 3; tonemap agx\n\
                   add-light point; frames 2; screenshot edited; save-scene edited\n\
                   settings texel=0.9; wait; frames 2; screenshot coarse\n\
-                  remove-light 1; light-kind 0 spot; frames 2; screenshot spot; quit";
+                  remove-light 1; light-kind 0 spot; frames 2; screenshot spot\n\
+                  albedo 0.6 0.5 0.4; scatter-distance 0.8 0.6 0.4; wait; frames 2\n\
+                  screenshot appearance; quit";
     let mut view = scripted_view(&x, script, &cache, &dir);
     // The material edits re-weight the operators with the device's pass (the default, said
     // here so that a new default cannot drop the check): the saved scene's fresh
@@ -374,6 +376,26 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
         "the settings keep the material"
     );
     assert_eq!(json(&dir.join("spot.json"))["lights"], 1);
+    // The material given as a colour and a scatter distance: the coefficients they stand for
+    // at the index in use.
+    let given = json(&dir.join("appearance.json"));
+    let want =
+        translucent::physics::Material::from_appearance([0.6, 0.5, 0.4], [0.8, 0.6, 0.4], 1.0)
+            .unwrap();
+    for (key, values) in [
+        ("sigma_s_prime", want.sigma_s_prime),
+        ("sigma_a", want.sigma_a),
+    ] {
+        let got: Vec<f64> = serde_json::from_value(given[key].clone()).unwrap();
+        for c in 0..3 {
+            assert!(
+                (got[c] / values[c] - 1.0).abs() < 1e-6,
+                "{key}[{c}]: {} for {}",
+                got[c],
+                values[c]
+            );
+        }
+    }
 
     // While the new absorption was prepared, the next frame showed the old operators scaled to
     // its total reflectance: nearer the real image than the old material in every channel.

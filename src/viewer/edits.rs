@@ -45,6 +45,14 @@ impl Running {
                 self.request_coefficients(m.sigma_s_prime, v, m.eta, Some(m.model), app)?;
             }
             Action::Eta(eta) => self.request_eta(eta, app)?,
+            Action::Albedo(albedo) => {
+                let (_, distance) = self.wanted().material.appearance()?;
+                self.request_appearance(albedo, distance, app)?;
+            }
+            Action::ScatterDistance(distance) => {
+                let (albedo, _) = self.wanted().material.appearance()?;
+                self.request_appearance(albedo, distance, app)?;
+            }
             Action::Model(model) => self.request_model(model, app)?,
             Action::Settings(o) => self.request_settings(o, app)?,
             Action::LightDirection(i, d) => self.set_light_direction(i, d)?,

@@ -149,6 +149,10 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
                     egui::CollapsingHeader::new("Lights")
                         .default_open(true)
                         .show(ui, |ui| lights(ui, s, st, actions));
+                    // After the sections above, whose controls keep their places.
+                    egui::CollapsingHeader::new("Material as colour and scatter distance")
+                        .default_open(false)
+                        .show(ui, |ui| appearance(ui, s, actions));
                     egui::CollapsingHeader::new("Look")
                         .default_open(false)
                         .show(ui, |ui| look(ui, s, actions));
@@ -170,6 +174,58 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
                     }
                 });
         });
+}
+
+/// The material as artists give it: the colour it shows (the half-space's total diffuse
+/// reflectance, linear) and the scatter distance (1 / sigma_t', mm) per channel; an edit
+/// finds the coefficients (`Material::from_appearance`) at the index in use.
+fn appearance(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
+    let Ok((albedo, distance)) = s.material.appearance() else {
+        ui.label("(no appearance for this material)");
+        return;
+    };
+    egui::Grid::new("appearance").show(ui, |ui| {
+        ui.label("");
+        for c in ["red", "green", "blue"] {
+            ui.label(c);
+        }
+        ui.end_row();
+        ui.label("colour");
+        let mut v = albedo;
+        let mut changed = false;
+        for x in v.iter_mut() {
+            changed |= ui
+                .add(
+                    egui::DragValue::new(x)
+                        .range(1e-4..=0.999)
+                        .speed(0.002)
+                        .max_decimals(4),
+                )
+                .changed();
+        }
+        if changed {
+            actions.push(Action::Albedo(v));
+        }
+        ui.end_row();
+        ui.label("scatter mm");
+        let mut v = distance;
+        let mut changed = false;
+        for x in v.iter_mut() {
+            let speed = 0.005 * x.max(1e-3);
+            changed |= ui
+                .add(
+                    egui::DragValue::new(x)
+                        .range(1e-3..=1e3)
+                        .speed(speed)
+                        .max_decimals(4),
+                )
+                .changed();
+        }
+        if changed {
+            actions.push(Action::ScatterDistance(v));
+        }
+        ui.end_row();
+    });
 }
 
 /// The display: exposure (in stops about the scene's) and tone curve.

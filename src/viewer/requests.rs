@@ -175,6 +175,25 @@ impl Running {
     }
 
     /// Asks for coefficients of one's own; `model` where it applies, else the index's own.
+    /// The material of colour `albedo` and scatter distance `distance` (mm) per channel at the
+    /// index and model in use: its coefficients requested.
+    pub(super) fn request_appearance(
+        &mut self,
+        albedo: [f64; 3],
+        distance: [f64; 3],
+        app: &AppSettings,
+    ) -> Result<()> {
+        let m = self.wanted().material;
+        let found = Material::from_appearance(albedo, distance, m.eta).context("the material")?;
+        self.request_coefficients(
+            found.sigma_s_prime,
+            found.sigma_a,
+            m.eta,
+            Some(m.model),
+            app,
+        )
+    }
+
     pub(super) fn request_coefficients(
         &mut self,
         sigma_s_prime: [f64; 3],

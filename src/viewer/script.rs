@@ -77,6 +77,10 @@ pub enum Action {
     Reset,
     /// Ask the window system for this inner size.
     Resize(u32, u32),
+    /// The colour the material shows per channel, its scatter distance kept.
+    Albedo([f64; 3]),
+    /// The material's scatter distance per channel (mm), its colour kept.
+    ScatterDistance([f64; 3]),
     /// The display's exposure (radiance to display value, before the tone curve).
     Exposure(f64),
     /// The display's tone curve.
@@ -299,6 +303,14 @@ fn material_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> 
         ),
         "sigma-a" => (
             Step::Act(Action::SigmaA(triple(0, "coefficient in 1/mm")?)),
+            3,
+        ),
+        "albedo" => (
+            Step::Act(Action::Albedo(triple(0, "colour (linear, below 1)")?)),
+            3,
+        ),
+        "scatter-distance" => (
+            Step::Act(Action::ScatterDistance(triple(0, "distance in mm")?)),
             3,
         ),
         "eta" => {
