@@ -8,6 +8,7 @@
 // the covered samples: a multisampled edge pixel's fragment stays inside its triangle.
 #include "frame.glsl"
 #include "shadow.glsl"
+#include "display.glsl"
 
 layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
 layout(set = 0, binding = 3) uniform sampler2D albedo_texture;
@@ -21,6 +22,7 @@ layout(set = 0, binding = 5) uniform sampler2DArrayShadow shadow_maps;
 layout(std430, set = 0, binding = 6) readonly buffer EnvironmentMap {
     vec4 environment_map[];
 };
+#include "environment_map.glsl"
 
 layout(location = 0) centroid in vec3 in_position;
 layout(location = 1) centroid in vec3 in_normal;
@@ -67,66 +69,6 @@ layout(constant_id = 4) const bool SURFACE = false;
 // applied to exposure * L before the sRGB encoding (`src/output/tonemap.rs` has the same).
 layout(constant_id = 5) const uint TONEMAP = 0u;
 
-// The sRGB curve 1.055 c^(1/2.4) - 0.055 as a combination of c^(1/2), c^(1/4) and c^(1/8)
-// (three square roots instead of a pow, which costs more on lavapipe), within 0.4 of an 8-bit
-// step of the exact curve over [0, 1]; tests/render.rs checks the display against
-// output::tonemap to one step.
-vec3 srgb_encode(vec3 c) {
-    c = clamp(c, 0.0, 1.0);
-    vec3 s1 = sqrt(c);
-    vec3 s2 = sqrt(s1);
-    vec3 s3 = sqrt(s2);
-    vec3 curve = 0.585122381 * s1 + 0.783140355 * s2 - 0.368262736 * s3;
-    return mix(c * 12.92, curve, greaterThan(c, vec3(0.0031308)));
-}
-
-// Khronos PBR Neutral.
-vec3 pbr_neutral(vec3 c) {
-    const float start = 0.8 - 0.04;
-    const float desaturation = 0.15;
-    float x = min(c.r, min(c.g, c.b));
-    float offset = x < 0.08 ? x - 6.25 * x * x : 0.04;
-    c -= offset;
-    float peak = max(c.r, max(c.g, c.b));
-    if (peak < start) {
-        return c;
-    }
-    const float d = 1.0 - start;
-    float new_peak = 1.0 - d * d / (peak + d - start);
-    c *= new_peak / peak;
-    float g = 1.0 - 1.0 / (desaturation * (peak - new_peak) + 1.0);
-    return mix(c, vec3(new_peak), g);
-}
-
-// AgX: its working space, log2 over [-12.47, 4.03] stops, the contrast curve's sixth-degree
-// fit, back out, and to linear (the curve's output has a 2.2 gamma).
-vec3 agx(vec3 c) {
-    const mat3 inset = mat3(0.842479062253094, 0.0423282422610123, 0.0423756549057051,
-                            0.0784335999999992, 0.878468636469772, 0.0784336,
-                            0.0792237451477643, 0.0791661274605434, 0.879142973793104);
-    const mat3 outset = mat3(1.19687900512017, -0.0528968517574562, -0.0529716355144438,
-                             -0.0980208811401368, 1.15190312990417, -0.0980434501171241,
-                             -0.0990297440797205, -0.0989611768448433, 1.15107367264116);
-    const float min_ev = -12.47393;
-    const float max_ev = 4.026069;
-    vec3 x = (clamp(log2(max(inset * c, vec3(1e-10))), min_ev, max_ev) - min_ev) / (max_ev - min_ev);
-    vec3 x2 = x * x;
-    vec3 x4 = x2 * x2;
-    x = 15.5 * x4 * x2 - 40.14 * x4 * x + 31.96 * x4 - 6.868 * x2 * x + 0.4298 * x2 + 0.1191 * x
-        - 0.00232;
-    return min(pow(max(outset * x, vec3(0.0)), vec3(2.2)), vec3(1.0));
-}
-
-// The display's value of radiance l: exposure, the tone curve, the sRGB encoding.
-vec3 display_value(vec3 l) {
-    vec3 c = max(l * push.exposure, vec3(0.0));
-    if (TONEMAP == 1u) {
-        c = pbr_neutral(c);
-    } else if (TONEMAP == 2u) {
-        c = agx(c);
-    }
-    return srgb_encode(c);
-}
 
 vec3 local_response(vec2 atlas) {
     vec2 t = atlas - 0.5;
@@ -221,20 +163,7 @@ vec3 surface_reflection(vec3 x, vec3 n, vec3 v) {
     float eta = frame.material.x;
     float cos_o = max(dot(n, v), 0.0);
     vec3 l = vec3(0.0);
-    uint w = uint(frame.surface.z);
-    uint h = uint(frame.surface.w);
-    if (w > 0u && h > 0u) {
-        vec3 r = reflect(-v, n);
-        vec3 m = vec3(dot(frame.world_to_map[0].xyz, r), dot(frame.world_to_map[1].xyz, r),
-                      dot(frame.world_to_map[2].xyz, r));
-        float u = atan(m.x, -m.z) / (2.0 * PI);
-        u = u < 0.0 ? u + 1.0 : u;
-        float t = acos(clamp(m.y, -1.0, 1.0)) / PI;
-        uint px = min(uint(u * float(w)), w - 1u);
-        uint py = min(uint(t * float(h)), h - 1u);
-        l += (1.0 - fresnel_transmittance(eta, cos_o)) * frame.environment_scale.rgb
-            * environment_map[py * w + px].rgb;
-    }
+    l += (1.0 - fresnel_transmittance(eta, cos_o)) * environment_from(reflect(-v, n));
     float a = frame.surface.x;
     if (a > 0.0 && cos_o > 0.0) {
         float a2 = a * a;
@@ -327,5 +256,5 @@ void main() {
         l += surface_reflection(in_position, dot(n, v) < 0.0 ? -n : n, v);
     }
     out_radiance = vec4(l, 1.0);
-    out_display = vec4(display_value(l), 1.0);
+    out_display = vec4(display_value(l * push.exposure, TONEMAP), 1.0);
 }

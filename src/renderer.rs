@@ -102,6 +102,8 @@ pub struct WindowOutput {
     /// Columns left of the image, for the panel to float over: the window image is this much
     /// wider than the scene's.
     pub left: u32,
+    /// Whether the scene's environment shows behind the object (black without one).
+    pub backdrop: bool,
     /// The interface to draw over the image (the `ui` pass), if any.
     pub ui: Option<passes::ui::SharedUi>,
 }
@@ -111,13 +113,14 @@ impl std::fmt::Debug for WindowOutput {
         f.debug_struct("WindowOutput")
             .field("linear", &self.linear)
             .field("left", &self.left)
+            .field("backdrop", &self.backdrop)
             .field("ui", &self.ui.is_some())
             .finish()
     }
 }
 
-/// Writes `scene`'s environment map into `buffer` for the surface's mirror reflection (nothing
-/// where the surface reflects none: the buffer's one pixel stays black).
+/// Writes `scene`'s environment map into `buffer`, for the surface's mirror reflection and the
+/// viewer's backdrop (nothing without an environment: the buffer's one pixel stays black).
 fn write_environment_map(buffer: &Buffer, scene: &Scene) -> Result<()> {
     let Some(env) = scene.environment.as_ref() else {
         return Ok(());

@@ -752,6 +752,7 @@ fn the_interface_is_drawn_over_the_display() {
             window: Some(WindowOutput {
                 linear,
                 left: LEFT,
+                backdrop: false,
                 ui: Some(layer.clone()),
             }),
             ..Default::default()

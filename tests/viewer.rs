@@ -490,7 +490,8 @@ fn the_environment_turns_and_switches_maps_in_the_viewer() {
     )
     .unwrap();
     let script = "frames 2; screenshot sky\n\
-                  environment 90; frames 2; screenshot turned\n\
+                  backdrop off; frames 2; screenshot plain\n\
+                  backdrop on; environment 90; frames 2; screenshot turned\n\
                   envmap; frames 2; screenshot overcast\n\
                   envmap; frames 2; screenshot back\n\
                   quit";
@@ -520,6 +521,24 @@ fn the_environment_turns_and_switches_maps_in_the_viewer() {
         rms(&back, &turned)
     );
     assert_eq!(json(&dir.join("turned.json"))["environment_yaw_deg"], 90.0);
+    // The sky shows behind the object in the window, by default and when asked: the image's
+    // corner (off the object) is the sky's colour, black without the backdrop; the image
+    // itself (the PNG) is the object's alone either way.
+    let corner = |name: &str| {
+        let w = rgb(&dir.join(format!("{name}-window.png")));
+        let p = w.get_pixel(w.width() - 4, 4).0;
+        p.iter().map(|&v| v as u32).sum::<u32>()
+    };
+    assert!(json(&dir.join("sky.json"))["backdrop"] == true);
+    assert!(
+        corner("sky") > 60,
+        "no sky behind the object: {}",
+        corner("sky")
+    );
+    assert_eq!(corner("plain"), 0, "the backdrop stayed");
+    assert!(corner("turned") > 60);
+    let png = rgb(&dir.join("sky.png"));
+    assert_eq!(png.get_pixel(png.width() - 4, 4).0, [0, 0, 0]);
     assert_eq!(json(&dir.join("turned.json"))["environment"], "sky");
     let shown = json(&dir.join("overcast.json"))["environment"].to_string();
     assert!(shown.contains("overcast.exr"), "{shown}");

@@ -435,13 +435,13 @@ pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::
     }
 }
 
-/// Environment map pixels the composite reads for the surface's mirror reflection: room for
-/// the largest work map ([`crate::environment::MAX_WORK_WIDTH`] x half of it, or the scene's
-/// own if larger), so that the viewer can switch maps in place; 0 where the surface reflects
-/// no environment.
+/// Environment map pixels the composite reads for the surface's mirror reflection (and the
+/// viewer for its backdrop): room for the largest work map
+/// ([`crate::environment::MAX_WORK_WIDTH`] x half of it, or the scene's own if larger), so that
+/// the viewer can switch maps in place; 0 without an environment.
 pub fn environment_pixels(scene: &Scene) -> u64 {
     match &scene.environment {
-        Some(env) if scene.surface.reflects(&scene.material) => {
+        Some(env) => {
             let most = crate::environment::MAX_WORK_WIDTH as u64;
             (most * most / 2).max(env.width as u64 * env.height as u64)
         }

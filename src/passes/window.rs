@@ -22,27 +22,52 @@ pub fn format(linear: bool) -> vk::Format {
 /// Workgroup edge of `glsl/window.comp`.
 const GROUP: u32 = 8;
 
-/// Declares the `window` pass: `window = display` shifted right by `left` columns, linear when
-/// `linear_out`.
+/// What the `window` pass reads besides the display.
+#[derive(Debug, Clone, Copy)]
+pub struct WindowInputs {
+    /// Frame uniforms (the camera, the environment map's size, frame and scale).
+    pub frame: ResourceId,
+    /// The environment map's radiance per pixel.
+    pub environment: ResourceId,
+    /// Columns left of the image, for the panel.
+    pub left: u32,
+    /// Whether the environment shows behind the object.
+    pub backdrop: bool,
+    /// The display's exposure and tone curve, for the backdrop.
+    pub look: (f32, crate::output::ToneMap),
+}
+
+/// Declares the `window` pass: `window = display` shifted right by `left` columns, over the
+/// environment where `backdrop`, linear when `linear_out`.
 pub fn add(
     graph: &mut RenderGraph,
     display: ResourceId,
     window: ResourceId,
     linear_out: bool,
-    left: u32,
+    i: WindowInputs,
 ) {
     graph
         .pass(PassName::Window.as_str())
+        .access(i.frame, Access::Uniform(Stage::Compute))
+        .access(i.environment, Access::StorageRead(Stage::Compute))
         .access(display, Access::StorageRead(Stage::Compute))
         .access(window, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let out = res.image(window);
             let set = res
                 .bind()
-                .storage_image(0, display)
-                .storage_image(1, window)
+                .uniform(0, i.frame)
+                .storage_image(1, display)
+                .storage_image(2, window)
+                .storage_buffer(3, i.environment)
                 .finish()?;
-            let pipeline = Pipeline::compute::<u32>(
+            let push = [
+                i.left,
+                i.backdrop as u32,
+                i.look.0.to_bits(),
+                i.look.1.constant(),
+            ];
+            let pipeline = Pipeline::compute::<[u32; 4]>(
                 gpu,
                 PassName::Window.as_str(),
                 if linear_out {
@@ -55,7 +80,7 @@ pub fn add(
             let extent = out.info.extent;
             Ok(Box::new(move |rec| {
                 pipeline.bind(rec.cmd);
-                pipeline.push(rec.cmd, &left);
+                pipeline.push(rec.cmd, &push);
                 unsafe {
                     rec.gpu.device.cmd_dispatch(
                         rec.cmd,

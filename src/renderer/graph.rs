@@ -476,7 +476,19 @@ impl<'a> Assembly<'a> {
                     )
                 })?;
                 let window_id = g.import_image(image.clone(), Access::TransferRead);
-                passes::window::add(g, display, window_id, out.linear, out.left);
+                passes::window::add(
+                    g,
+                    display,
+                    window_id,
+                    out.linear,
+                    passes::window::WindowInputs {
+                        frame: self.imported.frame,
+                        environment: self.imported.environment,
+                        left: out.left,
+                        backdrop: out.backdrop && self.scene.environment.is_some(),
+                        look: (self.scene.exposure, self.scene.tonemap),
+                    },
+                );
                 if let Some(ui) = &out.ui {
                     passes::ui::add(g, window_id, ui.clone());
                 }

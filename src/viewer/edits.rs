@@ -93,6 +93,14 @@ impl Running {
                 self.scene.resolved.output.exposure = Some(e);
                 self.rebuild()?;
             }
+            Action::Backdrop(on) => {
+                if self.scene.environment.is_none() {
+                    self.status = "the scene has no environment to show behind the object".into();
+                } else if on != self.backdrop {
+                    self.backdrop = on;
+                    self.rebuild()?;
+                }
+            }
             Action::ToneMap(curve) => {
                 self.scene.tonemap = curve;
                 self.scene.resolved.output.tonemap = Some(curve);

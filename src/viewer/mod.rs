@@ -165,6 +165,8 @@ struct Running {
     egui_input: egui_winit::State,
     panel: panel::PanelState,
     ui_visible: bool,
+    /// Whether the environment shows behind the object.
+    backdrop: bool,
     scene_saves: usize,
     size_changed: bool,
     shot: Option<String>,
@@ -206,7 +208,7 @@ struct App {
 fn renderer_options(
     mode: Blend,
     linear: bool,
-    left: u32,
+    (left, backdrop): (u32, bool),
     ui: &SharedUi,
     global: Option<crate::passes::compute::GlobalVariant>,
 ) -> Options {
@@ -215,6 +217,7 @@ fn renderer_options(
         window: Some(WindowOutput {
             linear,
             left,
+            backdrop,
             ui: Some(ui.clone()),
         }),
         global_layout: global.map_or(crate::passes::compute::GlobalLayout::Auto, |v| v.layout),
@@ -262,7 +265,13 @@ impl Running {
         self.scene.height = extent.height.clamp(1, max);
         // The old graph's memory goes before the new one is allocated.
         self.renderer = None;
-        let options = renderer_options(self.mode, self.linear(), left, &self.ui_layer, self.global);
+        let options = renderer_options(
+            self.mode,
+            self.linear(),
+            (left, self.backdrop),
+            &self.ui_layer,
+            self.global,
+        );
         let renderer = Renderer::with_data(&self.gpu, self.scene.clone(), &self.data, options)?;
         // Measured once per uploaded data: a resize or a new light keeps the variant (and
         // does not stall for the measurement again).
@@ -274,7 +283,7 @@ impl Running {
     fn reupload(&mut self) -> Result<()> {
         self.renderer = None;
         self.global = None;
-        let options = renderer_options(self.mode, self.linear(), 0, &self.ui_layer, None);
+        let options = renderer_options(self.mode, self.linear(), (0, false), &self.ui_layer, None);
         self.data = Renderer::upload(
             &self.gpu,
             &self.scene,
@@ -346,6 +355,7 @@ impl Running {
         panel::Snapshot {
             exposure: self.scene.exposure as f64,
             tonemap: self.scene.tonemap,
+            backdrop: self.scene.environment.is_some().then_some(self.backdrop),
             device: format!("{} ({})", self.gpu.info.name, self.gpu.info.device_type),
             fps: self.fps(),
             frame_ms: report

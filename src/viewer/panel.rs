@@ -62,6 +62,8 @@ pub struct Snapshot {
     pub exposure: f64,
     /// The display's tone curve.
     pub tonemap: crate::output::ToneMap,
+    /// Whether the environment shows behind the object (None: the scene has none).
+    pub backdrop: Option<bool>,
 }
 
 /// What the panel keeps between frames (not part of the scene).
@@ -228,7 +230,8 @@ fn appearance(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
     });
 }
 
-/// The display: exposure (in stops about the scene's) and tone curve.
+/// The display: exposure (in stops about the scene's), the environment as a backdrop, and the
+/// tone curve.
 fn look(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
     let mut stops = s.exposure.log2();
     if ui
@@ -240,6 +243,15 @@ fn look(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
         .changed()
     {
         actions.push(Action::Exposure(2f64.powf(stops)));
+    }
+    if let Some(on) = s.backdrop {
+        let mut shown = on;
+        if ui
+            .checkbox(&mut shown, "the environment behind the object")
+            .changed()
+        {
+            actions.push(Action::Backdrop(shown));
+        }
     }
     egui::ComboBox::from_label("tone curve")
         .selected_text(s.tonemap.name())

@@ -139,6 +139,7 @@ impl Running {
             "eta": self.scene.material.eta,
             "exposure": self.scene.exposure,
             "tonemap": self.scene.tonemap.name(),
+            "backdrop": self.backdrop,
             "model": self.scene.material.model.name(),
             "preview": self.preview,
             "lights": self.scene.lights.len(),

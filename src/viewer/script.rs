@@ -85,6 +85,8 @@ pub enum Action {
     Exposure(f64),
     /// The display's tone curve.
     ToneMap(crate::output::ToneMap),
+    /// Whether the environment shows behind the object.
+    Backdrop(bool),
     /// Close the viewer.
     Quit,
 }
@@ -236,6 +238,14 @@ fn view_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> {
                 bail!("exposure {e} must be a positive number");
             }
             (Step::Act(Action::Exposure(e as f64)), 1)
+        }
+        "backdrop" => {
+            let on = match args.first().copied() {
+                Some("on") => true,
+                Some("off") => false,
+                other => bail!("backdrop takes on or off, not {other:?}"),
+            };
+            (Step::Act(Action::Backdrop(on)), 1)
         }
         "tonemap" => {
             let name = *args.first().context("missing tone curve")?;

@@ -39,7 +39,7 @@ impl App {
         let swapchain = Swapchain::new(&gpu, size.width.max(1), size.height.max(1), config.vsync)?;
         let linear = swapchain::is_srgb(swapchain.format);
         let ui = Interface::new(&gpu, &window, linear)?;
-        let options = renderer_options(config.mode, linear, 0, &ui.layer, None);
+        let options = renderer_options(config.mode, linear, (0, false), &ui.layer, None);
         let data = Renderer::upload(
             &gpu,
             &config.scene,
@@ -155,6 +155,7 @@ fn assemble(
         Blend::Simple => Blend::Simple,
         _ => Blend::Optimized,
     };
+    let backdrop = config.scene.environment.is_some();
     let current = Wanted {
         preset: config.scene.resolved.material.preset.clone(),
         material: config.scene.material,
@@ -186,6 +187,7 @@ fn assemble(
         egui_input: ui.input,
         panel: panel::PanelState::default(),
         ui_visible: true,
+        backdrop,
         scene_saves: 0,
         quit: false,
         preview: None,
