@@ -3,8 +3,8 @@
 // B = (B^l + B^g) sqrt(T) / R, L = F_t(eta, w_o) B / pi, plus the surface's own reflection
 // (SURFACE).
 // B^l is filtered bilinearly over the covered texels of the atlas only (alpha 1), so chart
-// borders do not pull in gutter texels. Writes L (linear) and its tone-mapped display value
-// (exposure, sRGB curve); alpha marks coverage. The inputs are interpolated at the centroid of
+// borders do not pull in gutter texels. Writes L (linear) and its display value (exposure,
+// tone curve, sRGB encoding); alpha marks coverage. The inputs are interpolated at the centroid of
 // the covered samples: a multisampled edge pixel's fragment stays inside its triangle.
 #include "frame.glsl"
 #include "shadow.glsl"
@@ -88,8 +88,7 @@ vec3 local_response(vec2 atlas) {
         return sum / wsum;
     }
     // No covered texel among the four (a sliver of a chart that a multisampled pixel's sample
-    // meets between texel centres): the covered ones of the 3 x 3 around it, whose texture
-    // means bound the texture's variation there (`passes::data::texture_means`).
+    // meets between texel centres): the covered ones of the 3 x 3 around it.
     ivec2 c = ivec2(floor(atlas));
     for (int j = -1; j <= 1; ++j) {
         for (int i = -1; i <= 1; ++i) {
@@ -209,7 +208,8 @@ vec4 single_at(ivec2 p) {
             continue;
         }
         vec4 v = texelFetch(single, q, 0);
-        if (v.a > 0.0) {
+        // Covered: a chord inside (alpha) or light scattered once.
+        if (v.a > 0.0 || any(greaterThan(v.rgb, vec3(0.0)))) {
             sum += v;
             count += 1.0;
         }

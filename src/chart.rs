@@ -458,7 +458,6 @@ fn colour(series: &str) -> RGBColor {
         "dipole" => RGBColor(110, 110, 110),
         "halfspace" => RGBColor(20, 170, 170),
         "volume" => RGBColor(170, 130, 0),
-        "halfspace-single" => RGBColor(120, 60, 200),
         "halfspace-air" => RGBColor(60, 160, 90),
         _ => RGBColor(120, 60, 200),
     }
@@ -1273,7 +1272,7 @@ mod tests {
         let svg = std::fs::read_to_string(dir.join("chart.svg")).unwrap();
         assert!(svg.contains("Pareto front") && svg.contains("optimized"));
         let png = image::open(dir.join("chart.png")).unwrap();
-        assert_eq!(png.width(), 900);
+        assert_eq!(png.width(), 900 + LEGEND_WIDTH);
         assert!(csv(&pts).lines().count() == 5);
         // With truth: the front follows the error against truth, the model's its own; two panels.
         let truth_err = [0.2, 0.06, 0.05, 0.07];
@@ -1289,7 +1288,10 @@ mod tests {
         plot(&dir, "test", &pts).unwrap();
         let svg = std::fs::read_to_string(dir.join("chart.svg")).unwrap();
         assert!(svg.contains("volumetric truth") && svg.contains("its exact model"));
-        assert_eq!(image::open(dir.join("chart.png")).unwrap().width(), 1800);
+        assert_eq!(
+            image::open(dir.join("chart.png")).unwrap().width(),
+            2 * (900 + LEGEND_WIDTH)
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -76,7 +76,7 @@ pub enum Item {
     /// else).
     TextureEntry,
     /// The environment map's radiance per pixel, host-visible, for the surface's mirror
-    /// reflection (scenes whose surface reflects under an environment light, room for the
+    /// reflection and the viewer's backdrop (scenes with an environment light, room for the
     /// largest map the viewer can switch to; 1 element else).
     EnvironmentMap,
 }

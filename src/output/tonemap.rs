@@ -1,5 +1,5 @@
 //! The tone curves from linear radiance (times the exposure) to the display's linear values,
-//! before the sRGB encoding: the plain clip, Khronos PBR Neutral and AgX. `glsl/composite.frag`
+//! before the sRGB encoding: the plain clip, Khronos PBR Neutral and AgX. `glsl/display.glsl`
 //! has the same curves; `tests/render.rs` holds the two to one 8-bit step.
 
 use serde::{Deserialize, Serialize};

@@ -1,7 +1,7 @@
 //! `composite`: the camera view. B = (B^l + B^g) sqrt(T) / R (the light entered through
 //! sqrt(T); T the texture, R the untextured medium's reflectance) and L = F_t(eta, w_o) B / pi
 //! into a linear HDR image whose alpha marks covered pixels, and the same radiance tone-mapped
-//! (exposure, sRGB curve) into the RGBA8 display image as a second attachment. (Tone mapping
+//! (exposure, tone curve, sRGB encoding) into the RGBA8 display image as a second attachment. (Tone mapping
 //! here costs the covered fragments only, where a compute pass of its own would visit every
 //! pixel.) With several samples per pixel both are drawn multisampled and averaged: a
 //! silhouette pixel's alpha is the share the object covers.

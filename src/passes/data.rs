@@ -288,7 +288,7 @@ impl LinearTexture {
 /// The texture's part of the light entering the surface, per atlas texel (dense, row-major):
 /// the mean of sqrt(T) over the texel's footprint (the atlas triangles sampled at sub-texel
 /// points, as many per texel edge as texture pixels fall across it, up to 16; where no point
-/// of a touched texel falls inside, T at the centroid of a triangle touching it). Light enters
+/// of a touched texel falls inside, sqrt(T) at the centroid of a triangle touching it). Light enters
 /// through sqrt(T) and leaves through sqrt(T) / R (`glsl/composite.frag`), so that a region of
 /// colour T much wider than the light's spread under the surface shows T, while finer detail
 /// blurs as light under the surface does. Alpha 1 where touched, 0 elsewhere (never drawn).
@@ -487,6 +487,7 @@ impl Requirements {
             total: items.iter().map(|i| i.1).sum(),
             largest_texel_buffer: [
                 Item::EnvironmentTransfer,
+                Item::TextureEntry,
                 Item::Kernels,
                 Item::GlobalEntries,
                 Item::GatherEntries,

@@ -207,7 +207,7 @@ impl FrameUniforms {
                     penumbra = env.sun.map_or(0.0, |s| {
                         shadow.depth_range_mm * s.angular_radius.tan() as f32 / shadow.texel_mm
                     });
-                    // The map itself for the surface's mirror reflection.
+                    // The map itself, for the surface's mirror reflection and the backdrop.
                     if crate::passes::data::environment_pixels(scene) > 0 {
                         u.surface[2] = env.width as f32;
                         u.surface[3] = env.height as f32;

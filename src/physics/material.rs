@@ -324,6 +324,14 @@ impl Material {
             })
     }
 
+    /// The largest colour a medium behind a boundary of index `eta` can show: a half-space that
+    /// does not absorb (the rest leaves as the surface's reflection, counted apart).
+    pub fn most_albedo(eta: f64) -> Result<f64, MaterialError> {
+        Ok(Material::custom([1.0; 3], [0.0; 3], eta)?
+            .with_model(Model::Halfspace)?
+            .total_reflectance()[0])
+    }
+
     /// The medium an artist describes: `albedo`, the colour the object shows (the total
     /// diffuse reflectance of a half-space under light along its normal, exact: the
     /// half-space tables, the surface's mirror reflection left out), and `distance_mm`, each
@@ -344,7 +352,7 @@ impl Material {
                 .with_model(Model::Halfspace)?
                 .total_reflectance())
         };
-        let most = reflectance(1.0)?[0];
+        let most = Material::most_albedo(eta)?;
         let mut sigma_s_prime = [0.0; 3];
         let mut sigma_a = [0.0; 3];
         for c in 0..3 {

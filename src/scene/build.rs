@@ -160,7 +160,8 @@ pub(super) fn load_mesh(
             bail!("[mesh] {key} does not apply to the {kind} mesh (radius: builtin sphere; size: builtin box; segments: both)");
         }
     }
-    let format = md.file.as_deref().map(Format::of).transpose()?;
+    // The format's error waits for the file's own checks (missing, a device, a folder).
+    let format = md.file.as_deref().and_then(|f| Format::of(f).ok());
     let units = *md.units.get_or_insert(if format == Some(Format::Gltf) {
         Units::M
     } else {
@@ -187,6 +188,9 @@ fn build_mesh(md: &mut MeshDesc, base: &Path, steps: u32) -> Result<(Mesh, Optio
             if !p.exists() {
                 bail!("mesh file '{}' does not exist", p.display());
             }
+            let meta = std::fs::metadata(&p)
+                .with_context(|| format!("cannot read mesh file '{}'", p.display()))?;
+            crate::input::check_regular(&p, &meta, crate::input::MAX_OBJ_BYTES, "mesh file")?;
             let (mesh, material) = match Format::of(&p)? {
                 Format::Obj => (Mesh::load_obj(&p)?, None),
                 Format::Ply => (Mesh::load_ply(&p)?, None),
@@ -248,15 +252,16 @@ pub(super) fn load_texture(
     mesh: &Mesh,
     from_file: Option<&ImageSource>,
 ) -> Result<Option<image::RgbaImage>> {
-    if md.texture.is_none() {
+    // A glTF's texture where the scene gives none and the mesh can take one.
+    if md.texture.is_none() && mesh.has_uvs {
         match from_file {
             Some(ImageSource::File(p)) => md.texture = Some(p.clone()),
-            Some(ImageSource::Embedded(bytes)) if mesh.has_uvs => {
+            Some(ImageSource::Embedded(bytes)) => {
                 let img =
                     decode_texture(bytes).context("cannot read the glTF's base-colour texture")?;
                 return Ok(Some(img.to_rgba8()));
             }
-            _ => {}
+            None => {}
         }
     }
     Ok(match &md.texture {
@@ -656,9 +661,6 @@ fn lamp_light(i: usize, l: &mut LightDesc, center: Vec3, radiance: Vec3) -> Resu
     })
 }
 
-/// `[material]`: a preset, coefficients or an appearance (albedo and scatter distance), the
-/// surface's roughness, and the model (by default
-/// the half-space profile under an environment); the medium and the roughness.
 /// A glTF's material as the scene's `[material]`, where the scene gives no medium of its own
 /// (no preset, coefficients, appearance or index): `KHR_materials_ior` as eta, and with
 /// `KHR_materials_volume` the base colour as the colour shown and the attenuation's 1/e
@@ -685,6 +687,10 @@ pub(super) fn take_file_material(
         took.push(format!("eta {ior} (KHR_materials_ior)"));
     }
     if let Some((colour, distance)) = g.volume {
+        // A base colour at or above what the index lets a medium show (white, the format's
+        // default) is taken just below it.
+        let most = Material::most_albedo(g.ior.unwrap_or(1.3)).unwrap_or(1.0);
+        let colour = colour.map(|c| c.clamp(1e-4, 0.999 * most));
         mat.albedo = Some(colour);
         mat.scatter_distance_mm = Some(distance.map(|d| d * units.to_mm()));
         took.push("albedo and scatter distance (base colour, KHR_materials_volume)".into());
@@ -693,6 +699,9 @@ pub(super) fn take_file_material(
     true
 }
 
+/// `[material]`: a preset, coefficients or an appearance (albedo and scatter distance), the
+/// surface's roughness, and the model (by default
+/// the half-space profile under an environment); the medium and the roughness.
 pub(super) fn resolve_material(
     mat: &mut MaterialDesc,
     has_environment: bool,

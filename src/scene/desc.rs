@@ -3,7 +3,7 @@
 //! ```toml
 //! [mesh]
 //! builtin = "bunny"          # or: file = "model.obj" (.ply, .gltf, .glb); builtin "sphere" and "box" take sizes
-//! units = "mm"               # units of the OBJ: mm, cm, m, in
+//! units = "mm"               # units of the mesh file: mm, cm, m, in (glTF: m by default)
 //! texture = "albedo.png"     # optional diffuse texture (needs texture coordinates)
 //!
 //! [transform]

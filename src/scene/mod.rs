@@ -476,6 +476,10 @@ mod tests {
                 "samples = 3 must be 1, 2, 4 or 8",
             ),
             (
+                "[mesh]\nfile = \"Cargo.toml\"",
+                "'.toml' is not a format read here",
+            ),
+            (
                 "[output]\nshadow_map = 16385",
                 "shadow_map = 16385 must lie between 16 and 16384",
             ),

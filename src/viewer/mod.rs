@@ -246,7 +246,6 @@ impl Running {
         swapchain::is_srgb(self.swapchain.format)
     }
 
-    /// Builds the renderer for the current scene, data and swapchain size.
     /// Columns left of the image, for the panel: [`panel::SPACE`] while the panel shows,
     /// less in a window too narrow to leave [`panel::MIN_VIEW`] columns beside it.
     fn left(&self) -> u32 {
@@ -257,6 +256,7 @@ impl Running {
         }
     }
 
+    /// Builds the renderer for the current scene, data and swapchain size.
     fn rebuild(&mut self) -> Result<()> {
         let extent = self.swapchain.extent;
         let max = self.gpu.info.max_image_dimension_2d;

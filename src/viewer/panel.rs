@@ -198,8 +198,11 @@ fn appearance(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
         for x in v.iter_mut() {
             changed |= ui
                 .add(
+                    // Clamped where edited only: a value outside shown as it is, not
+                    // pushed back each frame as an edit.
                     egui::DragValue::new(x)
                         .range(1e-4..=0.999)
+                        .clamp_existing_to_range(false)
                         .speed(0.002)
                         .max_decimals(4),
                 )
@@ -218,6 +221,7 @@ fn appearance(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
                 .add(
                     egui::DragValue::new(x)
                         .range(1e-3..=1e3)
+                        .clamp_existing_to_range(false)
                         .speed(speed)
                         .max_decimals(4),
                 )
@@ -238,9 +242,10 @@ fn look(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
         .add(
             egui::Slider::new(&mut stops, -10.0..=10.0)
                 .text("exposure (stops)")
-                .step_by(0.1),
+                .clamping(egui::SliderClamping::Edits),
         )
         .changed()
+        && (2f64.powf(stops) / s.exposure - 1.0).abs() > 1e-9
     {
         actions.push(Action::Exposure(2f64.powf(stops)));
     }

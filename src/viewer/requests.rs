@@ -174,7 +174,6 @@ impl Running {
         scene
     }
 
-    /// Asks for coefficients of one's own; `model` where it applies, else the index's own.
     /// The material of colour `albedo` and scatter distance `distance` (mm) per channel at the
     /// index and model in use: its coefficients requested.
     pub(super) fn request_appearance(
@@ -194,6 +193,7 @@ impl Running {
         )
     }
 
+    /// Asks for coefficients of one's own; `model` where it applies, else the index's own.
     pub(super) fn request_coefficients(
         &mut self,
         sigma_s_prime: [f64; 3],

@@ -11,10 +11,17 @@ use std::path::{Path, PathBuf};
 /// Node levels followed below a scene's roots (a deeper tree, or a cycle, is refused).
 const MAX_DEPTH: usize = 64;
 
+/// Node placements followed over the whole tree: nodes may share children, so placements can
+/// grow exponentially with the depth.
+const MAX_PLACEMENTS: usize = 1 << 16;
+
+/// Vertices placed over all nodes (each placement copies its primitives' vertices).
+const MAX_VERTICES: usize = 3 * crate::scene::MAX_TRIANGLES;
+
 /// Where a glTF's base-colour image is.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ImageSource {
-    /// A file, resolved against the glTF's folder.
+    /// A file, resolved against the glTF's folder (absolute).
     File(PathBuf),
     /// Bytes inside the glTF (a buffer view or a data URI).
     Embedded(Vec<u8>),
@@ -111,13 +118,17 @@ impl Mesh {
         let file = gltf::Gltf::from_slice(bytes).map_err(|e| refuse(name, e.to_string()))?;
         let doc = &file.document;
         let mut buffers = Vec::new();
+        // External buffers together: at most what one mesh file may hold.
+        let mut room = crate::input::MAX_OBJ_BYTES;
         for b in doc.buffers() {
             let data = match b.source() {
                 gltf::buffer::Source::Bin => file.blob.clone().ok_or_else(|| {
                     refuse(name, "a buffer refers to a binary chunk the file lacks")
                 })?,
                 gltf::buffer::Source::Uri(uri) => {
-                    read_uri(name, base, uri, crate::input::MAX_OBJ_BYTES, "buffer")?
+                    let data = read_uri(name, base, uri, room, "buffer")?;
+                    room = room.saturating_sub(data.len() as u64);
+                    data
                 }
             };
             if data.len() < b.length() {
@@ -140,8 +151,11 @@ impl Mesh {
         let mut mesh = Mesh::default();
         let (mut all_normals, mut all_uvs) = (true, true);
         let mut material = None;
+        // Depth first in the document's order: the stack pops the first node first.
         let mut stack: Vec<(gltf::Node, Mat4, usize)> =
             scene.nodes().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+        stack.reverse();
+        let mut placements = 0usize;
         while let Some((node, parent, depth)) = stack.pop() {
             if depth > MAX_DEPTH {
                 return Err(refuse(
@@ -149,8 +163,16 @@ impl Mesh {
                     format!("nodes nest deeper than {MAX_DEPTH} levels (or in a cycle)"),
                 ));
             }
+            placements += 1;
+            if placements > MAX_PLACEMENTS {
+                return Err(refuse(
+                    name,
+                    format!("its nodes are placed more than {MAX_PLACEMENTS} times"),
+                ));
+            }
             let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
-            for child in node.children() {
+            let children: Vec<gltf::Node> = node.children().collect();
+            for child in children.into_iter().rev() {
                 stack.push((child, world, depth + 1));
             }
             let Some(m) = node.mesh() else { continue };
@@ -161,6 +183,7 @@ impl Mesh {
                 ));
             }
             for prim in m.primitives() {
+                let before = mesh.indices.len();
                 add_primitive(
                     name,
                     &prim,
@@ -170,14 +193,17 @@ impl Mesh {
                     &mut all_normals,
                     &mut all_uvs,
                 )?;
-                if material.is_none() {
+                // The first primitive with triangles says what the medium is.
+                if material.is_none() && mesh.indices.len() > before {
                     material = Some(material_of(name, base, &prim.material(), &buffers)?);
                 }
-                if mesh.indices.len() / 3 > crate::scene::MAX_TRIANGLES {
+                if mesh.indices.len() / 3 > crate::scene::MAX_TRIANGLES
+                    || mesh.positions.len() > MAX_VERTICES
+                {
                     return Err(refuse(
                         name,
                         format!(
-                            "its nodes place more than {} triangles",
+                            "its nodes place more than {} triangles or {MAX_VERTICES} vertices",
                             crate::scene::MAX_TRIANGLES
                         ),
                     ));
@@ -199,9 +225,39 @@ impl Mesh {
     }
 }
 
-/// The bytes an accessor reads lie within its buffer view and the view within its buffer:
-/// checked here, as the reader slices them without.
-fn check_accessor(name: &str, a: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), MeshError> {
+/// What an accessor the reader reads must hold: its element types (the reader's iterators know
+/// only these, and panic on others) and its dimensions.
+struct Layout {
+    what: &'static str,
+    types: &'static [gltf::accessor::DataType],
+    dimensions: gltf::accessor::Dimensions,
+}
+
+/// The bytes an accessor reads lie within its buffer view and the view within its buffer, its
+/// elements do not overlap, and (`layout`) it holds what is read from it: checked here, as the
+/// reader slices and interprets them without.
+fn check_accessor(
+    name: &str,
+    a: &gltf::Accessor,
+    buffers: &[Vec<u8>],
+    layout: Option<Layout>,
+) -> Result<(), MeshError> {
+    if let Some(l) = layout {
+        if !l.types.contains(&a.data_type()) || a.dimensions() != l.dimensions {
+            return Err(refuse(
+                name,
+                format!(
+                    "accessor {} ({}) holds {:?} {:?}, not {:?} of {:?}",
+                    a.index(),
+                    l.what,
+                    a.dimensions(),
+                    a.data_type(),
+                    l.dimensions,
+                    l.types
+                ),
+            ));
+        }
+    }
     if a.sparse().is_some() {
         return Err(refuse(
             name,
@@ -223,6 +279,16 @@ fn check_accessor(name: &str, a: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result
         ));
     }
     let stride = view.stride().unwrap_or(a.size());
+    if stride < a.size() {
+        return Err(refuse(
+            name,
+            format!(
+                "buffer view {} has a stride of {stride} bytes for elements of {}",
+                view.index(),
+                a.size()
+            ),
+        ));
+    }
     let end = a.count().checked_sub(1).map_or(Some(0), |last| {
         last.checked_mul(stride)
             .and_then(|s| s.checked_add(a.offset()))
@@ -256,11 +322,31 @@ fn add_primitive(
         // Points and lines have no surface.
         return Ok(());
     }
-    for (_, a) in prim.attributes() {
-        check_accessor(name, &a, buffers)?;
+    use gltf::accessor::{DataType as T, Dimensions as D};
+    use gltf::mesh::Semantic;
+    for (semantic, a) in prim.attributes() {
+        let layout = match semantic {
+            Semantic::Positions | Semantic::Normals => Some(Layout {
+                what: "positions or normals",
+                types: &[T::F32],
+                dimensions: D::Vec3,
+            }),
+            Semantic::TexCoords(0) => Some(Layout {
+                what: "texture coordinates",
+                types: &[T::U8, T::U16, T::F32],
+                dimensions: D::Vec2,
+            }),
+            _ => None,
+        };
+        check_accessor(name, &a, buffers, layout)?;
     }
     if let Some(a) = prim.indices() {
-        check_accessor(name, &a, buffers)?;
+        let layout = Layout {
+            what: "indices",
+            types: &[T::U8, T::U16, T::U32],
+            dimensions: D::Scalar,
+        };
+        check_accessor(name, &a, buffers, Some(layout))?;
     }
     let reader = prim.reader(|b| buffers.get(b.index()).map(|v| &v[..]));
     let positions: Vec<Vec3> = reader
@@ -344,20 +430,26 @@ fn material_of(
     buffers: &[Vec<u8>],
 ) -> Result<GltfMaterial, MeshError> {
     let colour = m.pbr_metallic_roughness().base_color_factor();
-    let volume = m.volume().map(|v| {
-        let d = decimal(v.attenuation_distance());
-        let c = v.attenuation_color();
-        let distance = [0, 1, 2].map(|k| {
-            let fall = -decimal(c[k]).clamp(1e-6, 1.0 - 1e-6).ln();
-            d / fall
+    // An infinite attenuation distance (the extension's default) attenuates nothing: no
+    // medium is said.
+    let volume = m
+        .volume()
+        .filter(|v| v.attenuation_distance().is_finite())
+        .map(|v| {
+            let d = decimal(v.attenuation_distance());
+            let c = v.attenuation_color();
+            let distance = [0, 1, 2].map(|k| {
+                let fall = -decimal(c[k]).clamp(1e-6, 1.0 - 1e-6).ln();
+                d / fall
+            });
+            ([0, 1, 2].map(|k| decimal(colour[k])), distance)
         });
-        ([0, 1, 2].map(|k| decimal(colour[k])), distance)
-    });
     let texture = match m.pbr_metallic_roughness().base_color_texture() {
         None => None,
         Some(info) => Some(match info.texture().source().source() {
             gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
-                ImageSource::File(base.join(uri))
+                let path = base.join(uri);
+                ImageSource::File(std::path::absolute(&path).unwrap_or(path))
             }
             gltf::image::Source::Uri { uri, .. } => ImageSource::Embedded(read_uri(
                 name,
@@ -405,7 +497,10 @@ mod tests {
     }
 
     /// One triangle in a data URI, placed by a node scaled by -1 in x (a mirror: the winding
-    /// turns), with an IOR, a volume and no texture; broken files are refused by name.
+    /// turns), with an IOR, a volume and no texture; broken files are refused by name: an
+    /// accessor or a view past its bounds, overlapping elements, positions of another type
+    /// (which the reader would slice past its buffer), a short buffer, nodes nested too deep,
+    /// and shared children that would place the mesh exponentially often.
     #[test]
     fn a_small_gltf_and_broken_ones() {
         let mut bin = Vec::new();
@@ -450,10 +545,44 @@ mod tests {
         let (colour, distance) = g.material.volume.unwrap();
         assert!((colour[0] - 0.8).abs() < 1e-6);
         assert!((distance[1] - 0.002 / 2f64.ln()).abs() < 1e-9);
+        // A chain of nodes, each the parent of the next (listed `copies` times), the last
+        // placing the mesh.
+        let chain = |n: usize, copies: usize| {
+            let nodes: Vec<String> = (0..n)
+                .map(|i| {
+                    if i + 1 == n {
+                        r#"{"mesh":0}"#.to_string()
+                    } else {
+                        format!(r#"{{"children":{:?}}}"#, vec![i + 1; copies])
+                    }
+                })
+                .collect();
+            doc(3, 36).replace(
+                r#""nodes":[{"mesh":0,"scale":[-1,1,1]}]"#,
+                &format!(r#""nodes":[{}]"#, nodes.join(",")),
+            )
+        };
         for (text, why) in [
             ("{".to_string(), ""),
             (doc(4, 36), "reaches past its buffer view"),
-            (doc(3, 48), "reaches past its buffer"),
+            (doc(3, 48), "buffer view 0 reaches past its buffer"),
+            (
+                doc(3, 36).replace(
+                    r#""byteLength":36}]"#,
+                    r#""byteLength":36,"byteStride":4}]"#,
+                ),
+                "stride of 4 bytes for elements of 12",
+            ),
+            (
+                doc(3, 36).replace(r#""componentType":5126"#, r#""componentType":5121"#),
+                "accessor 0 (positions or normals) holds",
+            ),
+            (
+                doc(3, 36).replace(r#"{"byteLength":36,"uri""#, r#"{"byteLength":40,"uri""#),
+                "buffer 0 holds 36 bytes of the 40",
+            ),
+            (chain(70, 1), "nest deeper than 64 levels"),
+            (chain(40, 2), "placed more than 65536 times"),
         ] {
             let e = Mesh::parse_gltf("t.gltf", text.as_bytes(), Path::new(""))
                 .unwrap_err()

@@ -6,6 +6,9 @@ use super::{Mesh, MeshError};
 use glam::{Vec2, Vec3};
 use std::path::Path;
 
+/// Corners a face may have.
+const MAX_FACE_CORNERS: f64 = 256.0;
+
 /// A property's scalar type.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Scalar {
@@ -127,9 +130,11 @@ impl Body<'_> {
 
 /// The header: encoding, elements, and where the body starts.
 fn header(bytes: &[u8]) -> Result<(Encoding, Vec<Element>, usize), String> {
+    // The line that is `end_header` alone (not the words inside a comment).
     let end = bytes
-        .windows(10)
-        .position(|w| w == b"end_header")
+        .windows(12)
+        .position(|w| w[0] == b'\n' && &w[1..11] == b"end_header" && matches!(w[11], b'\n' | b'\r'))
+        .map(|p| p + 1)
         .ok_or("no 'end_header' line: not a PLY file")?;
     let body = bytes[end..]
         .iter()
@@ -274,13 +279,16 @@ impl Mesh {
                         None => values[k] = body.value(p.value).map_err(&refuse)?,
                         Some(c) => {
                             let n = body.value(c).map_err(&refuse)?;
-                            if !(0.0..=1e6).contains(&n) || n.fract() != 0.0 {
+                            let take = is_face && Some(k) == list;
+                            // A face is a polygon ear-clipped in time quadratic in its
+                            // corners: a few hundred at most; other lists are only skipped.
+                            let most = if take { MAX_FACE_CORNERS } else { 1e6 };
+                            if !(0.0..=most).contains(&n) || n.fract() != 0.0 {
                                 return Err(refuse(format!(
-                                    "{} {item}: a list of {n} items",
+                                    "{} {item}: a list of {n} items (at most {most})",
                                     e.name
                                 )));
                             }
-                            let take = is_face && Some(k) == list;
                             if take {
                                 arities.push(n as u32);
                             }
@@ -315,7 +323,12 @@ impl Mesh {
             return Err(refuse("no vertex element".into()));
         }
         let count = positions.len();
-        let indices = super::obj::triangulate(name, &positions, &indices, &arities)?;
+        // The polygon's errors as this format's.
+        let indices =
+            super::obj::triangulate(name, &positions, &indices, &arities).map_err(|e| match e {
+                MeshError::Obj { reason, .. } => refuse(reason),
+                other => other,
+            })?;
         for (t, tri) in indices.chunks(3).enumerate() {
             if let Some(&i) = tri.iter().find(|&&i| i as usize >= count) {
                 return Err(MeshError::IndexOutOfRange {
@@ -356,7 +369,7 @@ mod tests {
     /// with an extra element and property to skip: the same triangles.
     #[test]
     fn ascii_and_binary_give_the_same_mesh() {
-        let ascii = "ply\nformat ascii 1.0\ncomment square\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float s\nproperty float t\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n3 0 1 2\n3 0 2 3\n";
+        let ascii = "ply\nformat ascii 1.0\ncomment end_header inside a comment\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float s\nproperty float t\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n3 0 1 2\n3 0 2 3\n";
         let a = Mesh::parse_ply("ascii", ascii.as_bytes()).unwrap();
         assert_eq!(a.indices, [0, 1, 2, 0, 2, 3]);
         assert!(a.has_uvs && a.normals_from_faces);
@@ -427,6 +440,10 @@ mod tests {
             (
                 format!("{head}0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n"),
                 "refers to vertex 7",
+            ),
+            (
+                format!("{head}0 0 0\n1 0 0\n0 1 0\n300 0 1 2\n"),
+                "a list of 300 items (at most 256)",
             ),
             (
                 format!("{head}0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n"),
