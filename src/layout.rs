@@ -332,6 +332,21 @@ impl Counts {
 mod tests {
     use super::*;
 
+    /// The device's query of multisampled attachments asks for the formats the camera view's
+    /// images have.
+    #[test]
+    fn the_device_asks_for_the_output_formats() {
+        let formats = crate::gpu::device::OUTPUT_ATTACHMENTS.map(|(f, _)| f);
+        assert_eq!(
+            formats,
+            [
+                Item::RadianceSamples.format(),
+                Item::DisplaySamples.format(),
+                Item::Depth.format()
+            ]
+        );
+    }
+
     #[test]
     fn two_taps_to_an_element() {
         assert_eq!(kernel_pairs(1), 1);

@@ -366,6 +366,23 @@ fn describe(
     (info, props)
 }
 
+/// The camera view's attachments as multisampled: the radiance, display and depth formats with
+/// their usage (`layout::Item::RadianceSamples`, `DisplaySamples` and `Depth`, checked there).
+pub const OUTPUT_ATTACHMENTS: [(vk::Format, vk::ImageUsageFlags); 3] = [
+    (
+        vk::Format::R32G32B32A32_SFLOAT,
+        vk::ImageUsageFlags::COLOR_ATTACHMENT,
+    ),
+    (
+        vk::Format::R8G8B8A8_UNORM,
+        vk::ImageUsageFlags::COLOR_ATTACHMENT,
+    ),
+    (
+        vk::Format::D32_SFLOAT,
+        vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+    ),
+];
+
 /// The sample counts the framebuffer limits and each of the camera view's attachment formats
 /// allow together.
 fn output_sample_counts(
@@ -373,26 +390,21 @@ fn output_sample_counts(
     pd: vk::PhysicalDevice,
     props: &vk::PhysicalDeviceProperties,
 ) -> u32 {
-    use crate::layout::Item;
     let limits = &props.limits;
     let mut counts =
         limits.framebuffer_color_sample_counts & limits.framebuffer_depth_sample_counts;
-    for (item, usage) in [
-        (Item::RadianceSamples, vk::ImageUsageFlags::COLOR_ATTACHMENT),
-        (Item::DisplaySamples, vk::ImageUsageFlags::COLOR_ATTACHMENT),
-        (Item::Depth, vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT),
-    ] {
-        let format = unsafe {
+    for (format, usage) in OUTPUT_ATTACHMENTS {
+        let properties = unsafe {
             instance.get_physical_device_image_format_properties(
                 pd,
-                item.format(),
+                format,
                 vk::ImageType::TYPE_2D,
                 vk::ImageTiling::OPTIMAL,
                 usage,
                 vk::ImageCreateFlags::empty(),
             )
         };
-        counts &= format.map_or(vk::SampleCountFlags::TYPE_1, |f| f.sample_counts);
+        counts &= properties.map_or(vk::SampleCountFlags::TYPE_1, |f| f.sample_counts);
     }
     counts.as_raw() | 1
 }
