@@ -202,9 +202,11 @@ pub struct MaterialDesc {
     /// The colour the object shows, linear RGB: the total diffuse reflectance of the material's
     /// half-space (`physics::Material::from_appearance`), above 0 and below what the index
     /// allows without absorption; with
-    /// `scatter_distance_mm`, instead of a preset or coefficients.
+    /// `scatter_distance_mm`, instead of a preset or coefficients. `color` is read as this key
+    /// too (the word Blender and Arnold use).
     #[serde(
         default,
+        alias = "color",
         deserialize_with = "triple",
         skip_serializing_if = "Option::is_none"
     )]

@@ -327,6 +327,9 @@ mod tests {
         assert!(printed.contains("scatter_distance_mm"), "{printed}");
         let again = from_text(&printed);
         assert_eq!(again.material, s.material);
+        // `color`, as Blender and Arnold call it, is the same key.
+        let coloured = from_text(&text.replace("albedo =", "color ="));
+        assert_eq!(coloured.material, s.material);
     }
 
     #[test]
