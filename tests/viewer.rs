@@ -178,6 +178,7 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
     let script = "frames 3; screenshot start\n\
                   light 90 0; frames 2; screenshot light\n\
                   orbit 40 10; zoom 0.7; frames 2; screenshot zoom\n\
+                  turntable 5; frames 4; turntable 0; frames 1; screenshot turning\n\
                   resize 400 300; frames 3; screenshot resized\n\
                   mode local; frames 2; screenshot local\n\
                   reset; material ketchup; wait; frames 2; screenshot ketchup\n\
@@ -257,6 +258,19 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
         .sum::<f64>()
         / (w * h) as f64;
     assert!(diff > 2.0, "moving the light changed little: {diff}");
+
+    // The turntable turned the camera about the object, 5 degrees a frame (the frames the
+    // script asked for, and the one it was asked in), and stopped.
+    let yaw = |name: &str| json(&dir.join(format!("{name}.json")))["camera"]["yaw_deg"].clone();
+    let turned = yaw("turning").as_f64().unwrap() - yaw("zoom").as_f64().unwrap();
+    assert!(
+        turned >= 15.0 && (turned / 5.0 - (turned / 5.0).round()).abs() < 1e-3,
+        "the turntable turned {turned} degrees over 4 frames"
+    );
+    assert_eq!(
+        json(&dir.join("turning.json"))["turntable_deg_per_frame"],
+        0.0
+    );
 
     // Zooming in covers more of the image.
     let zoomed = lit_fraction(&rgb(&dir.join("zoom.png")));

@@ -93,6 +93,7 @@ impl Running {
                 self.scene.resolved.output.exposure = Some(e);
                 self.rebuild()?;
             }
+            Action::Turntable(degrees) => self.turntable = degrees,
             Action::Backdrop(on) => {
                 if self.scene.environment.is_none() {
                     self.status = "the scene has no environment to show behind the object".into();
@@ -152,7 +153,7 @@ impl Running {
 
     /// Takes the view `v` where it gives a usable camera (`Rig::valid`); else keeps the shown
     /// one and marks the change refused.
-    fn take_view(&mut self, v: View) {
+    pub(super) fn take_view(&mut self, v: View) {
         self.refused_view = false;
         if v != self.view {
             if self.rig.valid(&v) {

@@ -18,6 +18,8 @@ const DRAG_DEG_PER_PX: f32 = 0.3;
 const KEY_LIGHT_DEG: f32 = 10.0;
 /// Zoom factor per wheel line.
 const WHEEL_ZOOM: f32 = 0.9;
+/// Degrees the camera turns each frame once `t` starts the turntable.
+const TURNTABLE_DEG: f32 = 1.0;
 
 impl Running {
     /// The action a key press asks for, if any.
@@ -42,6 +44,11 @@ impl Running {
                 "b" if !event.repeat => Action::CycleBlend,
                 "p" if !event.repeat => Action::Screenshot(None),
                 "h" if !event.repeat => Action::ToggleUi,
+                "t" if !event.repeat => Action::Turntable(if self.turntable == 0.0 {
+                    TURNTABLE_DEG
+                } else {
+                    0.0
+                }),
                 "s" if !event.repeat => Action::SaveScene(None),
                 "r" => Action::Reset,
                 "e" if !event.repeat => Action::NextEnvironment(1),

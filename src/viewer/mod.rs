@@ -167,6 +167,8 @@ struct Running {
     ui_visible: bool,
     /// Whether the environment shows behind the object.
     backdrop: bool,
+    /// Degrees the camera turns about the object each frame (0: still).
+    turntable: f32,
     scene_saves: usize,
     size_changed: bool,
     shot: Option<String>,
@@ -356,6 +358,7 @@ impl Running {
             exposure: self.scene.exposure as f64,
             tonemap: self.scene.tonemap,
             backdrop: self.scene.environment.is_some().then_some(self.backdrop),
+            turntable: self.turntable,
             device: format!("{} ({})", self.gpu.info.name, self.gpu.info.device_type),
             fps: self.fps(),
             frame_ms: report
@@ -444,6 +447,11 @@ impl Running {
                     self.status = format!("{e:#}");
                 }
             }
+        }
+        if self.turntable != 0.0 {
+            let mut v = self.view;
+            v.yaw += self.turntable;
+            self.take_view(v);
         }
         let camera = self.rig.camera(&self.view);
         let lights = self.rig.lights(&self.view);

@@ -64,6 +64,8 @@ pub struct Snapshot {
     pub tonemap: crate::output::ToneMap,
     /// Whether the environment shows behind the object (None: the scene has none).
     pub backdrop: Option<bool>,
+    /// Degrees the camera turns each frame.
+    pub turntable: f32,
 }
 
 /// What the panel keeps between frames (not part of the scene).
@@ -257,6 +259,14 @@ fn look(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
         {
             actions.push(Action::Backdrop(shown));
         }
+    }
+    let mut turn = s.turntable;
+    if ui
+        .add(egui::Slider::new(&mut turn, 0.0..=5.0).text("turntable (degrees a frame)"))
+        .changed()
+        && turn != s.turntable
+    {
+        actions.push(Action::Turntable(turn));
     }
     egui::ComboBox::from_label("tone curve")
         .selected_text(s.tonemap.name())

@@ -140,6 +140,7 @@ impl Running {
             "exposure": self.scene.exposure,
             "tonemap": self.scene.tonemap.name(),
             "backdrop": self.backdrop,
+            "turntable_deg_per_frame": self.turntable,
             "model": self.scene.material.model.name(),
             "preview": self.preview,
             "lights": self.scene.lights.len(),
@@ -155,6 +156,7 @@ impl Running {
             "camera": {
                 "position": renderer.scene().camera.position.to_array(),
                 "target": renderer.scene().camera.target.to_array(),
+                "yaw_deg": self.view.yaw,
             },
             "light_yaw_deg": self.view.light_yaw,
             "light_pitch_deg": self.view.light_pitch,

@@ -87,6 +87,8 @@ pub enum Action {
     ToneMap(crate::output::ToneMap),
     /// Whether the environment shows behind the object.
     Backdrop(bool),
+    /// Turn the camera about the object by this many degrees each frame (0: still).
+    Turntable(f32),
     /// Close the viewer.
     Quit,
 }
@@ -238,6 +240,13 @@ fn view_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> {
                 bail!("exposure {e} must be a positive number");
             }
             (Step::Act(Action::Exposure(e as f64)), 1)
+        }
+        "turntable" => {
+            let d = real(0, "degrees per frame")?;
+            if !(d.is_finite() && d.abs() <= 90.0) {
+                bail!("turntable {d}: at most 90 degrees a frame");
+            }
+            (Step::Act(Action::Turntable(d)), 1)
         }
         "backdrop" => {
             let on = match args.first().copied() {

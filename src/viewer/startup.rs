@@ -188,6 +188,7 @@ fn assemble(
         panel: panel::PanelState::default(),
         ui_visible: true,
         backdrop,
+        turntable: 0.0,
         scene_saves: 0,
         quit: false,
         preview: None,
