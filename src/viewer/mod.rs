@@ -450,8 +450,13 @@ impl Running {
         }
         if self.turntable != 0.0 {
             let mut v = self.view;
-            v.yaw += self.turntable;
+            v.yaw = (v.yaw + self.turntable).rem_euclid(360.0);
             self.take_view(v);
+            if self.refused_view {
+                // A turn that would enter the object (about a panned target) stops it.
+                self.turntable = 0.0;
+                self.status = "the turntable stopped: the next turn would enter the object".into();
+            }
         }
         let camera = self.rig.camera(&self.view);
         let lights = self.rig.lights(&self.view);

@@ -262,7 +262,11 @@ fn look(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
     }
     let mut turn = s.turntable;
     if ui
-        .add(egui::Slider::new(&mut turn, 0.0..=5.0).text("turntable (degrees a frame)"))
+        .add(
+            egui::Slider::new(&mut turn, 0.0..=5.0)
+                .text("turntable (degrees a frame)")
+                .clamping(egui::SliderClamping::Edits),
+        )
         .changed()
         && turn != s.turntable
     {

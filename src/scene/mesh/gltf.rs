@@ -85,6 +85,31 @@ fn data_uri(uri: &str) -> Option<Vec<u8>> {
     Some(out)
 }
 
+/// A relative URI as a path: its %XX escapes (a space written %20) decoded.
+fn percent_decoded(uri: &str) -> String {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        match (
+            b[i],
+            b.get(i + 1).copied().and_then(hex),
+            b.get(i + 2).copied().and_then(hex),
+        ) {
+            (b'%', Some(h), Some(l)) => {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+            }
+            (c, ..) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8(out).unwrap_or_else(|_| uri.to_string())
+}
+
 /// A URI's bytes: a data URI, or a file next to the glTF (at most `most` bytes).
 fn read_uri(
     name: &str,
@@ -97,7 +122,7 @@ fn read_uri(
         return data_uri(uri)
             .ok_or_else(|| refuse(name, format!("{what}: a data URI that is not base64")));
     }
-    let path = base.join(uri);
+    let path = base.join(percent_decoded(uri));
     crate::input::read_regular(&path, most, what)
         .map_err(|e| refuse(name, format!("{what} '{}': {e:#}", path.display())))
 }
@@ -122,9 +147,21 @@ impl Mesh {
         let mut room = crate::input::MAX_OBJ_BYTES;
         for b in doc.buffers() {
             let data = match b.source() {
-                gltf::buffer::Source::Bin => file.blob.clone().ok_or_else(|| {
-                    refuse(name, "a buffer refers to a binary chunk the file lacks")
-                })?,
+                // Only the first buffer may be the binary chunk.
+                gltf::buffer::Source::Bin if b.index() == 0 => {
+                    file.blob.clone().ok_or_else(|| {
+                        refuse(name, "a buffer refers to a binary chunk the file lacks")
+                    })?
+                }
+                gltf::buffer::Source::Bin => {
+                    return Err(refuse(
+                        name,
+                        format!(
+                            "buffer {} is the binary chunk, which only buffer 0 may be",
+                            b.index()
+                        ),
+                    ))
+                }
                 gltf::buffer::Source::Uri(uri) => {
                     let data = read_uri(name, base, uri, room, "buffer")?;
                     room = room.saturating_sub(data.len() as u64);
@@ -258,6 +295,9 @@ fn check_accessor(
             ));
         }
     }
+    if a.count() == 0 {
+        return Err(refuse(name, format!("accessor {} is empty", a.index())));
+    }
     if a.sparse().is_some() {
         return Err(refuse(
             name,
@@ -348,6 +388,24 @@ fn add_primitive(
         };
         check_accessor(name, &a, buffers, Some(layout))?;
     }
+    // What it would place, refused before anything is read.
+    let vertices = prim.get(&Semantic::Positions).map_or(0, |a| a.count());
+    let corners = prim.indices().map_or(vertices, |a| a.count());
+    let triangles = match mode {
+        Mode::Triangles => corners / 3,
+        _ => corners.saturating_sub(2),
+    };
+    if mesh.positions.len() + vertices > MAX_VERTICES
+        || mesh.indices.len() / 3 + triangles > crate::scene::MAX_TRIANGLES
+    {
+        return Err(refuse(
+            name,
+            format!(
+                "its nodes place more than {} triangles or {MAX_VERTICES} vertices",
+                crate::scene::MAX_TRIANGLES
+            ),
+        ));
+    }
     let reader = prim.reader(|b| buffers.get(b.index()).map(|v| &v[..]));
     let positions: Vec<Vec3> = reader
         .read_positions()
@@ -434,7 +492,9 @@ fn material_of(
     // medium is said.
     let volume = m
         .volume()
-        .filter(|v| v.attenuation_distance().is_finite())
+        .filter(|v| {
+            v.attenuation_distance().is_finite() && v.attenuation_color().iter().any(|&c| c < 1.0)
+        })
         .map(|v| {
             let d = decimal(v.attenuation_distance());
             let c = v.attenuation_color();
@@ -448,7 +508,7 @@ fn material_of(
         None => None,
         Some(info) => Some(match info.texture().source().source() {
             gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
-                let path = base.join(uri);
+                let path = base.join(percent_decoded(uri));
                 ImageSource::File(std::path::absolute(&path).unwrap_or(path))
             }
             gltf::image::Source::Uri { uri, .. } => ImageSource::Embedded(read_uri(
@@ -484,6 +544,13 @@ fn material_of(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn relative_uris_decode_their_escapes() {
+        assert_eq!(percent_decoded("My%20Tex.png"), "My Tex.png");
+        assert_eq!(percent_decoded("a%2"), "a%2");
+        assert_eq!(percent_decoded("plain/x.bin"), "plain/x.bin");
+    }
 
     #[test]
     fn data_uris_decode() {

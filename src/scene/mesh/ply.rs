@@ -130,17 +130,20 @@ impl Body<'_> {
 
 /// The header: encoding, elements, and where the body starts.
 fn header(bytes: &[u8]) -> Result<(Encoding, Vec<Element>, usize), String> {
-    // The line that is `end_header` alone (not the words inside a comment).
-    let end = bytes
-        .windows(12)
-        .position(|w| w[0] == b'\n' && &w[1..11] == b"end_header" && matches!(w[11], b'\n' | b'\r'))
-        .map(|p| p + 1)
-        .ok_or("no 'end_header' line: not a PLY file")?;
-    let body = bytes[end..]
-        .iter()
-        .position(|&c| c == b'\n')
-        .map(|p| end + p + 1)
-        .unwrap_or(bytes.len());
+    // The line that is `end_header` alone, spaces aside (not the words inside a comment).
+    let (mut start, mut found) = (0usize, None);
+    while start < bytes.len() {
+        let stop = bytes[start..]
+            .iter()
+            .position(|&c| c == b'\n')
+            .map_or(bytes.len(), |p| start + p);
+        if bytes[start..stop].trim_ascii() == b"end_header" {
+            found = Some((start, (stop + 1).min(bytes.len())));
+            break;
+        }
+        start = stop + 1;
+    }
+    let (end, body) = found.ok_or("no 'end_header' line: not a PLY file")?;
     let text = std::str::from_utf8(&bytes[..end]).map_err(|_| "the header is not text")?;
     let mut lines = text.lines().map(|l| l.trim_end_matches('\r'));
     if lines.next() != Some("ply") {
@@ -280,8 +283,8 @@ impl Mesh {
                         Some(c) => {
                             let n = body.value(c).map_err(&refuse)?;
                             let take = is_face && Some(k) == list;
-                            // A face is a polygon ear-clipped in time quadratic in its
-                            // corners: a few hundred at most; other lists are only skipped.
+                            // A face is a polygon ear-clipped in time cubic in its corners
+                            // at worst: a few hundred at most; other lists are only skipped.
                             let most = if take { MAX_FACE_CORNERS } else { 1e6 };
                             if !(0.0..=most).contains(&n) || n.fract() != 0.0 {
                                 return Err(refuse(format!(
@@ -323,6 +326,13 @@ impl Mesh {
             return Err(refuse("no vertex element".into()));
         }
         let count = positions.len();
+        let triangles: u64 = arities.iter().map(|&n| n.saturating_sub(2) as u64).sum();
+        if triangles > crate::scene::MAX_TRIANGLES as u64 {
+            return Err(refuse(format!(
+                "its faces make {triangles} triangles; at most {} are supported",
+                crate::scene::MAX_TRIANGLES
+            )));
+        }
         // The polygon's errors as this format's.
         let indices =
             super::obj::triangulate(name, &positions, &indices, &arities).map_err(|e| match e {
@@ -365,11 +375,12 @@ impl Mesh {
 mod tests {
     use super::*;
 
-    /// A unit square as two triangles in ASCII, and as a quad in binary of either byte order
-    /// with an extra element and property to skip: the same triangles.
+    /// A unit square as two triangles in ASCII (CRLF lines, a comment holding `end_header`,
+    /// spaces after the real one), and as a quad in binary of either byte order with an extra
+    /// element and property to skip: the same triangles.
     #[test]
     fn ascii_and_binary_give_the_same_mesh() {
-        let ascii = "ply\nformat ascii 1.0\ncomment end_header inside a comment\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float s\nproperty float t\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n3 0 1 2\n3 0 2 3\n";
+        let ascii = "ply\r\nformat ascii 1.0\ncomment end_header inside a comment\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float s\nproperty float t\nelement face 2\nproperty list uchar int vertex_indices\nend_header  \r\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n3 0 1 2\n3 0 2 3\n";
         let a = Mesh::parse_ply("ascii", ascii.as_bytes()).unwrap();
         assert_eq!(a.indices, [0, 1, 2, 0, 2, 3]);
         assert!(a.has_uvs && a.normals_from_faces);
