@@ -1092,15 +1092,7 @@ mod tests {
     /// texel x2 and nodes x2; the automatic one alone when quick.
     #[test]
     fn walk_sweep_scales_the_walks() {
-        let auto = crate::preprocess::settings::Settings {
-            texel_mm: 0.5,
-            kernel_size: 7,
-            node_spacing_mm: 2.0,
-            prune_tolerance: 0.01,
-            chart_angle_deg: 60.0,
-            walk_paths: 2576,
-            walk_lights: [None; crate::scene::MAX_LIGHTS],
-        };
+        let auto = automatic();
         let quick = walk_sweep(&auto, true);
         assert_eq!(quick.len(), 1);
         assert_eq!(quick[0].1.walk_paths, Some(2576));
@@ -1117,11 +1109,9 @@ mod tests {
         assert_eq!(full[4].1.node_spacing_mm, Some(4.0));
     }
 
-    /// Every swept setting's marker says the knob it varies, the automatic one its own; an
-    /// error that was not measured reads "n/a", not "NaN %".
-    #[test]
-    fn each_point_says_its_knob_and_missing_errors_read_na() {
-        let auto = crate::preprocess::settings::Settings {
+    /// Automatic settings for the sweeps' tests.
+    fn automatic() -> crate::preprocess::settings::Settings {
+        crate::preprocess::settings::Settings {
             texel_mm: 0.5,
             kernel_size: 7,
             node_spacing_mm: 2.0,
@@ -1129,7 +1119,14 @@ mod tests {
             chart_angle_deg: 60.0,
             walk_paths: 2576,
             walk_lights: [None; crate::scene::MAX_LIGHTS],
-        };
+        }
+    }
+
+    /// Every swept setting's marker says the knob it varies, the automatic one its own; an
+    /// error that was not measured reads "n/a", not "NaN %".
+    #[test]
+    fn each_point_says_its_knob_and_missing_errors_read_na() {
+        let auto = automatic();
         let base = sweep(&auto, false)[0].1;
         let mut seen = Vec::new();
         for (label, o) in sweep(&auto, false)

@@ -169,6 +169,8 @@ struct Running {
     backdrop: bool,
     /// Degrees the camera turns about the object each frame (0: still).
     turntable: f32,
+    /// The material the panel last showed and its colour and scatter distance.
+    appearance: Option<(crate::physics::Material, Option<panel::Appearance>)>,
     scene_saves: usize,
     size_changed: bool,
     shot: Option<String>,
@@ -378,6 +380,7 @@ impl Running {
             }),
             preset: wanted.preset.clone(),
             material: wanted.material,
+            appearance: self.appearance.as_ref().and_then(|(_, a)| *a),
             mode: self.mode,
             texel_mm: s.texel_mm,
             kernel_size: s.kernel_size,
@@ -396,6 +399,12 @@ impl Running {
     /// what the user did in it.
     fn layout_ui(&mut self) -> Result<Vec<script::Action>> {
         let raw = self.egui_input.take_egui_input(&self.window);
+        // The material as artists give it, found once per material (the half-space's tables)
+        // rather than each frame the panel shows it.
+        let material = self.wanted().material;
+        if self.appearance.as_ref().is_none_or(|(m, _)| *m != material) {
+            self.appearance = Some((material, material.appearance().ok()));
+        }
         let snapshot = self.ui_visible.then(|| self.snapshot());
         let mut actions = Vec::new();
         let panel = &mut self.panel;

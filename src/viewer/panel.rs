@@ -58,6 +58,9 @@ pub struct Snapshot {
     pub passes: Vec<(String, Vec<f64>)>,
     /// The GPU time of each of the last frames, ms.
     pub frames: Vec<f64>,
+    /// The material shown or asked for as artists give it: its colour and scatter distance
+    /// (None where it has none).
+    pub appearance: Option<Appearance>,
     /// The display's exposure.
     pub exposure: f64,
     /// The display's tone curve.
@@ -184,56 +187,76 @@ pub fn show(ctx: &egui::Context, s: &Snapshot, st: &mut PanelState, actions: &mu
 /// reflectance, linear) and the scatter distance (1 / sigma_t', mm) per channel; an edit
 /// finds the coefficients (`Material::from_appearance`) at the index in use.
 fn appearance(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
-    let Ok((albedo, distance)) = s.material.appearance() else {
+    let Some((albedo, distance)) = s.appearance else {
         ui.label("(no appearance for this material)");
         return;
     };
     egui::Grid::new("appearance").show(ui, |ui| {
-        ui.label("");
-        for c in ["red", "green", "blue"] {
-            ui.label(c);
-        }
-        ui.end_row();
-        ui.label("colour");
-        let mut v = albedo;
-        let mut changed = false;
-        for x in v.iter_mut() {
-            changed |= ui
-                .add(
-                    // Clamped where edited only: a value outside shown as it is, not
-                    // pushed back each frame as an edit.
-                    egui::DragValue::new(x)
-                        .range(1e-4..=0.999)
-                        .clamp_existing_to_range(false)
-                        .speed(0.002)
-                        .max_decimals(4),
-                )
-                .changed();
-        }
-        if changed {
+        channel_header(ui, "");
+        // Values outside a field's range are shown as they are: clamped where edited only, not
+        // pushed back each frame as an edit.
+        let colour = Field {
+            range: 1e-4..=0.999,
+            speed: |_| 0.002,
+            decimals: 4,
+            clamp_existing: false,
+        };
+        if let Some(v) = channel_row(ui, "colour", albedo, &colour) {
             actions.push(Action::Albedo(v));
         }
-        ui.end_row();
-        ui.label("scatter mm");
-        let mut v = distance;
-        let mut changed = false;
-        for x in v.iter_mut() {
-            let speed = 0.005 * x.max(1e-3);
-            changed |= ui
-                .add(
-                    egui::DragValue::new(x)
-                        .range(1e-3..=1e3)
-                        .clamp_existing_to_range(false)
-                        .speed(speed)
-                        .max_decimals(4),
-                )
-                .changed();
-        }
-        if changed {
+        let scatter = Field {
+            range: 1e-3..=1e3,
+            speed: |x| 0.005 * x.max(1e-3),
+            decimals: 4,
+            clamp_existing: false,
+        };
+        if let Some(v) = channel_row(ui, "scatter mm", distance, &scatter) {
             actions.push(Action::ScatterDistance(v));
         }
-        ui.end_row();
     });
+}
+
+/// A material's colour shown and scatter distance (mm) per channel.
+pub type Appearance = ([f64; 3], [f64; 3]);
+
+/// How a row of per-channel drag fields takes its values.
+struct Field {
+    range: std::ops::RangeInclusive<f64>,
+    /// The drag's step at a value.
+    speed: fn(f64) -> f64,
+    decimals: usize,
+    /// Whether a value outside the range is pulled into it even where not edited.
+    clamp_existing: bool,
+}
+
+/// The header of a grid of per-channel rows: `corner`, then the channels' names.
+fn channel_header(ui: &mut egui::Ui, corner: &str) {
+    ui.label(corner);
+    for c in ["red", "green", "blue"] {
+        ui.label(c);
+    }
+    ui.end_row();
+}
+
+/// A grid row: `label` and a drag field per channel; the values as edited, if any was.
+fn channel_row(ui: &mut egui::Ui, label: &str, values: [f64; 3], f: &Field) -> Option<[f64; 3]> {
+    ui.label(label);
+    let mut v = values;
+    let mut changed = false;
+    for x in v.iter_mut() {
+        let speed = (f.speed)(*x);
+        changed |= ui
+            .add(
+                egui::DragValue::new(x)
+                    .range(f.range.clone())
+                    .clamp_existing_to_range(f.clamp_existing)
+                    .speed(speed)
+                    .max_decimals(f.decimals),
+            )
+            .changed();
+    }
+    ui.end_row();
+    changed.then_some(v)
 }
 
 /// The display: exposure (in stops about the scene's), the environment as a backdrop, and the
@@ -300,11 +323,13 @@ fn material(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
         });
     let m = &s.material;
     egui::Grid::new("coefficients").show(ui, |ui| {
-        ui.label("1/mm");
-        for c in ["red", "green", "blue"] {
-            ui.label(c);
-        }
-        ui.end_row();
+        channel_header(ui, "1/mm");
+        let coefficient = Field {
+            range: 1e-5..=100.0,
+            speed: |x| 0.005 * x.max(1e-4),
+            decimals: 5,
+            clamp_existing: true,
+        };
         for (label, values, make) in [
             (
                 "sigma_s'",
@@ -313,24 +338,9 @@ fn material(ui: &mut egui::Ui, s: &Snapshot, actions: &mut Vec<Action>) {
             ),
             ("sigma_a", m.sigma_a, Action::SigmaA),
         ] {
-            ui.label(label);
-            let mut v = values;
-            let mut changed = false;
-            for x in v.iter_mut() {
-                let speed = 0.005 * x.max(1e-4);
-                changed |= ui
-                    .add(
-                        egui::DragValue::new(x)
-                            .range(1e-5..=100.0)
-                            .speed(speed)
-                            .max_decimals(5),
-                    )
-                    .changed();
-            }
-            if changed {
+            if let Some(v) = channel_row(ui, label, values, &coefficient) {
                 actions.push(make(v));
             }
-            ui.end_row();
         }
     });
     let mut eta = m.eta;

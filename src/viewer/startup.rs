@@ -189,6 +189,7 @@ fn assemble(
         ui_visible: true,
         backdrop,
         turntable: 0.0,
+        appearance: None,
         scene_saves: 0,
         quit: false,
         preview: None,

@@ -339,16 +339,7 @@ impl Mesh {
                 MeshError::Obj { reason, .. } => refuse(reason),
                 other => other,
             })?;
-        for (t, tri) in indices.chunks(3).enumerate() {
-            if let Some(&i) = tri.iter().find(|&&i| i as usize >= count) {
-                return Err(MeshError::IndexOutOfRange {
-                    name: name.into(),
-                    triangle: t,
-                    index: i,
-                    count,
-                });
-            }
-        }
+        // An index past the vertices is refused by `finish`'s validation.
         let has_normals = normals.len() == count;
         let has_uvs = uvs.len() == count && count > 0;
         let mesh = Mesh {
