@@ -8,6 +8,7 @@
 // the covered samples: a multisampled edge pixel's fragment stays inside its triangle.
 #include "frame.glsl"
 #include "shadow.glsl"
+#include "view_normal.glsl"
 #include "display.glsl"
 
 layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
@@ -37,6 +38,8 @@ layout(location = 5) centroid in vec3 in_exit_slope;
 layout(location = 6) centroid in vec3 in_drift_r;
 layout(location = 7) centroid in vec3 in_drift_g;
 layout(location = 8) centroid in vec3 in_drift_b;
+// The position at the pixel's centre, for the triangle's normal from its screen derivatives.
+layout(location = 9) in vec3 in_position_centre;
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_display;
@@ -218,9 +221,11 @@ vec4 single_at(ivec2 p) {
 }
 
 void main() {
-    vec3 n = normalize(in_normal);
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
-    float cos_o = abs(dot(n, v));
+    vec3 interpolated = normalize(in_normal);
+    // The normal the light leaves through, towards v.
+    vec3 n = adapted_normal(interpolated, facet_normal(in_position_centre, interpolated), v);
+    float cos_o = max(dot(n, v), 0.0);
     // The optimized fit and the direct term are bounded so that light on any texel gives every
     // texel a non-negative response (tests/preprocess.rs light_is_never_negative); where the
     // bound is met with equality the f32 sums of the passes round it to a few ulp either side.
@@ -236,7 +241,7 @@ void main() {
     vec3 lobe = exit_lobe(cos_o) * max(1.0 + in_exit_slope * (cos_o - 2.0 / 3.0), vec3(0.0));
     if (OBLIQUE) {
         // (`volume`: its exit_lobe samples are 1.)
-        lobe = oblique_exit(in_position, n, cos_o, in_exit_slope, lobe);
+        lobe = oblique_exit(in_position, interpolated, cos_o, in_exit_slope, lobe);
     }
     // The drift along the surface (an interpolated vector: its part along n is taken out). It
     // keeps the flux of either lobe (odd in the azimuth); the walks bound it so that the
@@ -253,7 +258,7 @@ void main() {
         l += s.rgb * shown;
     }
     if (SURFACE) {
-        l += surface_reflection(in_position, dot(n, v) < 0.0 ? -n : n, v);
+        l += surface_reflection(in_position, n, v);
     }
     out_radiance = vec4(l, 1.0);
     out_display = vec4(display_value(l * push.exposure, TONEMAP), 1.0);

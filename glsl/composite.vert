@@ -26,9 +26,13 @@ layout(location = 5) out vec3 out_exit_slope;
 layout(location = 6) out vec3 out_drift_r;
 layout(location = 7) out vec3 out_drift_g;
 layout(location = 8) out vec3 out_drift_b;
+// The position again, interpolated at the pixel's centre (not the centroid): its screen
+// derivatives give the triangle's plane (those of centroid inputs are not reliable).
+layout(location = 9) out vec3 out_position_centre;
 
 void main() {
     out_position = in_position;
+    out_position_centre = in_position;
     out_normal = in_normal;
     out_uv = in_uv;
     out_atlas = in_atlas;

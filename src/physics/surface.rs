@@ -40,6 +40,28 @@ pub fn reflect(d: DVec3, n: DVec3) -> DVec3 {
     d - 2.0 * d.dot(n) * n
 }
 
+/// The interpolated shading normal `n` adapted to the viewer at unit direction `v` (from the
+/// surface), given the triangle's own normal `g`. Where a coarse mesh bends fast (a thin tip),
+/// `n` turns away from the viewer on triangles that face it: the exit cosine and Fresnel's
+/// transmittance would fall to 0 inside the silhouette and draw a dark line that the faceted
+/// surface does not have. So the exit cosine is kept at least half the triangle's own: where
+/// `n . v` is below that, `n` is bent towards `v` (the least turn in the plane of the two)
+/// until it reaches it; elsewhere `n` is kept. Continuous in `n`, and the same as `n` at a
+/// true silhouette, where the triangle itself is seen at grazing. Both normals are turned
+/// over together where the triangle faces away from `v` (its back seen). The composite and
+/// the `single` pass shade with the same (glsl/view_normal.glsl).
+pub fn adapted_normal(n: DVec3, g: DVec3, v: DVec3) -> DVec3 {
+    let (n, g) = if g.dot(v) < 0.0 { (-n, -g) } else { (n, g) };
+    let least = 0.5 * g.dot(v);
+    let a = n.dot(v).clamp(-1.0, 1.0);
+    if a >= least {
+        return n;
+    }
+    // n + t v has cosine `least` with v.
+    let t = -a + least * ((1.0 - a * a) / (1.0 - least * least)).sqrt();
+    (n + t * v).try_normalize().unwrap_or(g)
+}
+
 /// The GGX width alpha of a roughness in [0, 1] (alpha = roughness^2, as Disney's, Blender's
 /// and glTF's roughness).
 pub fn alpha(roughness: f64) -> f64 {
@@ -69,6 +91,44 @@ pub fn ggx_reflection(eta: f64, alpha: f64, n: DVec3, wi: DVec3, wo: DVec3) -> f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The adapted normal keeps a normal that faces the viewer at least half as much as the
+    /// triangle does, and bends one turned further away (over a triangle that faces the
+    /// viewer) until it does, with no jump where the bending starts.
+    #[test]
+    fn a_shading_normal_turned_away_is_bent_to_face_the_viewer() {
+        let g = DVec3::Z;
+        let v = DVec3::new(0.9, 0.0, 0.3).normalize();
+        // Near the triangle's own: kept.
+        let n = DVec3::new(0.1, 0.05, 1.0).normalize();
+        assert_eq!(adapted_normal(n, g, v), n);
+        // Tilted away from the viewer: bent to half the triangle's cosine, in the plane of n
+        // and v.
+        for tilt in [30.0f64, 60.0, 100.0, 170.0] {
+            let (s, c) = tilt.to_radians().sin_cos();
+            let n = DVec3::new(-s, 0.0, c);
+            let a = adapted_normal(n, g, v);
+            assert!((a.length() - 1.0).abs() < 1e-12);
+            assert!(
+                (a.dot(v) - 0.5 * g.dot(v)).abs() < 1e-12,
+                "tilt {tilt}: {a:?}"
+            );
+            assert!(a.y.abs() < 1e-12, "tilt {tilt}: {a:?}");
+        }
+        // Seen from behind: both turned over, the same bend.
+        let n = DVec3::new(-0.8, 0.0, 0.6);
+        assert!((adapted_normal(-n, -g, v) - adapted_normal(n, g, v)).length() < 1e-12);
+        // Continuous, where the bending starts too: 0.01 degree steps of the interpolated
+        // normal move the adapted one by little.
+        let at = |t: f64| {
+            let (s, c) = t.to_radians().sin_cos();
+            adapted_normal(DVec3::new(-s, 0.0, c), g, v)
+        };
+        let jump = (1..10000)
+            .map(|k| (at(k as f64 * 0.01) - at((k - 1) as f64 * 0.01)).length())
+            .fold(0.0, f64::max);
+        assert!(jump < 1e-3, "the adapted normal jumps by {jump}");
+    }
 
     /// Snell's law, the refracted ray on the far side in the plane of incidence, the way back
     /// reversing it, and total internal reflection beyond the critical angle.

@@ -470,11 +470,18 @@ impl Reference {
                             let t = &m.indices
                                 [3 * hit.triangle as usize..3 * hit.triangle as usize + 3];
                             let p = o + d * hit.t;
+                            let face = {
+                                let q =
+                                    [t[0], t[1], t[2]].map(|i| m.positions[i as usize].as_dvec3());
+                                (q[1] - q[0]).cross(q[2] - q[0]).normalize_or(DVec3::Z)
+                            };
                             let n: DVec3 = (0..3)
                                 .map(|k| m.normals[t[k] as usize].as_dvec3() * hit.bary[k])
                                 .sum::<DVec3>()
-                                .normalize_or(DVec3::Z);
-                            let cos_o = n.dot(-d).abs();
+                                .normalize_or(face);
+                            // The normal the light leaves through, as the composite's.
+                            let n = crate::physics::surface::adapted_normal(n, face, -d);
+                            let cos_o = n.dot(-d).max(0.0);
                             let ft = fresnel_transmittance(scene.material.eta, cos_o);
                             let b = tree.eval(p, profiles, settings.theta);
                             let ss = single.as_ref().map_or([0.0; 3], |t| {
