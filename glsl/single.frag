@@ -22,6 +22,7 @@
 // so the exponential integrates exactly per channel.
 #include "frame.glsl"
 #include "shadow.glsl"
+#include "view_normal.glsl"
 
 layout(set = 0, binding = 1) uniform sampler2DArray entry_depth;
 layout(set = 0, binding = 2) uniform sampler2D back_depth;
@@ -172,17 +173,28 @@ const float ROUNDING = 16.0 / 8388608.0;
 // then measured from x itself (the ray's length times a ratio of cosines: no difference of
 // large coordinates) where the shadow map agrees with it within the rounding, so that an
 // object of a metre or a kilometre keeps the precision of one of a few millimetres.
+// With it, for `light_inside`'s smooth shading: the normals at x of the mesh's triangle
+// (`facet_n`) and interpolated (`smooth_n`), both facing the viewer, and how near x lies to
+// the surface the light enters (`near`: 1 within the rounding and a quarter of the shortest
+// free path, 0 beyond twice that, smooth between; the map's slopes bend where triangles
+// meet).
 struct Anchor {
     bool lit;
     vec3 n;
     float rounding;
+    vec3 facet_n;
+    vec3 smooth_n;
+    float near;
 };
 
-Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 travel) {
+Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
     Anchor a;
     a.lit = false;
     a.n = -travel;
     a.rounding = 0.0;
+    a.facet_n = facet;
+    a.smooth_n = normal;
+    a.near = 0.0;
     vec3 entry;
     uint layer;
     vec2 uv;
@@ -198,7 +210,11 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 travel) {
     a.rounding = max(ROUNDING * max(m.x, max(m.y, m.z)), depth_step);
     a.n = entry_normal(entry, layer, slopes, travel);
     // On the surface the light enters: turned towards the light, and where the map sees it.
-    a.lit = dot(normal, travel) < 0.0 && abs(dot(x - entry, travel)) <= a.rounding;
+    float off = abs(dot(x - entry, travel));
+    a.lit = dot(normal, travel) < 0.0 && off <= a.rounding;
+    vec3 sigma_t = frame.sigma_t.rgb;
+    float near = a.rounding + 0.25 / max(sigma_t.r, max(sigma_t.g, sigma_t.b));
+    a.near = dot(normal, travel) < 0.0 ? 1.0 - smoothstep(near, 2.0 * near, off) : 0.0;
     return a;
 }
 
@@ -208,9 +224,19 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 travel) {
 // cos_i / cos_t (the beam narrows as it bends towards the normal). Where x lies on the lit
 // surface (`a`) and the shadow map's path agrees with the plane's within the rounding, the
 // plane's, from s.
+// The path the light travels inside, per unit length of the view ray (`inside`), below a plane
+// of normal n through the ray's start, where it enters straight (index-matched) or refracted;
+// 0 where either direction runs along the plane.
+float plane_path(vec3 inside, vec3 travel, vec3 n, bool refracts, float eta) {
+    float below = -dot(inside, n);
+    float cos_in = refracts ? -dot(refract(travel, n, 1.0 / eta), n) : -dot(travel, n);
+    return below > 1e-3 && cos_in > 1e-3 ? below / cos_in : 0.0;
+}
+
 float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Anchor a, vec3 inside,
                    float s, inout vec3 e) {
     float d;
+    float cos_i = 1.0;
     // The depth below x's tangent plane and the path to it, along the light inside.
     float below = -s * dot(inside, a.n);
     float cos_in;
@@ -218,10 +244,7 @@ float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Ancho
         d = light_depth(l, p, travel);
         cos_in = -dot(travel, a.n);
     } else {
-        float cos_i;
         d = refracted_path(l, p, travel, eta, cos_i);
-        float cos_t = sqrt(max(1.0 - (1.0 - cos_i * cos_i) / (eta * eta), 0.0));
-        e *= fresnel_transmittance(eta, cos_i) * cos_i / max(cos_t, 1e-6);
         vec3 t = refract(travel, a.n, 1.0 / eta);
         cos_in = -dot(t, a.n);
     }
@@ -230,6 +253,25 @@ float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Ancho
         if (abs(d - planar) <= 2.0 * a.rounding / cos_in) {
             d = planar;
         }
+    }
+    // Smooth shading of a coarse mesh: near x the light enters through x's own triangle, whose
+    // plane the map follows, and a triangle's path shows as a flat facet. The surface the
+    // mesh's normals describe (a.smooth_n) gives the path of the ratio of the two planes'
+    // (bounded to [1/2, 2]), and the cosine of its entry, fading over the longest free path
+    // in depth (deeper light comes through the neighbouring triangles, as the map measures).
+    if (a.near > 0.0) {
+        float facet = plane_path(inside, travel, a.facet_n, refracts, eta);
+        float smooth_path = plane_path(inside, travel, a.smooth_n, refracts, eta);
+        if (facet > 0.0 && smooth_path > 0.0) {
+            vec3 sigma_t = frame.sigma_t.rgb;
+            float w = a.near * exp(-min(sigma_t.r, min(sigma_t.g, sigma_t.b)) * d);
+            d *= mix(1.0, clamp(smooth_path / facet, 0.5, 2.0), w);
+            cos_i = clamp(cos_i + w * dot(travel, a.facet_n - a.smooth_n), 0.0, 1.0);
+        }
+    }
+    if (refracts) {
+        float cos_t = sqrt(max(1.0 - (1.0 - cos_i * cos_i) / (eta * eta), 0.0));
+        e *= fresnel_transmittance(eta, cos_i) * cos_i / max(cos_t, 1e-6);
     }
     return d;
 }
@@ -273,8 +315,11 @@ void main() {
     // The view ray inside: refracted towards the normal behind a refractive boundary.
     vec3 normal = normalize(in_normal);
     normal = dot(normal, d) > 0.0 ? -normal : normal;
-    float cos_o = -dot(normal, d);
-    vec3 inside = refracts ? refract(d, normal, 1.0 / eta) : d;
+    // The normal the view ray enters through (adapted to the viewer as the composite's).
+    vec3 facet = facet_normal(x, normal);
+    vec3 through = adapted_normal(normal, facet, -d);
+    float cos_o = max(-dot(through, d), 0.0);
+    vec3 inside = refracts ? refract(d, through, 1.0 / eta) : d;
     if (dot(inside, inside) == 0.0) {
         inside = d;
     }
@@ -301,7 +346,7 @@ void main() {
     for (uint i = 0u; i < lights; ++i) {
         vec3 wi;
         light_at(frame.lights[i], x, wi, e0[i]);
-        anchors[i] = anchor_at(frame.lights[i], x, normal, -wi);
+        anchors[i] = anchor_at(frame.lights[i], x, normal, facet, -wi);
         d0[i] = light_inside(frame.lights[i], x, -wi, refracts, eta, anchors[i], inside, 0.0, e0[i]);
     }
     float s0 = 0.0;

@@ -384,7 +384,9 @@ fn coarse_mesh() {
         &s,
         SettingsOverrides::default(),
         0.13,
-        Truth::Walks(0.138),
+        // The truth traces the flat faces, 22 degrees apart; single scattering near the
+        // surface follows the smooth sphere the mesh's normals describe (smooth shading).
+        Truth::Walks(0.17),
     );
 }
 
