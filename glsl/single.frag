@@ -173,8 +173,8 @@ const float ROUNDING = 16.0 / 8388608.0;
 // then measured from x itself (the ray's length times a ratio of cosines: no difference of
 // large coordinates) where the shadow map agrees with it within the rounding, so that an
 // object of a metre or a kilometre keeps the precision of one of a few millimetres.
-// With it, for `light_inside`'s smooth shading: the normals at x of the mesh's triangle
-// (`facet_n`) and interpolated (`smooth_n`), both facing the viewer, and how near x lies to
+// With it, for `light_inside`'s smooth shading: the normals at x interpolated (`smooth_n`,
+// facing the viewer) and of the mesh's triangle (`facet_n`, on its side), and how near x lies to
 // the surface the light enters (`near`: 1 within the rounding and a quarter of the shortest
 // free path, 0 beyond twice that, smooth between; the map's slopes bend where triangles
 // meet).
@@ -218,12 +218,6 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
     return a;
 }
 
-// The light of `l` at p = x + inside s inside the object: the distance it travels inside, and
-// its irradiance `e` (across its beam, from `light_at`) turned into the irradiance across the
-// beam inside: behind a refractive boundary the Fresnel transmittance of its entry times
-// cos_i / cos_t (the beam narrows as it bends towards the normal). Where x lies on the lit
-// surface (`a`) and the shadow map's path agrees with the plane's within the rounding, the
-// plane's, from s.
 // The path the light travels inside, per unit length of the view ray (`inside`), below a plane
 // of normal n through the ray's start, where it enters straight (index-matched) or refracted;
 // 0 where either direction runs along the plane.
@@ -233,6 +227,12 @@ float plane_path(vec3 inside, vec3 travel, vec3 n, bool refracts, float eta) {
     return below > 1e-3 && cos_in > 1e-3 ? below / cos_in : 0.0;
 }
 
+// The light of `l` at p = x + inside s inside the object: the distance it travels inside, and
+// its irradiance `e` (across its beam, from `light_at`) turned into the irradiance across the
+// beam inside: behind a refractive boundary the Fresnel transmittance of its entry times
+// cos_i / cos_t (the beam narrows as it bends towards the normal). Where x lies on the lit
+// surface (`a`) and the shadow map's path agrees with the plane's within the rounding, the
+// plane's, from s.
 float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Anchor a, vec3 inside,
                    float s, inout vec3 e) {
     float d;
@@ -266,7 +266,9 @@ float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Ancho
             vec3 sigma_t = frame.sigma_t.rgb;
             float w = a.near * exp(-min(sigma_t.r, min(sigma_t.g, sigma_t.b)) * d);
             d *= mix(1.0, clamp(smooth_path / facet, 0.5, 2.0), w);
-            cos_i = clamp(cos_i + w * dot(travel, a.facet_n - a.smooth_n), 0.0, 1.0);
+            if (refracts) {
+                cos_i = clamp(cos_i + w * dot(travel, a.facet_n - a.smooth_n), 0.0, 1.0);
+            }
         }
     }
     if (refracts) {

@@ -384,8 +384,8 @@ fn coarse_mesh() {
         &s,
         SettingsOverrides::default(),
         0.13,
-        // The truth traces the flat faces, 22 degrees apart; single scattering near the
-        // surface follows the smooth sphere the mesh's normals describe (smooth shading).
+        // The truth traces the flat faces; single scattering near the surface follows the
+        // smooth sphere the mesh's normals describe (smooth shading).
         Truth::Walks(0.17),
     );
 }

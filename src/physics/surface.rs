@@ -41,7 +41,7 @@ pub fn reflect(d: DVec3, n: DVec3) -> DVec3 {
 }
 
 /// The interpolated shading normal `n` adapted to the viewer at unit direction `v` (from the
-/// surface), given the triangle's own normal `g`. Where a coarse mesh bends fast (a thin tip),
+/// surface), given the triangle's own normal `g` on `n`'s side (`n . g >= 0`). Where a coarse mesh bends fast (a thin tip),
 /// `n` turns away from the viewer on triangles that face it: the exit cosine and Fresnel's
 /// transmittance would fall to 0 inside the silhouette and draw a dark line that the faceted
 /// surface does not have. So the exit cosine is kept at least half the triangle's own: where
@@ -104,7 +104,7 @@ mod tests {
         assert_eq!(adapted_normal(n, g, v), n);
         // Tilted away from the viewer: bent to half the triangle's cosine, in the plane of n
         // and v.
-        for tilt in [30.0f64, 60.0, 100.0, 170.0] {
+        for tilt in [30.0f64, 60.0, 85.0] {
             let (s, c) = tilt.to_radians().sin_cos();
             let n = DVec3::new(-s, 0.0, c);
             let a = adapted_normal(n, g, v);
@@ -124,7 +124,7 @@ mod tests {
             let (s, c) = t.to_radians().sin_cos();
             adapted_normal(DVec3::new(-s, 0.0, c), g, v)
         };
-        let jump = (1..10000)
+        let jump = (1..9000)
             .map(|k| (at(k as f64 * 0.01) - at((k - 1) as f64 * 0.01)).length())
             .fold(0.0, f64::max);
         assert!(jump < 1e-3, "the adapted normal jumps by {jump}");

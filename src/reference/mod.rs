@@ -473,13 +473,22 @@ impl Reference {
                             let face = {
                                 let q =
                                     [t[0], t[1], t[2]].map(|i| m.positions[i as usize].as_dvec3());
-                                (q[1] - q[0]).cross(q[2] - q[0]).normalize_or(DVec3::Z)
+                                (q[1] - q[0]).cross(q[2] - q[0]).normalize_or_zero()
                             };
                             let n: DVec3 = (0..3)
                                 .map(|k| m.normals[t[k] as usize].as_dvec3() * hit.bary[k])
                                 .sum::<DVec3>()
                                 .normalize_or(face);
-                            // The normal the light leaves through, as the composite's.
+                            // The normal the light leaves through, as the composite's: the
+                            // triangle's normal on the interpolated one's side, n where the
+                            // triangle is degenerate.
+                            let face = if face == DVec3::ZERO {
+                                n
+                            } else if face.dot(n) < 0.0 {
+                                -face
+                            } else {
+                                face
+                            };
                             let n = crate::physics::surface::adapted_normal(n, face, -d);
                             let cos_o = n.dot(-d).max(0.0);
                             let ft = fresnel_transmittance(scene.material.eta, cos_o);
