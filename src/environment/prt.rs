@@ -62,5 +62,6 @@ const SECONDS_PER_RAY: f64 = 9.0e-7;
 /// `texels x settings.rays` shadow rays, at the calibrated cost per ray.
 pub fn estimate_seconds(texels: u64, settings: PrtSettings) -> f64 {
     let threads = rayon::current_num_threads().max(1) as f64;
-    texels as f64 * settings.rays as f64 * SECONDS_PER_RAY / threads
+    crate::numeric::speed::factor() * texels as f64 * settings.rays as f64 * SECONDS_PER_RAY
+        / threads
 }

@@ -4,3 +4,4 @@
 pub mod hash;
 pub mod quadrature;
 pub mod rng;
+pub mod speed;

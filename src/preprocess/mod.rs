@@ -140,17 +140,20 @@ mod cost {
 }
 
 impl Work {
-    /// Seconds of this work at the calibrated per-unit costs on `threads` threads.
+    /// Seconds of this work at the calibrated per-unit costs on `threads` threads, scaled by
+    /// this machine's speed now relative to the one they were measured on
+    /// ([`crate::numeric::speed::factor`]).
     pub fn seconds(&self, threads: usize) -> f64 {
         let threads = threads.max(1) as f64;
-        (cost::KERNEL_TAP * self.kernel_taps as f64
-            + cost::DENSE_ENTRY * self.dense_entries as f64
-            + cost::FIT_PRODUCT * self.fit_products
-            + cost::TRIANGLE_PARALLEL * self.triangles as f64
-            + cost::WALK * self.walks
-            + cost::WALK_COLLISION * self.walk_collisions)
-            / threads
-            + cost::TRIANGLE_SERIAL * self.triangles as f64
+        crate::numeric::speed::factor()
+            * ((cost::KERNEL_TAP * self.kernel_taps as f64
+                + cost::DENSE_ENTRY * self.dense_entries as f64
+                + cost::FIT_PRODUCT * self.fit_products
+                + cost::TRIANGLE_PARALLEL * self.triangles as f64
+                + cost::WALK * self.walks
+                + cost::WALK_COLLISION * self.walk_collisions)
+                / threads
+                + cost::TRIANGLE_SERIAL * self.triangles as f64)
     }
 }
 
@@ -256,12 +259,13 @@ impl Estimate {
     /// One line for people.
     pub fn describe(&self) -> String {
         format!(
-            "estimate: about {} texels, {} nodes, {:.0} to {:.0} MiB of device data, {:.1} s",
+            "estimate: about {} texels, {} nodes, {:.0} to {:.0} MiB of device data, {:.1} s (this machine now takes {:.2}x the time of the one the costs were measured on)",
             self.texels,
             self.nodes,
             self.device_bytes_min as f64 / (1u64 << 20) as f64,
             self.device_bytes_max as f64 / (1u64 << 20) as f64,
-            self.seconds
+            self.seconds,
+            crate::numeric::speed::factor()
         )
     }
 
