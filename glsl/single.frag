@@ -177,7 +177,7 @@ const float ROUNDING = 16.0 / 8388608.0;
 // facing the viewer) and of the mesh's triangle (`facet_n`, on its side), and how near x lies to
 // the surface the light enters (`near`: 1 within the rounding and a quarter of the shortest
 // free path, 0 beyond twice that, smooth between; the map's slopes bend where triangles
-// meet).
+// meet), and the least extinction, over whose free path the smooth shading fades in depth.
 struct Anchor {
     bool lit;
     vec3 n;
@@ -185,6 +185,7 @@ struct Anchor {
     vec3 facet_n;
     vec3 smooth_n;
     float near;
+    float fade;
 };
 
 Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
@@ -195,6 +196,8 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
     a.facet_n = facet;
     a.smooth_n = normal;
     a.near = 0.0;
+    vec3 sigma_t = frame.sigma_t.rgb;
+    a.fade = min(sigma_t.r, min(sigma_t.g, sigma_t.b));
     vec3 entry;
     uint layer;
     vec2 uv;
@@ -212,7 +215,6 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
     // On the surface the light enters: turned towards the light, and where the map sees it.
     float off = abs(dot(x - entry, travel));
     a.lit = dot(normal, travel) < 0.0 && off <= a.rounding;
-    vec3 sigma_t = frame.sigma_t.rgb;
     float near = a.rounding + 0.25 / max(sigma_t.r, max(sigma_t.g, sigma_t.b));
     a.near = dot(normal, travel) < 0.0 ? 1.0 - smoothstep(near, 2.0 * near, off) : 0.0;
     return a;
@@ -263,8 +265,7 @@ float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Ancho
         float facet = plane_path(inside, travel, a.facet_n, refracts, eta);
         float smooth_path = plane_path(inside, travel, a.smooth_n, refracts, eta);
         if (facet > 0.0 && smooth_path > 0.0) {
-            vec3 sigma_t = frame.sigma_t.rgb;
-            float w = a.near * exp(-min(sigma_t.r, min(sigma_t.g, sigma_t.b)) * d);
+            float w = a.near * exp(-a.fade * d);
             d *= mix(1.0, clamp(smooth_path / facet, 0.5, 2.0), w);
             if (refracts) {
                 cos_i = clamp(cos_i + w * dot(travel, a.facet_n - a.smooth_n), 0.0, 1.0);

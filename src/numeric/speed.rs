@@ -60,11 +60,13 @@ pub fn factor() -> f64 {
 mod tests {
     use super::*;
 
-    /// The factor is measured once, positive and within its bounds.
+    /// The factor is measured once, and strictly within its bounds: the probe's work ran and
+    /// took a time the clock could see (a loop optimised away, or a timer that does not
+    /// advance, would pin it at 1/8).
     #[test]
     fn the_factor_is_measured_once_and_bounded() {
         let f = factor();
-        assert!((0.125..=8.0).contains(&f), "{f}");
+        assert!(f > 0.125 && f < 8.0, "{f}");
         assert_eq!(factor(), f);
         println!("speed factor {f:.3} (probe {:.4} s)", f * REFERENCE_SECONDS);
     }

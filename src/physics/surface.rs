@@ -41,15 +41,16 @@ pub fn reflect(d: DVec3, n: DVec3) -> DVec3 {
 }
 
 /// The interpolated shading normal `n` adapted to the viewer at unit direction `v` (from the
-/// surface), given the triangle's own normal `g` on `n`'s side (`n . g >= 0`). Where a coarse mesh bends fast (a thin tip),
-/// `n` turns away from the viewer on triangles that face it: the exit cosine and Fresnel's
-/// transmittance would fall to 0 inside the silhouette and draw a dark line that the faceted
-/// surface does not have. So the exit cosine is kept at least half the triangle's own: where
-/// `n . v` is below that, `n` is bent towards `v` (the least turn in the plane of the two)
-/// until it reaches it; elsewhere `n` is kept. Continuous in `n`, and the same as `n` at a
-/// true silhouette, where the triangle itself is seen at grazing. Both normals are turned
-/// over together where the triangle faces away from `v` (its back seen). The composite and
-/// the `single` pass shade with the same (glsl/view_normal.glsl).
+/// surface), given the triangle's own normal `g` on `n`'s side (`n . g >= 0`). Where a coarse
+/// mesh bends fast (a thin tip), `n` turns away from the viewer on triangles that face it:
+/// the exit cosine and Fresnel's transmittance would fall to 0 inside the silhouette and draw
+/// a dark line that the faceted surface does not have. So the exit cosine is kept at least
+/// half the triangle's own: where `n . v` is below that, `n` is bent towards `v` (the least
+/// turn in the plane of the two) until it reaches it; elsewhere `n` is kept. Continuous in
+/// `n`, and the same as `n` at a true silhouette, where the triangle itself is seen at
+/// grazing. Both normals are turned over together where the triangle faces away from `v`
+/// (its back seen). The composite and the `single` pass shade with the same
+/// (glsl/view_normal.glsl).
 pub fn adapted_normal(n: DVec3, g: DVec3, v: DVec3) -> DVec3 {
     let (n, g) = if g.dot(v) < 0.0 { (-n, -g) } else { (n, g) };
     let least = 0.5 * g.dot(v);

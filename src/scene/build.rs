@@ -689,7 +689,7 @@ pub(super) fn take_file_material(
     if let Some((colour, distance)) = g.volume {
         // A base colour at or above what the index lets a medium show (white, the format's
         // default) is taken just below it.
-        let most = Material::most_albedo(g.ior.unwrap_or(1.3)).unwrap_or(1.0);
+        let most = Material::most_albedo(g.ior.unwrap_or(DEFAULT_ETA)).unwrap_or(1.0);
         let colour = colour.map(|c| c.clamp(1e-4, 0.999 * most));
         mat.albedo = Some(colour);
         mat.scatter_distance_mm = Some(distance.map(|d| d * units.to_mm()));
@@ -721,7 +721,7 @@ pub(super) fn resolve_material(
     let material = match (&mat.preset, mat.sigma_s_prime, mat.sigma_a) {
         _ if appearance => match (mat.albedo, mat.scatter_distance_mm) {
             (Some(albedo), Some(distance)) => {
-                let eta = *mat.eta.get_or_insert(1.3);
+                let eta = *mat.eta.get_or_insert(DEFAULT_ETA);
                 Material::from_appearance(albedo, distance, eta).context("[material]")?
             }
             _ => bail!("[material] needs both albedo and scatter_distance_mm"),
@@ -730,7 +730,7 @@ pub(super) fn resolve_material(
             bail!("[material] gives both a preset and coefficients; choose one")
         }
         (None, Some(s), Some(a)) => {
-            let eta = *mat.eta.get_or_insert(1.3);
+            let eta = *mat.eta.get_or_insert(DEFAULT_ETA);
             Material::custom(s, a, eta).context("[material]")?
         }
         (None, Some(_), None) | (None, None, Some(_)) => {
@@ -765,6 +765,10 @@ pub(super) fn resolve_material(
 /// Samples per pixel where the scene does not say: four, the count every Vulkan device
 /// supports for the camera view's attachments, gives the silhouette five levels of coverage.
 pub const DEFAULT_SAMPLES: u32 = 4;
+
+/// The relative index of refraction of a material given by coefficients, colour or a glTF
+/// volume without an index: about that of milk, water and skin.
+const DEFAULT_ETA: f64 = 1.3;
 
 /// `[output]` resolved, with the scene's `[settings]`.
 pub(super) struct Output {

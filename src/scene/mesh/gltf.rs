@@ -234,17 +234,6 @@ impl Mesh {
                 if material.is_none() && mesh.indices.len() > before {
                     material = Some(material_of(name, base, &prim.material(), &buffers)?);
                 }
-                if mesh.indices.len() / 3 > crate::scene::MAX_TRIANGLES
-                    || mesh.positions.len() > MAX_VERTICES
-                {
-                    return Err(refuse(
-                        name,
-                        format!(
-                            "its nodes place more than {} triangles or {MAX_VERTICES} vertices",
-                            crate::scene::MAX_TRIANGLES
-                        ),
-                    ));
-                }
             }
         }
         mesh.has_uvs = all_uvs && !mesh.positions.is_empty();
