@@ -17,7 +17,8 @@
 
 struct Light {
     vec4 position;         // xyz: position in mm (point, spot); unused for directional
-    vec4 direction;        // xyz: direction the light travels (directional, spot axis, sun)
+    vec4 direction;        // xyz: direction the light travels (directional, spot axis, sun);
+                           // w: a sun's sin^2(angular radius) (0 for the others)
     vec4 radiance;         // rgb: colour * intensity (irradiance at normal incidence, at 1 mm for point/spot)
     vec4 params;           // x: cos(spot half-angle); a sun: its penumbra's half-width in
                            //    map texels per unit of map depth between blocker and receiver,
@@ -130,6 +131,29 @@ float fresnel_transmittance(float eta, float cos_i) {
     float rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     float rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     return clamp(1.0 - 0.5 * (rs * rs + rp * rp), 0.0, 1.0);
+}
+
+// The mean over a sun's disc (uniform, sin^2 of its angular radius `sin2`) of max(0, cos) F_t,
+// for a normal at cosine c with the disc's centre, relative to the disc's irradiance on a plane
+// facing it: c F_t(c) where the whole disc is above the horizon; where the horizon cuts it, the
+// clamped cosine over the cap in closed form (Snyder 1996) with F_t at the mean cosine of the
+// part above. Mirrors environment::disc_cosine.
+float sun_cosine(float c, float sin2, float eta) {
+    float s = sqrt(max(sin2, 0.0));
+    if (c >= s) {
+        return c * fresnel_transmittance(eta, c);
+    }
+    if (c <= -s) {
+        return 0.0;
+    }
+    float sin_t = sqrt(max(1.0 - c * c, 0.0));
+    float x = sqrt(max(1.0 / sin2 - 1.0, 0.0));
+    float y = clamp(-x * c / sin_t, -1.0, 1.0);
+    float q = sin_t * sqrt(max(1.0 - y * y, 0.0));
+    float k = max(((c * acos(y) - x * q) * sin2 + atan(q / x)) / (PI * sin2), 0.0);
+    float h = clamp(c / s, -1.0, 1.0);
+    float above = (acos(-h) + h * sqrt(max(1.0 - h * h, 0.0))) / PI;
+    return k * fresnel_transmittance(eta, min(k / max(above, 1e-9), 1.0));
 }
 
 #endif

@@ -59,9 +59,10 @@ void main() {
         vec3 wi;
         vec3 irradiance;
         light_at(frame.lights[lights], in_position, wi, irradiance);
-        float cos_i = dot(n, wi);
-        if (cos_i > 0.0) {
-            e += irradiance * cos_i * fresnel_transmittance(eta, cos_i)
+        // A disc: lit until its far edge sets.
+        float k = sun_cosine(dot(n, wi), frame.lights[lights].direction.w, eta);
+        if (k > 0.0) {
+            e += irradiance * k
                 * sun_visibility(shadow_maps, shadow_depths, lights, in_position, n);
         }
         // The rest of the map: its coefficients dotted with the texel's transfer.

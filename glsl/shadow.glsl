@@ -57,8 +57,31 @@ float shadow_visibility(sampler2DArrayShadow maps, uint index, vec3 x, vec3 n) {
     return sum / 9.0;
 }
 
+// The receiver's tangent plane at x (shading normal n) in `layer` of light l's orthographic
+// map: the depth it adds per unit of map coordinates, so that taps away from x compare
+// against the plane there and a wide filter does not take the receiver's own surface for a
+// blocker (receiver-plane depth bias, Isidoro 2006). Clamped to the slope of a plane at 80
+// degrees from the light, where the disc's cosine is small anyway.
+vec2 receiver_slope(Light l, uint layer, vec3 n) {
+    vec3 t1 = normalize(cross(n, abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 t2 = cross(n, t1);
+    mat4 m = frame.shadow_view_proj[layer];
+    // Map coordinates are half the clip coordinates; depth is clip z (w = 1).
+    vec3 a = (m * vec4(t1, 0.0)).xyz;
+    vec3 b = (m * vec4(t2, 0.0)).xyz;
+    mat2 j = mat2(0.5 * a.xy, 0.5 * b.xy);
+    float det = determinant(j);
+    if (abs(det) <= 1e-6 * length(a.xy) * length(b.xy)) {
+        return vec2(0.0);
+    }
+    vec2 g = transpose(inverse(j)) * vec2(a.z, b.z);
+    float c = abs(dot(n, normalize(l.direction.xyz)));
+    float tan_n = sqrt(max(1.0 - c * c, 0.0)) / max(c, 1e-6);
+    return g * min(1.0, 5.67 / max(tan_n, 1e-6));
+}
+
 // Taps of the sun's blocker search and filter: (2 SUN_TAPS + 1)^2 each.
-#define SUN_TAPS 2
+#define SUN_TAPS 3
 
 // Visibility of a sun (a disc at infinity, `index` a LIGHT_SUN) from x: percentage-closer soft
 // shadows (Fernando 2005) on its orthographic map. Blockers are searched over the widest
@@ -75,15 +98,16 @@ float sun_visibility(sampler2DArrayShadow maps, sampler2DArray depths, uint inde
         return 1.0;
     }
     vec2 texel = 1.0 / vec2(textureSize(maps, 0).xy);
+    vec2 slope = receiver_slope(l, layer, n);
     float per_depth = l.params.x;
     float search = max(ref * per_depth, 1.0);
     float blockers = 0.0;
     float count = 0.0;
     for (int j = -SUN_TAPS; j <= SUN_TAPS; ++j) {
         for (int i = -SUN_TAPS; i <= SUN_TAPS; ++i) {
-            vec2 at = uv + vec2(i, j) * (search / float(SUN_TAPS)) * texel;
-            float d = texture(depths, vec3(at, float(layer))).r;
-            if (d < ref) {
+            vec2 off = vec2(i, j) * (search / float(SUN_TAPS)) * texel;
+            float d = texture(depths, vec3(uv + off, float(layer))).r;
+            if (d < ref + dot(slope, off)) {
                 blockers += d;
                 count += 1.0;
             }
@@ -96,8 +120,8 @@ float sun_visibility(sampler2DArrayShadow maps, sampler2DArray depths, uint inde
     float sum = 0.0;
     for (int j = -SUN_TAPS; j <= SUN_TAPS; ++j) {
         for (int i = -SUN_TAPS; i <= SUN_TAPS; ++i) {
-            vec2 at = uv + vec2(i, j) * (radius / float(SUN_TAPS)) * texel;
-            sum += texture(maps, vec4(at, float(layer), ref));
+            vec2 off = vec2(i, j) * (radius / float(SUN_TAPS)) * texel;
+            sum += texture(maps, vec4(uv + off, float(layer), ref + dot(slope, off)));
         }
     }
     return sum / float((2 * SUN_TAPS + 1) * (2 * SUN_TAPS + 1));

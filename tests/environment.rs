@@ -103,6 +103,92 @@ fn per_texel_irradiance_is_within_three_percent_of_ray_traced_irradiance() {
     );
 }
 
+/// A soft sun (a disc of 8 degrees radius, 16 wide, as through haze) is lit as a disc with its
+/// soft shadow, not rung through the harmonics: behind the boundary (eta 1.3), per texel
+/// against ray-traced irradiance of the whole map, over every texel and over those that face
+/// away from the whole disc (where the harmonics' ringing would put the sun's light).
+#[test]
+fn a_soft_sun_is_lit_as_a_disc_on_both_sides() {
+    let dir = common::temp_dir("soft-sun");
+    let radius_deg = 8.0;
+    translucent::environment::sky::write(
+        &dir.join("soft.exr"),
+        256,
+        translucent::environment::sky::SUN_TO_SKY,
+        radius_deg,
+    )
+    .unwrap();
+    let scene = scene_in(
+        &format!(
+            "{SKY}file = \"soft.exr\"\n[material]\npreset = \"skimmilk\"\neta = 1.3\n[mesh]\nbuiltin = \"bunny\"\n"
+        ),
+        &dir,
+    )
+    .unwrap();
+    let (env, light) = scene.environment_light().unwrap();
+    let r = radius_deg.to_radians();
+    let towards = light.rotation.as_dquat() * translucent::environment::sky::sun_direction();
+    let pre = common::preprocess(&scene, SettingsOverrides::default());
+    let reference = TexelReference::compute(&scene, &pre.atlas, 4, 8192);
+    let (map, _) = illumination(&scene, &pre);
+    let all = reference.error_of(&pre.atlas, &map);
+    // The texels whose horizon hides the whole disc.
+    let mut dark = reference.clone();
+    let keep: Vec<bool> = reference
+        .texels
+        .iter()
+        .map(|&t| {
+            let (_, n) = translucent::preprocess::transfer::texel_point(&pre.atlas, t);
+            n.dot(towards) < -(r.sin() + 0.05)
+        })
+        .collect();
+    let pick = |v: &[[f64; 3]]| -> Vec<[f64; 3]> {
+        v.iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(x, _)| *x)
+            .collect()
+    };
+    dark.texels = reference
+        .texels
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(t, _)| *t)
+        .collect();
+    dark.irradiance = pick(&reference.irradiance);
+    dark.noise = pick(&reference.noise);
+    assert!(dark.texels.len() > 300, "{} dark texels", dark.texels.len());
+    let away = dark.error_of(&pre.atlas, &map);
+    println!(
+        "bunny under a soft sun ({radius_deg} degrees), eta 1.3: {:.2} / {:.2} / {:.2} % RMS per texel over {} texels, {:.2} / {:.2} / {:.2} % over the {} facing away (reference noise {:.2} / {:.2} %)",
+        100.0 * all.rel_rms[0],
+        100.0 * all.rel_rms[1],
+        100.0 * all.rel_rms[2],
+        all.texels,
+        100.0 * away.rel_rms[0],
+        100.0 * away.rel_rms[1],
+        100.0 * away.rel_rms[2],
+        away.texels,
+        100.0 * all.rel_noise[1],
+        100.0 * away.rel_noise[1],
+    );
+    let sun = env.sun.expect("the soft sun is a sun");
+    assert!(
+        (sun.angular_radius - r).abs() < 0.1 * r,
+        "radius {} vs {r}",
+        sun.angular_radius
+    );
+    for c in 0..3 {
+        assert!(all.rel_rms[c] < 0.06, "channel {c}: {:?}", all.rel_rms);
+        assert!(
+            away.rel_rms[c] < 0.06,
+            "channel {c} facing away: {:?}",
+            away.rel_rms
+        );
+    }
+}
+
 #[test]
 fn the_image_under_the_sky_is_within_the_methods_error_of_the_reference() {
     // The paper's model, as tests/accuracy.rs measures the default light's.

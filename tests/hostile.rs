@@ -123,7 +123,7 @@ fn writers_never_replace_what_is_not_a_regular_file() {
 }
 
 /// Values that made a meaningless result are refused by name: an error picture's full scale
-/// of no error, an object moved so far that f32 coordinates lose its detail (its edges would be
+/// of no error, a sky's sun disc of no size or wider than a sun, an object moved so far that f32 coordinates lose its detail (its edges would be
 /// split into slivers of their rounding), coefficients beyond f32 or any material, an empty
 /// viewer script (which would leave the window open forever).
 #[test]
@@ -140,6 +140,13 @@ fn meaningless_settings_are_refused_by_name() {
             .arg("--out")
             .arg(dir.join("cmp"));
         fails_with(c, "must be a finite positive relative error");
+    }
+    // A sun disc of no size, or so wide that it is a sky.
+    for radius in ["0", "45", "nan"] {
+        let mut c = bin();
+        c.args(["sky", "--width", "16", "--sun-radius", radius, "--out"])
+            .arg(dir.join("sky.exr"));
+        fails_with(c, "must lie between 0.1 and 30 degrees");
     }
     for translate in ["[1e8, 0.0, 0.0]", "[0.0, 0.0, 1e6]"] {
         let scene = dir.join("far.toml");

@@ -14,6 +14,9 @@ pub struct SkyArgs {
     /// The sun's irradiance at normal incidence over the sky's on level ground (0: no sun).
     #[arg(long, default_value_t = crate::environment::sky::SUN_TO_SKY)]
     pub sun_to_sky: f64,
+    /// The sun disc's angular radius, degrees (wider: a softer sun, as through haze).
+    #[arg(long, default_value_t = crate::environment::sky::SUN_RADIUS_DEG)]
+    pub sun_radius: f64,
 }
 
 /// Arguments of `tabulate`.
@@ -45,7 +48,13 @@ pub(super) fn sky(args: &SkyArgs) -> Result<()> {
             args.sun_to_sky
         );
     }
-    crate::environment::sky::write(&args.out, args.width, args.sun_to_sky)?;
+    if !(args.sun_radius.is_finite() && (0.1..=30.0).contains(&args.sun_radius)) {
+        anyhow::bail!(
+            "--sun-radius = {} must lie between 0.1 and 30 degrees",
+            args.sun_radius
+        );
+    }
+    crate::environment::sky::write(&args.out, args.width, args.sun_to_sky, args.sun_radius)?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }

@@ -40,11 +40,14 @@ pub const MAX_WORK_WIDTH: u32 = 1024;
 pub const MAX_INPUT_WIDTH: u32 = 16384;
 
 /// A region is a sun when its peak is at least this many times the map's mean radiance...
-pub const SUN_CONTRAST: f64 = 50.0;
+pub const SUN_CONTRAST: f64 = 20.0;
 
-/// ...and it spans at most this solid angle (sr; a disc of 4.6 degrees radius). Wider bright
-/// regions (a window, an overcast sun) stay in the spherical harmonics.
-pub const MAX_SUN_SOLID_ANGLE: f64 = 0.02;
+/// ...and it spans at most this solid angle (sr; a disc of 16 degrees radius). A bright region
+/// a few degrees to 30 wide (a sun through haze, a lamp in a studio map) rings through the
+/// spherical harmonics of the orders used onto the side facing away from it, so it is lit as a
+/// disc with its soft shadow; wider ones (an overcast sky, a window wall) stay in the
+/// harmonics.
+pub const MAX_SUN_SOLID_ANGLE: f64 = 0.25;
 
 /// Width of the map the spherical-harmonic projection sums over (box-averaged from the work
 /// map): 1.4 degrees a pixel, far finer than the highest band's lobes (30 degrees at order 6).
@@ -55,7 +58,7 @@ const PROJECTION_WIDTH: u32 = 256;
 pub struct Sun {
     /// Unit direction towards the sun, in the map's frame.
     pub direction: DVec3,
-    /// Irradiance it gives at normal incidence (above the sky it hides), per channel.
+    /// Irradiance it gives a plane facing its direction (above the sky it hides), per channel.
     pub irradiance: [f64; 3],
     /// Solid angle of its pixels, sr.
     pub solid_angle: f64,
@@ -63,6 +66,45 @@ pub struct Sun {
     /// excess brightness about its direction (a uniform disc of radius r has r^2 / 2), less
     /// the pixels' own spread.
     pub angular_radius: f64,
+}
+
+impl Sun {
+    /// The mean over the disc (uniform, of [`Sun::angular_radius`]) of max(0, cos) F_t(eta,
+    /// cos), with cos taken against a normal whose cosine with the disc's centre is `c`: what
+    /// multiplies [`Sun::irradiance`] on that surface. Mirrored by `sun_cosine` in
+    /// `glsl/frame.glsl`.
+    pub fn cosine(&self, c: f64, eta: f64) -> f64 {
+        let r = self.angular_radius.min(MAX_DISC_RADIUS);
+        disc_cosine(c, r.sin().powi(2), eta)
+    }
+}
+
+/// The widest disc [`disc_cosine`] is asked for, radians (beyond any sun [`find_sun`] finds).
+pub const MAX_DISC_RADIUS: f64 = 0.5;
+
+/// The mean over a uniform disc at infinity (angular radius r, `sin2` = sin^2 r) of
+/// max(0, cos) F_t(eta, cos), for a surface whose normal has cosine `c` with the disc's centre,
+/// relative to the disc's irradiance on a plane facing it. Where the whole disc is above the
+/// horizon, c F_t(c). Where the horizon cuts it, the clamped cosine integrated over the cap in
+/// closed form (Snyder 1996, as in Lagarde and de Rousiers 2014), with Fresnel's transmittance
+/// at the mean cosine of the part above the horizon (that part's share from the area of the
+/// circular segment). Continuous in c, 0 once the disc is below the horizon.
+pub fn disc_cosine(c: f64, sin2: f64, eta: f64) -> f64 {
+    let s = sin2.max(0.0).sqrt();
+    if c >= s {
+        return c * crate::physics::fresnel_transmittance(eta, c);
+    }
+    if c <= -s {
+        return 0.0;
+    }
+    let sin_t = (1.0 - c * c).max(0.0).sqrt();
+    let x = (1.0 / sin2 - 1.0).max(0.0).sqrt();
+    let y = (-x * c / sin_t).clamp(-1.0, 1.0);
+    let q = sin_t * (1.0 - y * y).max(0.0).sqrt();
+    let k = (((c * y.acos() - x * q) * sin2 + (q / x).atan()) / (PI * sin2)).max(0.0);
+    let h = (c / s).clamp(-1.0, 1.0);
+    let above = ((-h).acos() + h * (1.0 - h * h).sqrt()) / PI;
+    k * crate::physics::fresnel_transmittance(eta, (k / above.max(1e-9)).min(1.0))
 }
 
 /// An environment map ready to light a scene.
@@ -404,7 +446,7 @@ impl Environment {
                 let d = DVec3::new(r * phi.cos(), z, r * phi.sin());
                 let mut e = self.sky_irradiance(d);
                 if let Some(s) = &self.sun {
-                    let c = d.dot(s.direction).max(0.0);
+                    let c = s.cosine(d.dot(s.direction), 1.0);
                     for k in 0..3 {
                         e[k] += s.irradiance[k] * c;
                     }
@@ -544,31 +586,35 @@ fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]
         sky_w += d;
     }
     let sky = sky.map(|s| s / sky_w.max(1e-300));
-    let mut irradiance = [0.0; 3];
+    let excess = |i: usize| -> [f64; 3] {
+        std::array::from_fn(|c| (radiance[i][c] as f64 - sky[c]).max(0.0))
+    };
     let mut dir = DVec3::ZERO;
     let mut out = unchanged;
     for &i in &region {
         let (x, y) = (i as u32 % w, i as u32 / w);
         let d = pixel_solid_angle(y, w, h);
-        let wdir = direction_of(x, y, w, h);
-        let excess: [f64; 3] = std::array::from_fn(|c| (radiance[i][c] as f64 - sky[c]).max(0.0));
-        for c in 0..3 {
-            irradiance[c] += excess[c] * d;
-        }
-        dir += wdir * luminance(excess.map(|e| e as f32)) * d;
+        dir += direction_of(x, y, w, h) * luminance(excess(i).map(|e| e as f32)) * d;
         out[i] = sky.map(|s| s as f32);
     }
     let direction = dir.normalize_or(DVec3::Y);
+    // On a plane facing the disc's centre: each pixel by its cosine.
+    let mut irradiance = [0.0; 3];
+    for &i in &region {
+        let (x, y) = (i as u32 % w, i as u32 / w);
+        let k = pixel_solid_angle(y, w, h) * direction_of(x, y, w, h).dot(direction).max(0.0);
+        let e = excess(i);
+        for c in 0..3 {
+            irradiance[c] += e[c] * k;
+        }
+    }
     let (mut m2, mut total) = (0.0, 0.0);
     for &i in &region {
         let (x, y) = (i as u32 % w, i as u32 / w);
-        let d = pixel_solid_angle(y, w, h);
         let wdir = direction_of(x, y, w, h);
-        let excess = luminance(std::array::from_fn(|c| {
-            (radiance[i][c] as f64 - sky[c]).max(0.0) as f32
-        })) * d;
-        m2 += excess * wdir.angle_between(direction).powi(2);
-        total += excess;
+        let e = luminance(excess(i).map(|e| e as f32)) * pixel_solid_angle(y, w, h);
+        m2 += e * wdir.angle_between(direction).powi(2);
+        total += e;
     }
     // A pixel spans 2 pi / w in azimuth (times sin(theta)) and pi / h in elevation: uniform
     // spreads of variance span^2 / 12 each.
@@ -671,15 +717,21 @@ mod tests {
         let mut px = uniform(w, 0.5);
         // A 3 x 3-pixel sun of radiance 1000 over the sky of 0.5.
         let (sx, sy) = (40u32, 30u32);
-        let mut expect = 0.0;
         for y in sy - 1..=sy + 1 {
             for x in sx - 1..=sx + 1 {
                 px[(y * w + x) as usize] = [1000.0; 3];
-                expect += 999.5 * pixel_solid_angle(y, w, h);
             }
         }
         let env = Environment::new("test", w, h, px).unwrap();
         let sun = env.sun.expect("a sun");
+        // On a plane facing it: each pixel's excess by its cosine.
+        let mut expect = 0.0;
+        for y in sy - 1..=sy + 1 {
+            for x in sx - 1..=sx + 1 {
+                let c = direction_of(x, y, w, h).dot(sun.direction);
+                expect += 999.5 * pixel_solid_angle(y, w, h) * c;
+            }
+        }
         assert!((sun.irradiance[0] - expect).abs() < 1e-6 * expect);
         let d = direction((sx as f64 + 0.5) / w as f64, (sy as f64 + 0.5) / h as f64);
         assert!(
@@ -698,6 +750,55 @@ mod tests {
             }
         }
         assert!(Environment::new("test", w, h, wide).unwrap().sun.is_none());
+    }
+
+    /// The disc's cosine factor against a quadrature over the cap: exact for the clamped
+    /// cosine (eta 1), and within a small fraction of the full-disc value with Fresnel's
+    /// transmittance where the horizon cuts the disc.
+    #[test]
+    fn the_discs_cosine_matches_the_integral_over_the_cap() {
+        for &r_deg in &[1.5f64, 8.0, 16.0] {
+            let r = r_deg.to_radians();
+            let sin2 = r.sin().powi(2);
+            for &eta in &[1.0, 1.3, 1.6] {
+                let (mut worst, n) = (0.0f64, 400);
+                for k in 0..=60 {
+                    // Centre from straight up to below the horizon by more than the radius.
+                    let theta = (PI / 2.0 + 1.2 * r) * k as f64 / 60.0;
+                    let normal = DVec3::new(theta.sin(), theta.cos(), 0.0);
+                    // Midpoint rule over the cap about +Y, uniform in cos and azimuth.
+                    let mut sum = 0.0;
+                    for i in 0..n {
+                        let ct = 1.0 - (1.0 - r.cos()) * (i as f64 + 0.5) / n as f64;
+                        let st = (1.0 - ct * ct).sqrt();
+                        for j in 0..n {
+                            let phi = 2.0 * PI * (j as f64 + 0.5) / n as f64;
+                            let w = DVec3::new(st * phi.cos(), ct, st * phi.sin());
+                            let c = normal.dot(w);
+                            if c > 0.0 {
+                                sum += c * crate::physics::fresnel_transmittance(eta, c);
+                            }
+                        }
+                    }
+                    let cap = 2.0 * PI * (1.0 - r.cos());
+                    let want = sum / (n * n) as f64 * cap / (PI * sin2);
+                    let got = disc_cosine(theta.cos(), sin2, eta);
+                    let scale = crate::physics::fresnel_transmittance(eta, 1.0);
+                    worst = worst.max((got - want).abs() / scale);
+                    if eta == 1.0 {
+                        assert!(
+                            (got - want).abs() < 2e-3 * want.max(0.01),
+                            "r {r_deg} theta {theta}: {got} vs {want}"
+                        );
+                    }
+                }
+                // With Fresnel: the horizon's segment within 0.01 of the facing value.
+                assert!(worst < 0.01, "r {r_deg} eta {eta}: worst {worst}");
+            }
+        }
+        // A point at the limit: c F_t(c) above the horizon, 0 below.
+        assert_eq!(disc_cosine(0.5, 0.0, 1.0), 0.5);
+        assert_eq!(disc_cosine(-0.1, 0.0, 1.0), 0.0);
     }
 
     #[test]

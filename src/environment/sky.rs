@@ -54,13 +54,14 @@ fn sky(w: DVec3, sun: DVec3) -> [f64; 3] {
     }
 }
 
-/// The sky, `width` x `width / 2` pixels of linear RGB, rows from the top, its sun giving
-/// `sun_to_sky` times the sky's irradiance on level ground ([`SUN_TO_SKY`] in the shipped map;
-/// 0: no sun disc, the glow stays).
-pub fn generate(width: u32, sun_to_sky: f64) -> Vec<[f32; 3]> {
+/// The sky, `width` x `width / 2` pixels of linear RGB, rows from the top, its sun a disc of
+/// `sun_radius_deg` ([`SUN_RADIUS_DEG`] in the shipped map) giving `sun_to_sky` times the sky's
+/// irradiance on level ground ([`SUN_TO_SKY`] in the shipped map; 0: no sun disc, the glow
+/// stays).
+pub fn generate(width: u32, sun_to_sky: f64, sun_radius_deg: f64) -> Vec<[f32; 3]> {
     let height = width / 2;
     let sun = sun_direction();
-    let cos_disc = SUN_RADIUS_DEG.to_radians().cos();
+    let cos_disc = sun_radius_deg.to_radians().cos();
     let disc_solid = 2.0 * std::f64::consts::PI * (1.0 - cos_disc);
     // The sky's irradiance on level ground, summed over the pixels (disc excluded).
     let mut level = 0.0;
@@ -103,8 +104,13 @@ pub fn generate(width: u32, sun_to_sky: f64) -> Vec<[f32; 3]> {
 }
 
 /// Writes the sky as a half-float OpenEXR file.
-pub fn write(path: &std::path::Path, width: u32, sun_to_sky: f64) -> anyhow::Result<()> {
-    let px = generate(width, sun_to_sky);
+pub fn write(
+    path: &std::path::Path,
+    width: u32,
+    sun_to_sky: f64,
+    sun_radius_deg: f64,
+) -> anyhow::Result<()> {
+    let px = generate(width, sun_to_sky, sun_radius_deg);
     crate::output::write_atomic(path, |tmp| {
         use exr::prelude::*;
         let w = width as usize;

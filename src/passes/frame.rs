@@ -192,6 +192,7 @@ impl FrameUniforms {
             let shadow = shadows[0];
             let mut radiance = light.radiance;
             let mut penumbra = light.cos_cone;
+            let mut disc = 0.0;
             let kind = match light.kind {
                 LightKind::Directional => 0.0,
                 LightKind::Point => 1.0,
@@ -206,6 +207,13 @@ impl FrameUniforms {
                     // texels per unit of map depth between blocker and receiver.
                     penumbra = env.sun.map_or(0.0, |s| {
                         shadow.depth_range_mm * s.angular_radius.tan() as f32 / shadow.texel_mm
+                    });
+                    // Its disc for the cosine (`sun_cosine`).
+                    disc = env.sun.map_or(0.0, |s| {
+                        s.angular_radius
+                            .min(crate::environment::MAX_DISC_RADIUS)
+                            .sin()
+                            .powi(2) as f32
                     });
                     // The map itself, for the surface's mirror reflection and the backdrop.
                     if crate::passes::data::environment_pixels(scene) > 0 {
@@ -232,7 +240,7 @@ impl FrameUniforms {
             };
             *slot = GpuLight {
                 position: light.position.extend(1.0).to_array(),
-                direction: light.direction.extend(0.0).to_array(),
+                direction: light.direction.extend(disc).to_array(),
                 radiance: radiance.extend(0.0).to_array(),
                 params: [penumbra, 1.5 * shadow.texel_mm, shadow.depth_bias, kind],
                 layers: [layer as u32, shadows.len() as u32, 0, 0],

@@ -93,7 +93,11 @@ pub fn choose(
                     2.0 * s.angular_radius.to_degrees(),
                     s.direction.y.clamp(-1.0, 1.0).asin().to_degrees()
                 ),
-                None => "no sun (no compact region 50x brighter than the mean)".to_string(),
+                None => format!(
+                    "no sun (no region {:.0}x brighter than the mean within {} sr)",
+                    crate::environment::SUN_CONTRAST,
+                    crate::environment::MAX_SUN_SOLID_ANGLE
+                ),
             },
             p.order,
             crate::environment::sh::coefficients(p.order),
