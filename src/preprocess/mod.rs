@@ -123,18 +123,21 @@ pub struct Work {
 }
 
 /// Seconds per unit of [`Work`] on one thread, calibrated on 2 cores over meshes from a
-/// 704-triangle box to a 235 000-triangle bunny, long-triangle meshes included: kernel taps,
-/// dense entries and fit products (parallel), triangles (a serial and a parallel share); walks
+/// 704-triangle box to a 235 000-triangle bunny, long-triangle meshes included, each stage's
+/// time against its own count (`tests/estimate.rs` prints the totals): kernel taps, dense
+/// entries and fit products (parallel), triangles (a serial and a parallel share), and what
+/// every run pays whatever its size (thread start-up, allocation; once, not per thread); walks
 /// (a start, a shadow ray and the ray casts at both ends) and their collisions (a scattering
 /// event each, and a ray cast through the BVH for the flights that leave the ball around the
 /// last search free of the surface), fitted together on ketchup and skim-milk spheres with and
 /// without a refractive boundary (few collisions per walk and many).
 mod cost {
-    pub const KERNEL_TAP: f64 = 5.0e-7;
-    pub const DENSE_ENTRY: f64 = 6.0e-7;
-    pub const FIT_PRODUCT: f64 = 9.0e-8;
+    pub const KERNEL_TAP: f64 = 1.7e-6;
+    pub const DENSE_ENTRY: f64 = 8.0e-7;
+    pub const FIT_PRODUCT: f64 = 2.0e-8;
     pub const TRIANGLE_SERIAL: f64 = 2.0e-6;
-    pub const TRIANGLE_PARALLEL: f64 = 5.0e-6;
+    pub const TRIANGLE_PARALLEL: f64 = 3.0e-6;
+    pub const FIXED: f64 = 0.1;
     pub const WALK: f64 = 2.3e-6;
     pub const WALK_COLLISION: f64 = 0.6e-6;
 }
@@ -153,7 +156,8 @@ impl Work {
                 + cost::WALK * self.walks
                 + cost::WALK_COLLISION * self.walk_collisions)
                 / threads
-                + cost::TRIANGLE_SERIAL * self.triangles as f64)
+                + cost::TRIANGLE_SERIAL * self.triangles as f64
+                + cost::FIXED)
     }
 }
 
