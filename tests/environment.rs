@@ -673,4 +673,24 @@ fn under_an_environment_the_index_matched_default_is_the_full_half_space_profile
         s.material.model,
         translucent::physics::Model::HalfspaceSingle
     );
+    // A model named with a single-scattering pass is said to miss the sky's single
+    // scattering, with its share; the default is not.
+    let missing = "the single scattering of the rest of the map is missing";
+    for (model, said) in [
+        ("halfspace-single", true),
+        ("volume", true),
+        ("halfspace", false),
+    ] {
+        let s = common::scene(&format!(
+            "[[lights]]\nkind = \"environment\"\n[material]\npreset = \"ketchup\"\neta = 1.0\nmodel = \"{model}\"\n[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n"
+        ));
+        let choice =
+            translucent::pipeline::choose(&s, &SettingsOverrides::default(), 0.02).unwrap();
+        let line = choice.reasons.iter().find(|r| r.contains(missing));
+        assert_eq!(line.is_some(), said, "{model}: {:?}", choice.reasons);
+        if let Some(line) = line {
+            // Ketchup's green and blue are mostly single scattering.
+            assert!(line.contains("of the light a half-space"), "{line}");
+        }
+    }
 }

@@ -69,6 +69,17 @@ pub fn choose(
     choice
         .reasons
         .push(format!("model {}: {why}", m.model.name()));
+    if scene.environment.is_some() && m.model.has_single_pass() {
+        // Said, not refused: the model was named; what it leaves out is told with the share.
+        let share = crate::physics::incidence::single_share(m);
+        choice.reasons.push(format!(
+            "under an environment light the single-scattering pass of {} integrates the lamps and the map's sun only: the single scattering of the rest of the map is missing, {:.0} / {:.0} / {:.0} % of the light a half-space of this material gives back under diffuse light (model halfspace carries every order)",
+            m.model.name(),
+            100.0 * share[0],
+            100.0 * share[1],
+            100.0 * share[2]
+        ));
+    }
     if let Some(f) = m.incidence_factors() {
         let at = |mu: f64| f.map(|f| crate::physics::incidence::interpolate(&f, mu));
         let (a, b) = (at(0.5), at(0.1));
