@@ -1119,6 +1119,7 @@ mod tests {
             chart_angle_deg: 60.0,
             walk_paths: 2576,
             walk_lights: [None; crate::scene::MAX_LIGHTS],
+            walk_sky: None,
         }
     }
 

@@ -1016,7 +1016,7 @@ fn material_edits_re_weighted_on_the_device_equal_a_fresh_preprocessing() {
             &shown.nodes,
             &basis,
             &material,
-            &shown.settings,
+            (&shown.settings, None),
             &none,
         );
         let device = reweigher.weights(&material).unwrap();

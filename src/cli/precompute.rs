@@ -124,7 +124,7 @@ pub(super) fn reweigh_times(
         &pre.nodes,
         &basis,
         material,
-        &pre.settings,
+        (&pre.settings, None),
         &none,
     );
     let cpu_s = clock.elapsed().as_secs_f64();

@@ -418,6 +418,30 @@ impl Environment {
             .collect()
     }
 
+    /// The map without its sun in square blocks of the projection's pixels, `width` blocks
+    /// around (or the projection's pixels where it is narrower): per block the mean direction
+    /// (by luminance; the block's centre where it is black) in the map's frame and its
+    /// radiance x solid angle. What `volume`'s walks enter from.
+    pub fn sky_pixels(&self, width: u32) -> Vec<(DVec3, [f64; 3])> {
+        let pw = PROJECTION_WIDTH.min(self.width);
+        let ph = pw / 2;
+        let b = (pw / width.max(1)).clamp(1, ph) as usize;
+        let (cols, rows) = (pw as usize / b, ph as usize / b);
+        let mut out = vec![(DVec3::ZERO, [0.0; 3]); cols * rows];
+        for (i, (w, l)) in self.residual.iter().enumerate() {
+            let (x, y) = (i % pw as usize, i / pw as usize);
+            let o = &mut out[(y / b).min(rows - 1) * cols + (x / b).min(cols - 1)];
+            o.0 += *w * (luminance(l.map(|c| c as f32)) + 1e-12);
+            for c in 0..3 {
+                o.1[c] += l[c];
+            }
+        }
+        for o in &mut out {
+            o.0 = o.0.normalize_or(DVec3::Y);
+        }
+        out
+    }
+
     /// Irradiance of the map without its sun on a plane facing map direction `n`, nothing in
     /// the way (the sum over the projection's pixels).
     pub fn sky_irradiance(&self, n: DVec3) -> [f64; 3] {

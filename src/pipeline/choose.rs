@@ -49,9 +49,15 @@ pub fn choose(
         overrides,
     );
     if scene.material.model.walks() {
-        choice.settings.walk_lights = crate::preprocess::walk::entry_lights(&scene.lights);
+        choice.settings.walk_lights =
+            crate::preprocess::walk::entry_lights(&scene.lights, scene.environment.as_deref());
+        choice.sky = scene
+            .environment_light()
+            .and_then(|(env, light)| crate::preprocess::walk::WalkSky::new(env, light));
+        choice.settings.walk_sky = choice.sky.as_ref().map(|s| s.key());
         choice.reasons.push(crate::preprocess::walk::entry_reason(
             &choice.settings.walk_lights,
+            choice.sky.is_some(),
         ));
     }
     // The model is the material's; said with the derived settings, with why: the default's
@@ -69,7 +75,7 @@ pub fn choose(
     choice
         .reasons
         .push(format!("model {}: {why}", m.model.name()));
-    if scene.environment.is_some() && m.model.has_single_pass() {
+    if scene.environment.is_some() && m.model.has_single_pass() && !m.model.walks() {
         // Said, not refused: the model was named; what it leaves out is told with the share.
         let share = crate::physics::incidence::single_share(m);
         choice.reasons.push(format!(

@@ -9,9 +9,10 @@
 //!   boundary (its own tables, with Fresnel reflection and refraction at every crossing).
 //!   `volume` holds the boundary too, and is nearer the truth on closed meshes lit by lamps,
 //!   but its walks cost far more to prepare: a user names it.
-//! - **An environment light: `halfspace`**, whose profile carries every order: the per-frame
-//!   single scattering integrates delta lights along the view rays and would see the sky's sun
-//!   alone.
+//! - **An environment light on an open mesh: `halfspace`**, whose profile carries every
+//!   order: the per-frame single scattering integrates delta lights along the view rays and
+//!   would see the map's sun alone. On a closed mesh `volume` (below): its walks enter from the
+//!   map too and carry the map's single scattering but for the sun's.
 //! - **Single scattering below the target error: `halfspace`** ([`without_single_pass`]):
 //!   single scattering's share of the light a half-space gives back, per channel, under light
 //!   from every direction of the hemisphere weighted by its cosine (the incidences a convex
@@ -19,9 +20,10 @@
 //!   Chandrasekhar's H function (`physics::incidence`). For isotropic scattering it is
 //!   (2/3) (1 - ln 2) = 20.5 % at albedo 1 and more at lower albedos, so the rule takes the pass
 //!   out only under a coarse target.
-//! - **A closed mesh lit by lamps: `volume`** ([`volume_reason`]): F from random walks inside
-//!   the mesh entering along the lamps' light, the composite's oblique exit lobe and the walks'
-//!   drift; the most accurate model against the volumetric truth (docs/results/models.md).
+//! - **A closed mesh lit by lamps or an environment: `volume`** ([`volume_reason`]): F from
+//!   random walks inside the mesh entering along the lamps' light and from the environment's
+//!   map, the composite's oblique exit lobe and the walks' drift; the most accurate model
+//!   against the volumetric truth (docs/results/models.md, environment.md).
 //! - **Otherwise `halfspace-single`**: the half-space profile of orders >= 2 and per-frame
 //!   single scattering (an open mesh has no inside to walk in).
 //!
@@ -67,8 +69,12 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
     // kind decide alone.
     let (model, why) = Model::default_for(m.eta, scene.environment.is_some());
     if model != Model::HalfspaceSingle {
+        // Index-matched under an environment, the walks enter from its map as well.
+        if let Some(why) = volume_reason(scene) {
+            return Some((Model::Volume, why));
+        }
         // Where the walks would apply, the user is told they can be named.
-        let walkable = scene.environment.is_none() && lamps(scene) > 0 && scene.mesh.is_closed();
+        let walkable = (scene.environment.is_some() || lamps(scene) > 0) && scene.mesh.is_closed();
         if m.eta != 1.0 && walkable {
             return Some((
                 model,
@@ -114,29 +120,34 @@ pub fn use_model(scene: &mut Scene, model: Model, why: String) -> anyhow::Result
 
 /// The lamps the walks would enter along (`preprocess::walk::entry_lights`).
 fn lamps(scene: &Scene) -> usize {
-    crate::preprocess::walk::entry_lights(&scene.lights)
+    crate::preprocess::walk::entry_lights(&scene.lights, scene.environment.as_deref())
         .iter()
         .flatten()
         .count()
 }
 
-/// Why the default is `volume`: the mesh is closed (the walks need an inside), lamps light it
-/// (the walks enter along their light) and no environment does (its sky would enter
-/// everywhere, and the oblique exit lobe does not weigh it). None where one of these fails,
-/// eta is not 1 or the model is given.
+/// Why the default is `volume`: the mesh is closed (the walks need an inside) and lamps or an
+/// environment light it (the walks enter along the lamps' light and from the environment's
+/// map, `preprocess::walk`). None where one of these fails, eta is not 1 or the model is
+/// given.
 pub fn volume_reason(scene: &Scene) -> Option<String> {
     let lamps = lamps(scene);
-    (is_default(scene)
-        && scene.material.eta == 1.0
-        && scene.environment.is_none()
-        && lamps > 0
-        && scene.mesh.is_closed())
-    .then(|| {
-        format!(
-            "F from random walks inside the mesh along the light of its {lamps} lamp{} (eta = 1, a closed mesh): the most accurate model (--model halfspace-single keeps the half-space's F)",
-            if lamps == 1 { "" } else { "s" }
-        )
-    })
+    let sky = scene.environment.is_some();
+    (is_default(scene) && scene.material.eta == 1.0 && (lamps > 0 || sky) && scene.mesh.is_closed())
+        .then(|| {
+            let entering = if sky {
+                "entering from the environment's map and its sun".to_string()
+            } else {
+                format!(
+                    "along the light of its {lamps} lamp{}",
+                    if lamps == 1 { "" } else { "s" }
+                )
+            };
+            let other = if sky { "halfspace" } else { "halfspace-single" };
+            format!(
+                "F from random walks inside the mesh {entering} (eta = 1, a closed mesh): the most accurate model (--model {other} keeps the half-space's F)"
+            )
+        })
 }
 
 #[cfg(test)]
@@ -160,10 +171,10 @@ mod tests {
         assert!(without_single_pass(&dipole, 0.99).is_none());
     }
 
-    /// `volume` follows `halfspace-single` only where the walks can run and the default chose
-    /// the model.
+    /// `volume` is the default only where the walks can run (a closed mesh, lamps or an
+    /// environment to enter from) and the default chose the model.
     #[test]
-    fn volume_needs_a_closed_mesh_lit_by_lamps() {
+    fn volume_needs_a_closed_mesh_and_light_to_enter_from() {
         let text = |mesh: &str, light: &str, model: &str| {
             format!(
                 "[mesh]\n{mesh}\n{light}\n[material]\npreset = \"skimmilk\"\neta = 1.0\n{model}\n"
@@ -184,9 +195,10 @@ mod tests {
         // A model given is kept.
         let given = scene(text(sphere, lamp, "model = \"halfspace-single\""));
         assert!(volume_reason(&given).is_none());
-        // An environment light, or no lamp at all.
+        // An environment light: the walks enter from its map; no lamp at all: none.
         let sky = "[[lights]]\nkind = \"environment\"";
-        assert!(volume_reason(&scene(text(sphere, sky, ""))).is_none());
+        let why = volume_reason(&scene(text(sphere, sky, ""))).expect("a sphere under a sky");
+        assert!(why.contains("entering from the environment's map"), "{why}");
         let dark = "[[lights]]\nkind = \"directional\"\nintensity = 0.0";
         assert!(volume_reason(&scene(text(sphere, dark, ""))).is_none());
         // A mesh with no inside.
@@ -219,7 +231,13 @@ mod tests {
         // Single scattering's share below a coarse target: in the profile.
         assert_eq!(model(&scene(&matched), 0.5), Some(Model::Halfspace));
         let sky = format!("[[lights]]\nkind = \"environment\"\n{matched}");
-        assert_eq!(model(&scene(&sky), 0.02), Some(Model::Halfspace));
+        assert_eq!(model(&scene(&sky), 0.02), Some(Model::Volume));
+        let mut open_sky = scene(&sky);
+        open_sky
+            .mesh
+            .indices
+            .truncate(open_sky.mesh.indices.len() - 3);
+        assert_eq!(model(&open_sky, 0.02), Some(Model::Halfspace));
         let mut open = scene(&matched);
         open.mesh.indices.truncate(open.mesh.indices.len() - 3);
         assert_eq!(model(&open, 0.02), Some(Model::HalfspaceSingle));

@@ -24,6 +24,7 @@ pub fn same_geometry(a: &Settings, b: &Settings) -> bool {
     let geometry = |s: &Settings| Settings {
         walk_paths: 0,
         walk_lights: [None; crate::scene::MAX_LIGHTS],
+        walk_sky: None,
         ..*s
     };
     geometry(a) == geometry(b)
@@ -109,7 +110,7 @@ impl Prepared {
                         &shown.atlas,
                         &shown.nodes,
                         material,
-                        s,
+                        (s, None),
                         progress,
                     );
                     let how = format!(
@@ -162,6 +163,7 @@ mod tests {
             chart_angle_deg: 60.0,
             walk_paths: 0,
             walk_lights: [None; crate::scene::MAX_LIGHTS],
+            walk_sky: None,
         };
         assert!(same_geometry(
             &a,

@@ -464,7 +464,14 @@ impl Preprocessed {
         let nodes = Nodes::build(mesh, s.node_spacing_mm);
         progress("nodes", 1, 1);
         let t2 = Instant::now();
-        let ops = Operators::build(mesh, &atlas, &nodes, material, &s, progress);
+        let ops = Operators::build(
+            mesh,
+            &atlas,
+            &nodes,
+            material,
+            (&s, choice.sky.as_ref()),
+            progress,
+        );
         let t3 = Instant::now();
         Preprocessed {
             settings: s,

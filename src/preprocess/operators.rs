@@ -269,14 +269,15 @@ pub struct Weights {
 
 impl Weights {
     /// The weights of `material` on the CPU: the kernels and seam taps, and F (random walks
-    /// in `mesh` where the model says so, the profile's integral over `basis` elsewhere).
+    /// in `mesh` where the model says so, entering from the lamps and `sky`, the profile's
+    /// integral over `basis` elsewhere).
     pub fn evaluate(
         mesh: &crate::scene::mesh::Mesh,
         atlas: &Atlas,
         nodes: &Nodes,
         basis: &Basis,
         material: &Material,
-        settings: &super::settings::Settings,
+        (settings, sky): (&super::settings::Settings, Option<&super::walk::WalkSky>),
         progress: Progress<'_>,
     ) -> Weights {
         let kernel_size = settings.kernel_size;
@@ -297,7 +298,7 @@ impl Weights {
                 material,
                 settings.walk_paths,
                 min_order,
-                &lamps,
+                (&lamps, sky),
                 progress,
             );
             (walked.rows, Some(report), walked.slopes, walked.drifts)
@@ -698,12 +699,20 @@ impl Operators {
         atlas: &Atlas,
         nodes: &Nodes,
         material: &Material,
-        settings: &super::settings::Settings,
+        (settings, sky): (&super::settings::Settings, Option<&super::walk::WalkSky>),
         progress: Progress<'_>,
     ) -> Operators {
         let basis = Basis::new(atlas, nodes);
         progress("basis", 1, 1);
-        let weights = Weights::evaluate(mesh, atlas, nodes, &basis, material, settings, progress);
+        let weights = Weights::evaluate(
+            mesh,
+            atlas,
+            nodes,
+            &basis,
+            material,
+            (settings, sky),
+            progress,
+        );
         Self::assemble(atlas, nodes, basis, material, settings, weights, progress)
     }
 

@@ -43,6 +43,9 @@ pub struct Settings {
     /// The lamps the walks enter along (`model = "volume"`; none otherwise): F answers
     /// these lights, as the scene places them ([`crate::preprocess::walk`]).
     pub walk_lights: [Option<crate::scene::light::Light>; crate::scene::light::MAX_LIGHTS],
+    /// The key of the environment's sky the walks enter from besides the lamps
+    /// ([`crate::preprocess::walk::WalkSky::key`]; none without one).
+    pub walk_sky: Option<u64>,
 }
 
 impl Settings {
@@ -81,6 +84,8 @@ pub struct Choice {
     pub settings: Settings,
     /// One line per decision.
     pub reasons: Vec<String>,
+    /// The environment's sky the walks enter from ([`Settings::walk_sky`] is its key).
+    pub sky: Option<crate::preprocess::walk::WalkSky>,
 }
 
 /// Derives the settings for `material` on an object of `scale` (see the module docs).
@@ -238,8 +243,10 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             chart_angle_deg: 30.0,
             walk_paths,
             walk_lights: [None; crate::scene::light::MAX_LIGHTS],
+            walk_sky: None,
         },
         reasons,
+        sky: None,
     }
 }
 

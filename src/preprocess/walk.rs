@@ -58,23 +58,114 @@ pub const MAX_WALK_EVENTS: u64 = 10_000_000;
 /// Seed of every walk's random stream.
 pub const WALK_SEED: u64 = 0x7761_6c6b;
 
-/// The lamps of `lights` that walks enter along: directional, point and spot lights (an
-/// environment is no one direction).
-pub fn entry_lights(lights: &[Light]) -> [Option<Light>; MAX_LIGHTS] {
+/// The lamps of `lights` that walks enter along: directional, point and spot lights, and an
+/// environment's sun as the directional light of its irradiance (the rest of the map enters
+/// through [`WalkSky`]).
+pub fn entry_lights(
+    lights: &[Light],
+    environment: Option<&crate::environment::Environment>,
+) -> [Option<Light>; MAX_LIGHTS] {
     let mut out = [None; MAX_LIGHTS];
-    let lamps = lights
-        .iter()
-        .filter(|l| l.kind != LightKind::Environment && l.radiance.max_element() > 0.0);
-    for (o, l) in out.iter_mut().zip(lamps) {
-        *o = Some(*l);
+    let lamps = lights.iter().filter_map(|l| match l.kind {
+        LightKind::Environment => {
+            let sun = environment?.sun?;
+            let radiance = l.radiance * glam::DVec3::from_array(sun.irradiance).as_vec3();
+            Some(Light {
+                kind: LightKind::Directional,
+                radiance,
+                rotation: glam::Quat::IDENTITY,
+                ..*l
+            })
+        }
+        _ => Some(*l),
+    });
+    for (o, l) in out
+        .iter_mut()
+        .zip(lamps.filter(|l| l.radiance.max_element() > 0.0))
+    {
+        *o = Some(l);
     }
     out
 }
 
+/// Blocks around the sky that the walks enter from ([`WalkSky`]): 5.6 degrees each, the sky
+/// without its sun being smooth.
+const SKY_WIDTH: u32 = 64;
+
+/// The part of an environment light that walks enter from besides its sun: the map without
+/// the sun in blocks ([`crate::environment::Environment::sky_pixels`]), turned to the world
+/// and scaled by the light's radiance, drawn per channel in proportion to radiance x solid
+/// angle. Light from it leaves counted from its first scattering event on: the
+/// single-scattering pass integrates the lamps and the sun only.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WalkSky {
+    /// Per block: the unit direction towards it (world) and radiance x solid angle.
+    pixels: Vec<(DVec3, [f64; 3])>,
+    /// Per channel, the cumulative radiance x solid angle.
+    cdf: [Vec<f64>; 3],
+}
+
+impl WalkSky {
+    /// The sky of environment light `light` over map `env`; None where it is black.
+    pub fn new(env: &crate::environment::Environment, light: &Light) -> Option<WalkSky> {
+        let q = light.rotation.as_dquat();
+        let scale = light.radiance.as_dvec3();
+        let pixels: Vec<(DVec3, [f64; 3])> = env
+            .sky_pixels(SKY_WIDTH)
+            .into_iter()
+            .map(|(w, l)| (q * w, std::array::from_fn(|c| l[c] * scale[c])))
+            .collect();
+        let cdf: [Vec<f64>; 3] = std::array::from_fn(|c| {
+            let mut total = 0.0;
+            pixels
+                .iter()
+                .map(|p| {
+                    total += p.1[c];
+                    total
+                })
+                .collect()
+        });
+        cdf.iter()
+            .any(|c| c.last().is_some_and(|&t| t > 0.0))
+            .then_some(WalkSky { pixels, cdf })
+    }
+
+    /// A key of what the walks see of it (the preprocessing cache's).
+    pub fn key(&self) -> u64 {
+        let mut h = crate::numeric::hash::Fnv::default();
+        for (w, l) in &self.pixels {
+            for v in w.to_array().iter().chain(l) {
+                h.write(&v.to_le_bytes());
+            }
+        }
+        h.finish()
+    }
+
+    /// A block of channel `c` drawn by its radiance x solid angle: the direction towards it
+    /// and its irradiance estimate on a plane facing it (radiance x solid angle over the
+    /// probability of the draw); None where the channel is black.
+    fn sample(&self, c: usize, u: f64) -> Option<(DVec3, f64)> {
+        let cdf = &self.cdf[c];
+        let total = *cdf.last()?;
+        if total <= 0.0 {
+            return None;
+        }
+        let i = cdf.partition_point(|&v| v <= u * total).min(cdf.len() - 1);
+        Some((self.pixels[i].0, total))
+    }
+}
+
 /// The line that says how the walks enter under `lamps` ([`entry_lights`]), with the derived
 /// settings.
-pub fn entry_reason(lamps: &[Option<Light>]) -> String {
-    match lamps.iter().flatten().count() {
+pub fn entry_reason(lamps: &[Option<Light>], sky: bool) -> String {
+    let k = lamps.iter().flatten().count();
+    if sky {
+        return format!(
+            "walks enter from the environment's map without its sun (drawn by its brightness, a shadow ray each; their light counted from the first scattering event on, as the single-scattering pass sees the lamps and the sun only) and along the light of {k} lamp{} (the map's sun among them where it has one), each start point weighted by the lights' irradiance there: F answers these lights where the scene places them",
+            if k == 1 { "" } else { "s" }
+        );
+    }
+    match k {
         0 => "walks enter along the inward normal: the scene has no lamp (directional, point or spot light) to enter along".to_string(),
         k => format!(
             "walks enter along the light of the scene's {k} lamp{}, each start point weighted by the lamps' irradiance there (a shadow ray each), along the inward normal where no lamp reaches a node: F answers these lights where the scene places them",
@@ -238,15 +329,33 @@ impl Surface {
     /// lamp's light travelling, before refraction.
     pub(super) fn entry(
         &self,
-        lamps: &[Light],
+        (lamps, sky): (&[Light], Option<&WalkSky>),
         x: DVec3,
         n: DVec3,
         c: usize,
         shadows: bool,
         rng: &mut Rng,
-    ) -> Option<(DVec3, f64)> {
-        let mut irradiance = [(DVec3::ZERO, 0.0f64); MAX_LIGHTS];
+    ) -> Option<(DVec3, f64, bool)> {
+        // The lamps', then the sky's block drawn for this walk in the last slot.
+        let mut irradiance = [(DVec3::ZERO, 0.0f64); MAX_LIGHTS + 1];
         let mut total = 0.0;
+        if let Some((towards, e)) = sky.and_then(|s| s.sample(c, rng.uniform())) {
+            let cos = n.dot(towards);
+            let mut e_c = e * cos;
+            if self.eta != 1.0 {
+                e_c *= fresnel_transmittance(self.eta, cos);
+            }
+            if e_c > 0.0
+                && !(shadows
+                    && self
+                        .bvh
+                        .intersect(x + n * self.eps, towards, f64::INFINITY)
+                        .is_some())
+            {
+                irradiance[MAX_LIGHTS] = (-towards, e_c);
+                total += e_c;
+            }
+        }
         for (e, lamp) in irradiance.iter_mut().zip(lamps) {
             let (towards, distance, factor) = lamp.towards(x);
             let cos = n.dot(towards);
@@ -270,18 +379,20 @@ impl Surface {
             return None;
         }
         let mut u = rng.uniform() * total;
-        let lit = &irradiance[..lamps.len().min(MAX_LIGHTS)];
-        for &(d, e) in lit {
-            if e > 0.0 && u < e {
-                return Some((d, total));
+        let lit = irradiance
+            .iter()
+            .enumerate()
+            .filter(|(i, e)| e.1 > 0.0 && (*i < lamps.len() || *i == MAX_LIGHTS));
+        let mut last = None;
+        for (i, &(d, e)) in lit {
+            last = Some((d, total, i == MAX_LIGHTS));
+            if u < e {
+                return last;
             }
             u -= e;
         }
-        // Rounding: the last lamp that reaches x.
-        lit.iter()
-            .rev()
-            .find(|e| e.1 > 0.0)
-            .map(|&(d, _)| (d, total))
+        // Rounding: the last light that reaches x.
+        last
     }
 
     /// A walk travelling along `d` inside meets the surface at `hit` (on triangle `hit.triangle`
@@ -409,7 +520,10 @@ struct Walker<'a> {
     /// The reduced medium, isotropic: the truth's with g = 0.
     medium: crate::physics::Medium,
     lamps: &'a [Light],
-    /// Exits count after this many scattering events or more.
+    /// An environment's sky, entered from besides the lamps.
+    sky: Option<&'a WalkSky>,
+    /// Exits count after this many scattering events or more (from the lamps; from the sky
+    /// after one or more).
     min_order: u32,
     /// Nodes.
     n: usize,
@@ -427,7 +541,7 @@ pub fn walk_response(
     material: &Material,
     paths: u32,
     min_order: u32,
-    lamps: &[Light],
+    (lamps, sky): (&[Light], Option<&WalkSky>),
     progress: super::Progress<'_>,
 ) -> (Walked, WalkReport) {
     let walker = Walker {
@@ -436,6 +550,7 @@ pub fn walk_response(
         surface: Surface::new(mesh, nodes).behind(material.eta),
         medium: crate::physics::Medium::new(material, 0.0),
         lamps,
+        sky,
         min_order,
         n: nodes.positions.len(),
         done: std::sync::atomic::AtomicU64::new(0),
@@ -453,7 +568,11 @@ impl Walker<'_> {
             counters: [0u64; 4],
             left: [0.0; 3],
             weights: [0.0f64; 3],
-            lobe: [if self.lamps.is_empty() { 1.0 } else { 0.0 }; 3],
+            lobe: [if self.lamps.is_empty() && self.sky.is_none() {
+                1.0
+            } else {
+                0.0
+            }; 3],
         };
         if self.surface.sources.area(p) > 0.0 {
             for c in 0..3 {
@@ -476,7 +595,7 @@ impl Walker<'_> {
         let (mesh, surface, lamps) = (self.mesh, &self.surface, self.lamps);
         let mut rng = Rng::new(&[WALK_SEED, p as u64, c as u64]);
         for (along_lamps, shadows) in [(true, true), (true, false), (false, false)] {
-            if (along_lamps && lamps.is_empty()) || tally.weights[c] > 0.0 {
+            if (along_lamps && lamps.is_empty() && self.sky.is_none()) || tally.weights[c] > 0.0 {
                 continue;
             }
             let first = along_lamps && shadows;
@@ -485,12 +604,12 @@ impl Walker<'_> {
                 let [v0, v1, v2] = triangle(mesh, tri);
                 let normal = surface.outward_normal(mesh, tri);
                 let at = v0 * b[0] + v1 * b[1] + v2 * b[2];
-                let (d, weight) = if along_lamps {
-                    match surface.entry(lamps, at, normal, c, shadows, &mut rng) {
+                let (d, weight, from_sky) = if along_lamps {
+                    match surface.entry((lamps, self.sky), at, normal, c, shadows, &mut rng) {
                         // Behind a refractive boundary the light bends towards the normal.
-                        Some((d, w)) if surface.eta != 1.0 => {
+                        Some((d, w, k)) if surface.eta != 1.0 => {
                             match refract(d, normal, surface.eta) {
-                                Some(d) => (d, w),
+                                Some(d) => (d, w, k),
                                 None => continue,
                             }
                         }
@@ -498,11 +617,14 @@ impl Walker<'_> {
                         None => continue,
                     }
                 } else {
-                    (-normal, 1.0)
+                    (-normal, 1.0, false)
                 };
                 tally.counters[0] += 1;
                 tally.weights[c] += weight;
-                self.trace(scratch, &mut rng, c, (at, d, weight), tally);
+                // The sky's single scattering is the walks': the single-scattering pass
+                // integrates the lamps and the sun.
+                let min_order = if from_sky { 1 } else { self.min_order };
+                self.trace(scratch, &mut rng, c, (at, d, weight, min_order), tally);
             }
             if first {
                 tally.lobe[c] = tally.weights[c] / paths.max(1) as f64;
@@ -519,7 +641,7 @@ impl Walker<'_> {
         scratch: &mut Scratch,
         rng: &mut Rng,
         c: usize,
-        (at, mut d, weight): (DVec3, DVec3, f64),
+        (at, mut d, mut weight, min_order): (DVec3, DVec3, f64, u32),
         tally: &mut Tally,
     ) {
         let (mesh, surface) = (self.mesh, &self.surface);
@@ -569,7 +691,7 @@ impl Walker<'_> {
                         continue;
                     }
                 };
-                if order >= self.min_order {
+                if order >= min_order {
                     tally.left[c] += weight;
                     self.deposit(scratch, &hit, d_out, c, weight);
                 }
@@ -608,7 +730,12 @@ impl Walker<'_> {
             x = end;
             order += 1;
             events += 1;
-            if rng.uniform() >= albedo {
+            if order == 1 && min_order == 1 {
+                // Counted from their first scattering event on, these walks survive it with
+                // the albedo as a weight: each one may leave scattered once (at a low albedo
+                // an analog walk rarely does, and the light it carries is mostly that).
+                weight *= albedo;
+            } else if rng.uniform() >= albedo {
                 break;
             }
             if events >= MAX_WALK_EVENTS {
@@ -950,8 +1077,15 @@ mod tests {
             .position(|x| x.x.abs() < 1.0 && x.y.abs() < 1.0 && x.z > 0.0)
             .unwrap();
         for (min_order, orders) in [(2, Model::HalfspaceSingle), (1, Model::Halfspace)] {
-            let (walked, report) =
-                walk_response(&mesh, &nodes, &m, 4000, min_order, &[], &|_, _, _| {});
+            let (walked, report) = walk_response(
+                &mesh,
+                &nodes,
+                &m,
+                4000,
+                min_order,
+                (&[], None),
+                &|_, _, _| {},
+            );
             let table = Material { model: orders, ..m };
             let want = table.total_reflectance();
             let k = table_slope(&table.profiles()[0]);
@@ -1039,7 +1173,8 @@ mod tests {
             cos_cone: -1.0,
             rotation: glam::Quat::IDENTITY,
         };
-        let (walked, report) = walk_response(&mesh, &nodes, &m, 40_000, 2, &[lamp], &|_, _, _| {});
+        let (walked, report) =
+            walk_response(&mesh, &nodes, &m, 40_000, 2, (&[lamp], None), &|_, _, _| {});
         assert_eq!(report.reentries, 0);
         let back = returned(&walked, &Sources::new(&mesh, &nodes));
         let h = crate::physics::incidence::HFunction::new(m.albedo()[0]);
@@ -1064,6 +1199,65 @@ mod tests {
         );
     }
 
+    /// Under a uniform sky a point facing up enters from the hemisphere above it, drawn by the
+    /// blocks' radiance and weighted by their cosine: its mean weight is the sky's irradiance
+    /// pi L per channel, its entries cosine-distributed (mean cosine 2/3), each from the sky;
+    /// with the environment's sun a lamp beside it ([`entry_lights`]).
+    #[test]
+    fn walks_enter_from_the_sky_by_its_irradiance() {
+        let mesh = Mesh::cuboid(glam::Vec3::new(8.0, 6.0, 5.0), 2);
+        let nodes = Nodes::build(&mesh, 2.0);
+        let surface = Surface::new(&mesh, &nodes);
+        let l = [0.5f32, 1.0, 2.0];
+        let env = crate::environment::Environment::new("t", 64, 32, vec![l; 64 * 32]).unwrap();
+        let light = Light {
+            kind: LightKind::Environment,
+            position: glam::Vec3::ZERO,
+            direction: glam::Vec3::NEG_Y,
+            radiance: glam::Vec3::new(1.0, 1.0, 2.0),
+            cos_cone: -1.0,
+            rotation: glam::Quat::IDENTITY,
+        };
+        let sky = WalkSky::new(&env, &light).expect("a sky");
+        assert!(entry_lights(&[light], Some(&env))
+            .iter()
+            .all(Option::is_none));
+        let mut rng = Rng::new(&[2]);
+        let n = 200_000;
+        for c in 0..3 {
+            let (mut weight, mut cos) = (0.0, 0.0);
+            for _ in 0..n {
+                // A draw below the horizon gives no entry: weight 0.
+                let entry = surface.entry(
+                    (&[], Some(&sky)),
+                    DVec3::new(0.5, 0.5, 2.5),
+                    DVec3::Z,
+                    c,
+                    true,
+                    &mut rng,
+                );
+                if let Some((d, w, from_sky)) = entry {
+                    assert!(from_sky && d.z < 0.0);
+                    weight += w;
+                    cos += -d.z * w;
+                }
+            }
+            let want = PI * l[c] as f64 * light.radiance[c] as f64;
+            let (mean, mean_cos) = (weight / n as f64, cos / weight);
+            assert!((mean / want - 1.0).abs() < 0.01, "{c}: {mean} vs {want}");
+            // Cosine-weighted by the draws' irradiance: a cosine distribution's mean 2/3.
+            assert!((mean_cos - 2.0 / 3.0).abs() < 0.01, "{c}: {mean_cos}");
+        }
+        // A sun over the sky: a lamp of its irradiance along its light.
+        let mut px = vec![[0.5f32; 3]; 256 * 128];
+        px[40 * 256 + 100] = [5000.0; 3];
+        let with_sun = crate::environment::Environment::new("t", 256, 128, px).unwrap();
+        let sun = with_sun.sun.expect("a sun");
+        let lamp = entry_lights(&[light], Some(&with_sun))[0].expect("the sun as a lamp");
+        assert_eq!(lamp.kind, LightKind::Directional);
+        assert!((lamp.radiance.y as f64 / sun.irradiance[1] - 1.0).abs() < 1e-6);
+    }
+
     /// A walk's entry: a point that sees the lamp enters along its light with the lamp's
     /// irradiance as its weight; one in the shadow of another part of the object, or on a
     /// face turned away, does not enter along it. Of two lamps, each is drawn in proportion
@@ -1085,19 +1279,47 @@ mod tests {
         let mut rng = Rng::new(&[1]);
         let up = DVec3::Z;
         // The upper box's top face, lit; the lower box's top face, in its shadow; a bottom face.
-        let lit = surface.entry(&[down], DVec3::new(1.0, 1.0, 4.5), up, 0, true, &mut rng);
-        assert_eq!(lit, Some((DVec3::new(0.0, 0.0, -1.0), 2.0)));
+        let lit = surface.entry(
+            (&[down], None),
+            DVec3::new(1.0, 1.0, 4.5),
+            up,
+            0,
+            true,
+            &mut rng,
+        );
+        assert_eq!(lit, Some((DVec3::new(0.0, 0.0, -1.0), 2.0, false)));
         assert_eq!(
-            surface.entry(&[down], DVec3::new(1.0, 1.0, -0.5), up, 0, true, &mut rng),
+            surface.entry(
+                (&[down], None),
+                DVec3::new(1.0, 1.0, -0.5),
+                up,
+                0,
+                true,
+                &mut rng
+            ),
             None
         );
         assert_eq!(
-            surface.entry(&[down], DVec3::new(1.0, 1.0, 0.5), -up, 0, true, &mut rng),
+            surface.entry(
+                (&[down], None),
+                DVec3::new(1.0, 1.0, 0.5),
+                -up,
+                0,
+                true,
+                &mut rng
+            ),
             None
         );
         // Without the shadow ray (a node no lamp's ray reaches: along the lamp all the same).
         assert!(surface
-            .entry(&[down], DVec3::new(1.0, 1.0, -0.5), up, 0, false, &mut rng)
+            .entry(
+                (&[down], None),
+                DVec3::new(1.0, 1.0, -0.5),
+                up,
+                0,
+                false,
+                &mut rng
+            )
             .is_some());
         // Two lamps on the upper top face: 45 degrees (irradiance 1 / sqrt 2) and straight
         // down at half the radiance (0.5).
@@ -1105,9 +1327,9 @@ mod tests {
         let half = lamp(glam::Vec3::new(0.0, 0.0, -1.0), 0.5);
         let (n, mut slanted) = (20_000, 0);
         for _ in 0..n {
-            let (d, w) = surface
+            let (d, w, _) = surface
                 .entry(
-                    &[slant, half],
+                    (&[slant, half], None),
                     DVec3::new(0.0, 0.0, 4.5),
                     up,
                     1,
@@ -1136,7 +1358,7 @@ mod tests {
             .with_model(Model::Volume)
             .unwrap();
         let straight = (-2.0f64 * 5.0).exp();
-        let (walked, report) = walk_response(&mesh, &nodes, &m, 100, 1, &[], &|_, _, _| {});
+        let (walked, report) = walk_response(&mesh, &nodes, &m, 100, 1, (&[], None), &|_, _, _| {});
         assert_eq!(report.truncated, 0);
         for c in 0..3 {
             assert!(
@@ -1167,7 +1389,7 @@ mod tests {
         let mesh = two_boxes(4);
         let nodes = Nodes::build(&mesh, 2.0);
         let m = medium_of("skimmilk", false);
-        let (_, report) = walk_response(&mesh, &nodes, &m, 64, 1, &[], &|_, _, _| {});
+        let (_, report) = walk_response(&mesh, &nodes, &m, 64, 1, (&[], None), &|_, _, _| {});
         assert!(report.reentries > 0);
         assert!(report.left.iter().all(|&l| l > 1.01), "{:?}", report.left);
     }
@@ -1254,7 +1476,7 @@ mod tests {
             cos_cone: -1.0,
             rotation: glam::Quat::IDENTITY,
         };
-        let (walked, _) = walk_response(&mesh, &nodes, &m, 4000, 2, &[lamp], &|_, _, _| {});
+        let (walked, _) = walk_response(&mesh, &nodes, &m, 4000, 2, (&[lamp], None), &|_, _, _| {});
         let mut sides = Vec::new();
         for (p, x) in nodes.positions.iter().enumerate() {
             let on_side = (x.x.abs() - 10.0).abs() < 1e-3 || (x.y.abs() - 10.0).abs() < 1e-3;

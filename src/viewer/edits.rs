@@ -170,7 +170,10 @@ impl Running {
         // The walks' F answers the lamps where they were when it was walked: said, not hidden,
         // once a light moves away from there.
         let walked = &self.prepared.pre.settings.walk_lights;
-        let now = crate::preprocess::walk::entry_lights(&self.rig.lights(&self.view));
+        let now = crate::preprocess::walk::entry_lights(
+            &self.rig.lights(&self.view),
+            self.scene.environment.as_deref(),
+        );
         let moved = |a: &Option<Light>, b: &Option<Light>| match (a, b) {
             (Some(a), Some(b)) => {
                 a.kind != b.kind
