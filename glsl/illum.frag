@@ -2,7 +2,8 @@
 #extension GL_GOOGLE_include_directive : require
 // Irradiance entering the surface: E = sum over lights of L F_t(eta, cos) f(cos) max(0, N.w_i) V
 // (f: incidence_factor, the model's light at this incidence relative to normal incidence; not
-// for the environment, whose sky transfer is one scalar per texel: its sun goes without it too),
+// for the environment, whose sky transfer is one scalar per texel: its sun goes without it too,
+// and as a disc, `sun_cosine`, in place of F_t max(0, N.w_i)),
 // plus the environment's: its spherical-harmonic coefficients dotted with the texel's transfer
 // (visibility x cosine x Fresnel, precomputed; its sun is one of the lights).
 // Alpha 1 marks texels whose centre a triangle covers (the dilation pass fills the rest).

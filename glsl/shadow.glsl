@@ -57,6 +57,9 @@ float shadow_visibility(sampler2DArrayShadow maps, uint index, vec3 x, vec3 n) {
     return sum / 9.0;
 }
 
+// tan(80 degrees): the steepest receiver plane `receiver_slope` takes as it is.
+#define STEEPEST_SLOPE 5.67
+
 // The receiver's tangent plane at x (shading normal n) in `layer` of light l's orthographic
 // map: the depth it adds per unit of map coordinates, so that taps away from x compare
 // against the plane there and a wide filter does not take the receiver's own surface for a
@@ -77,7 +80,7 @@ vec2 receiver_slope(Light l, uint layer, vec3 n) {
     vec2 g = transpose(inverse(j)) * vec2(a.z, b.z);
     float c = abs(dot(n, normalize(l.direction.xyz)));
     float tan_n = sqrt(max(1.0 - c * c, 0.0)) / max(c, 1e-6);
-    return g * min(1.0, 5.67 / max(tan_n, 1e-6));
+    return g * min(1.0, STEEPEST_SLOPE / max(tan_n, 1e-6));
 }
 
 // Taps of the sun's blocker search and filter: (2 SUN_TAPS + 1)^2 each.

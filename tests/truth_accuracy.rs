@@ -372,9 +372,9 @@ fn semi_infinite_skim_milk() {
 }
 
 // Under the shipped sky (an environment light: its sun behind the bunny), at 64x64, the dipole
-// and the half-space profile (the default under an environment at eta = 1) are two to three
-// times further off than under the directional light, all of it the models' deficit under
-// light from every side (docs/results/environment.md).
+// and the half-space profile are two to three times further off than under the directional
+// light, all of it the models' deficit under light from every side (docs/results/environment.md).
+// The default there is `volume` (below).
 #[test]
 fn bunny_in_skim_milk_under_the_sky() {
     case("bunny-skimmilk-sky", Model::Dipole, [0.20, 0.16, 0.14]);
@@ -384,7 +384,7 @@ fn bunny_in_skim_milk_under_the_sky() {
 /// Under an environment the walks enter from the map without its sun (their light counted
 /// from the first scattering event on) and along the sun: the bunny under the shipped sky and
 /// the ketchup sphere under a soft sun (a disc of 8 degrees radius behind it) come to the
-/// walks' accuracy under lamps, where the half-space profile is 12-62 % off (above, and
+/// walks' accuracy under lamps, far nearer the truth than the half-space profile (above, and
 /// docs/results/environment.md). The walks' derived counts: ketchup's green and blue are
 /// almost all single scattering, which fewer walks leave noisy.
 #[test]

@@ -381,8 +381,10 @@ fn apply_default_for_reference(scene: &mut Scene, target_error: f64) -> Result<(
     if let Err(e) = crate::reference::Reference::supports(scene.material.model, &scene.mesh) {
         if default {
             bail!(
-                "render's default model for this scene is {}: {e:#}; or give --model halfspace-single for the exact model of the half-space",
-                scene.material.model.name()
+                "render's default model for this scene is {}: {e:#}; or give --model {} for the exact model of the half-space",
+                scene.material.model.name(),
+                // Under an environment the single-scattering pass would miss the map's own.
+                if scene.environment.is_some() { "halfspace" } else { "halfspace-single" }
             );
         }
         return Err(e);

@@ -14,7 +14,8 @@ pub struct SkyArgs {
     /// The sun's irradiance at normal incidence over the sky's on level ground (0: no sun).
     #[arg(long, default_value_t = crate::environment::sky::SUN_TO_SKY)]
     pub sun_to_sky: f64,
-    /// The sun disc's angular radius, degrees (wider: a softer sun, as through haze).
+    /// The sun disc's angular radius, degrees (wider: a softer sun, as through haze; up to the
+    /// widest disc the renderer lights as a sun).
     #[arg(long, default_value_t = crate::environment::sky::SUN_RADIUS_DEG)]
     pub sun_radius: f64,
 }
@@ -48,9 +49,10 @@ pub(super) fn sky(args: &SkyArgs) -> Result<()> {
             args.sun_to_sky
         );
     }
-    if !(args.sun_radius.is_finite() && (0.1..=30.0).contains(&args.sun_radius)) {
+    let widest = crate::environment::max_sun_radius_deg();
+    if !(args.sun_radius.is_finite() && (0.1..=widest).contains(&args.sun_radius)) {
         anyhow::bail!(
-            "--sun-radius = {} must lie between 0.1 and 30 degrees",
+            "--sun-radius = {} must lie between 0.1 and {widest:.0} degrees (a wider disc is a sky)",
             args.sun_radius
         );
     }

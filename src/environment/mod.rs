@@ -69,18 +69,32 @@ pub struct Sun {
 }
 
 impl Sun {
-    /// The mean over the disc (uniform, of [`Sun::angular_radius`]) of max(0, cos) F_t(eta,
-    /// cos), with cos taken against a normal whose cosine with the disc's centre is `c`: what
-    /// multiplies [`Sun::irradiance`] on that surface. Mirrored by `sun_cosine` in
-    /// `glsl/frame.glsl`.
+    /// The disc's (uniform, of [`Sun::angular_radius`]) max(0, cos) F_t(eta, cos) integrated
+    /// over it, against a normal whose cosine with the disc's centre is `c`, relative to its
+    /// irradiance on a plane facing it: what multiplies [`Sun::irradiance`] on that surface.
+    /// Mirrored by `sun_cosine` in `glsl/frame.glsl`.
     pub fn cosine(&self, c: f64, eta: f64) -> f64 {
         let r = self.angular_radius.min(MAX_DISC_RADIUS);
         disc_cosine(c, r.sin().powi(2), eta)
     }
 }
 
-/// The widest disc [`disc_cosine`] is asked for, radians (beyond any sun [`find_sun`] finds).
+/// The angular radius of the widest disc lit as a sun, degrees (of [`MAX_SUN_SOLID_ANGLE`],
+/// rounded down to a whole degree).
+pub fn max_sun_radius_deg() -> f64 {
+    (1.0 - MAX_SUN_SOLID_ANGLE / (2.0 * PI))
+        .acos()
+        .to_degrees()
+        .floor()
+}
+
+/// The widest disc [`disc_cosine`] is asked for, radians (beyond any sun the map's split
+/// finds).
 pub const MAX_DISC_RADIUS: f64 = 0.5;
+
+/// A region is a sun only when the angular radius of its brightness (the second moment) is
+/// within this factor of the radius of the disc of its solid angle (a uniform disc: 1).
+const DISC_SPREAD: f64 = 1.5;
 
 /// The mean over a uniform disc at infinity (angular radius r, `sin2` = sin^2 r) of
 /// max(0, cos) F_t(eta, cos), for a surface whose normal has cosine `c` with the disc's centre,
@@ -645,11 +659,18 @@ fn find_sun(radiance: &[[f32; 3]], w: u32, h: u32) -> (Option<Sun>, Vec<[f32; 3]
     let theta = direction.y.clamp(-1.0, 1.0).acos();
     let (da, de) = (2.0 * PI / w as f64 * theta.sin(), PI / h as f64);
     let spread = (da * da + de * de) / 12.0;
+    let angular_radius = (2.0 * (m2 / total.max(1e-300) - spread)).max(0.0).sqrt();
+    // Lit as a disc only where it is one: a strip (a horizon band, a tube) spreads far wider
+    // than the disc of its solid angle, and stays in the harmonics.
+    let disc = (1.0 - solid / (2.0 * PI)).clamp(-1.0, 1.0).acos();
+    if angular_radius > DISC_SPREAD * disc.max(de) {
+        return (None, radiance.to_vec());
+    }
     let sun = Sun {
         direction,
         irradiance,
         solid_angle: solid,
-        angular_radius: (2.0 * (m2 / total.max(1e-300) - spread)).max(0.0).sqrt(),
+        angular_radius,
     };
     (Some(sun), out)
 }
@@ -774,6 +795,31 @@ mod tests {
             }
         }
         assert!(Environment::new("test", w, h, wide).unwrap().sun.is_none());
+        // A bright disc is a sun up to MAX_SUN_SOLID_ANGLE (16 degrees radius), its measured
+        // radius its own; a strip of the same brightness (a horizon band) is not.
+        let towards = direction(0.3, 0.35);
+        let disc = |radius_deg: f64| {
+            let mut px = uniform(w, 0.5);
+            for (i, p) in px.iter_mut().enumerate() {
+                let d = direction_of(i as u32 % w, i as u32 / w, w, h);
+                if d.angle_between(towards) < radius_deg.to_radians() {
+                    *p = [1000.0; 3];
+                }
+            }
+            Environment::new("test", w, h, px).unwrap().sun
+        };
+        let sun = disc(14.0).expect("a disc of 14 degrees is a sun");
+        assert!(
+            (sun.angular_radius.to_degrees() - 14.0).abs() < 1.0,
+            "{}",
+            sun.angular_radius.to_degrees()
+        );
+        assert!(disc(18.0).is_none(), "a disc of 18 degrees is a sky");
+        let mut strip = uniform(w, 0.5);
+        for x in 20..140 {
+            strip[(60 * w + x) as usize] = [1000.0; 3];
+        }
+        assert!(Environment::new("test", w, h, strip).unwrap().sun.is_none());
     }
 
     /// The disc's cosine factor against a quadrature over the cap: exact for the clamped

@@ -62,7 +62,8 @@ pub fn generate(width: u32, sun_to_sky: f64, sun_radius_deg: f64) -> Vec<[f32; 3
     let height = width / 2;
     let sun = sun_direction();
     let cos_disc = sun_radius_deg.to_radians().cos();
-    let disc_solid = 2.0 * std::f64::consts::PI * (1.0 - cos_disc);
+    // A uniform disc of radiance L gives L pi sin^2 r on a plane facing it.
+    let disc_facing = std::f64::consts::PI * (1.0 - cos_disc * cos_disc);
     // The sky's irradiance on level ground, summed over the pixels (disc excluded).
     let mut level = 0.0;
     for y in 0..height {
@@ -77,7 +78,7 @@ pub fn generate(width: u32, sun_to_sky: f64, sun_radius_deg: f64) -> Vec<[f32; 3
             }
         }
     }
-    let sun_radiance = sun_to_sky * level / disc_solid;
+    let sun_radiance = sun_to_sky * level / disc_facing;
     let n = 4;
     (0..width * height)
         .map(|i| {

@@ -132,7 +132,9 @@ fn lamps(scene: &Scene) -> usize {
 /// given.
 pub fn volume_reason(scene: &Scene) -> Option<String> {
     let lamps = lamps(scene);
-    let sky = scene.environment.is_some();
+    let sky = scene
+        .environment_light()
+        .is_some_and(|(env, light)| crate::preprocess::walk::WalkSky::new(env, light).is_some());
     (is_default(scene) && scene.material.eta == 1.0 && (lamps > 0 || sky) && scene.mesh.is_closed())
         .then(|| {
             let entering = if sky {

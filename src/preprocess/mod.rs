@@ -116,7 +116,8 @@ pub struct Work {
     pub triangles: u64,
     /// Random walks that fill F (`model = "volume"`; 0 otherwise): nodes x walks per node
     /// and channel x 3. Each samples its start and its lamp's entry (a shadow ray), casts its
-    /// first flight and its exit's ray through the air.
+    /// first flight and its exit's ray through the air. Under an environment each also casts
+    /// a shadow ray towards the sky's block it draws, which the costs do not count.
     pub walks: f64,
     /// Collisions of those walks.
     pub walk_collisions: f64,

@@ -72,6 +72,7 @@ pub fn entry_lights(
             let radiance = l.radiance * glam::DVec3::from_array(sun.irradiance).as_vec3();
             Some(Light {
                 kind: LightKind::Directional,
+                direction: -(l.rotation * sun.direction.as_vec3()).normalize(),
                 radiance,
                 rotation: glam::Quat::IDENTITY,
                 ..*l
@@ -155,8 +156,8 @@ impl WalkSky {
     }
 }
 
-/// The line that says how the walks enter under `lamps` ([`entry_lights`]), with the derived
-/// settings.
+/// The line that says how the walks enter under `lamps` ([`entry_lights`]) and, where `sky`,
+/// an environment's map ([`WalkSky`]), with the derived settings.
 pub fn entry_reason(lamps: &[Option<Light>], sky: bool) -> String {
     let k = lamps.iter().flatten().count();
     if sky {
@@ -321,12 +322,15 @@ impl Surface {
         Surface { eta, ..self }
     }
 
-    /// How a walk starting at `x` (outward normal `n`) enters under `lamps`, channel `c`:
-    /// along the light of one lamp, drawn in proportion to each lamp's irradiance at `x`
+    /// How a walk starting at `x` (outward normal `n`) enters under `lamps` and `sky`, channel
+    /// `c`: along the light of one lamp or of one block of the sky (one block drawn per walk by
+    /// its brightness, [`WalkSky`]), chosen in proportion to each one's irradiance at `x`
     /// (radiance, distance and cone from [`Light::towards`], the cosine, the Fresnel
     /// transmittance behind a refractive boundary, and a shadow ray through the mesh), with
-    /// their sum as the walk's weight; none where no lamp reaches `x`. The direction is the
-    /// lamp's light travelling, before refraction.
+    /// their sum as the walk's weight, and whether the sky was chosen; none where no light
+    /// reaches `x`. The direction is the light travelling, before refraction. A lamp's cosine
+    /// is taken at its direction: the environment's sun enters as a point at its centre (the
+    /// illumination pass lights it as a disc).
     pub(super) fn entry(
         &self,
         (lamps, sky): (&[Light], Option<&WalkSky>),
@@ -361,7 +365,7 @@ impl Surface {
             let cos = n.dot(towards);
             let mut e_c = lamp.radiance[c] as f64 * factor * cos;
             if self.eta != 1.0 {
-                // As the illumination pass weighs it: the light that enters.
+                // The light that enters, as the illumination pass weighs a lamp's.
                 e_c *= fresnel_transmittance(self.eta, cos);
             }
             if e_c > 0.0
@@ -504,7 +508,7 @@ fn scratch(n: usize) -> Scratch {
 /// One source's running tallies: the counters (paths, collisions, cut, re-entries) and the
 /// weight that left per channel; per channel the walks' summed entry weights (their count
 /// along the normal) and the source's share in the exit lobes, its mean irradiance under the
-/// lamps (1 without lamps; 0 where no lamp's ray reaches it: it sends no light).
+/// lamps and the sky (1 without either; 0 where none reaches it: it sends no light).
 struct Tally {
     counters: [u64; 4],
     left: [f64; 3],
@@ -534,7 +538,7 @@ struct Walker<'a> {
 
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
 /// walks did, `paths` paths per node and channel, counting exits after `min_order` or more
-/// scattering events.
+/// scattering events (walks from the sky after one or more).
 pub fn walk_response(
     mesh: &Mesh,
     nodes: &Nodes,
@@ -582,9 +586,9 @@ impl Walker<'_> {
         self.column(scratch, p, tally)
     }
 
-    /// Channel `c` of source `p`'s walks, from its own random stream: along the lamps where
-    /// the scene has any; without the shadow ray where no lamp's ray reaches this node; along
-    /// the normal where it faces away from every lamp, or the scene has none.
+    /// Channel `c` of source `p`'s walks, from its own random stream: along the lamps and from
+    /// the sky where the scene has any; without the shadow ray where none reaches this node;
+    /// along the normal where it faces away from every light, or the scene has none.
     fn walk_channel(
         &self,
         scratch: &mut Scratch,
@@ -1256,6 +1260,14 @@ mod tests {
         let lamp = entry_lights(&[light], Some(&with_sun))[0].expect("the sun as a lamp");
         assert_eq!(lamp.kind, LightKind::Directional);
         assert!((lamp.radiance.y as f64 / sun.irradiance[1] - 1.0).abs() < 1e-6);
+        // Its light travels from the sun, turned with the map.
+        let turned = Light {
+            rotation: glam::Quat::from_rotation_y(0.7),
+            ..light
+        };
+        let lamp = entry_lights(&[turned], Some(&with_sun))[0].unwrap();
+        let want = -(turned.rotation.as_dquat() * sun.direction);
+        assert!(lamp.direction.as_dvec3().distance(want) < 1e-5, "{lamp:?}");
     }
 
     /// A walk's entry: a point that sees the lamp enters along its light with the lamp's

@@ -157,7 +157,9 @@ pub fn cpu_estimate(
                         }
                     }
                 }
-                k /= (side * side) as f64;
+                // The mean over the cap of cos F_t V, times the disc's flux over its
+                // irradiance on a plane facing it (`Sun::irradiance`): 2 / (1 + cos r).
+                k *= 2.0 / (1.0 + cos_max) / (side * side) as f64;
                 for ch in 0..3 {
                     e[ch] += sun.irradiance[ch] * scale[ch] * k;
                 }

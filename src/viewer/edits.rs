@@ -170,10 +170,18 @@ impl Running {
         // The walks' F answers the lamps where they were when it was walked: said, not hidden,
         // once a light moves away from there.
         let walked = &self.prepared.pre.settings.walk_lights;
-        let now = crate::preprocess::walk::entry_lights(
-            &self.rig.lights(&self.view),
-            self.scene.environment.as_deref(),
-        );
+        let lights = self.rig.lights(&self.view);
+        let now = crate::preprocess::walk::entry_lights(&lights, self.scene.environment.as_deref());
+        // And the environment's map they entered from, as it is turned and switched now.
+        let walked_sky = self.prepared.pre.settings.walk_sky;
+        let sky_moved = walked_sky.is_some() && {
+            let sky = lights
+                .iter()
+                .find(|l| l.kind == crate::scene::desc::LightKind::Environment)
+                .zip(self.scene.environment.as_deref())
+                .and_then(|(l, env)| crate::preprocess::walk::WalkSky::new(env, l));
+            sky.map(|s| s.key()) != walked_sky
+        };
         let moved = |a: &Option<Light>, b: &Option<Light>| match (a, b) {
             (Some(a), Some(b)) => {
                 a.kind != b.kind
@@ -183,7 +191,10 @@ impl Running {
             }
             (a, b) => a.is_some() != b.is_some(),
         };
-        if walked.iter().any(Option::is_some) && walked.iter().zip(&now).any(|(a, b)| moved(a, b)) {
+        if sky_moved
+            || (walked.iter().any(Option::is_some)
+                && walked.iter().zip(&now).any(|(a, b)| moved(a, b)))
+        {
             self.status = "volume: F was walked for the lights where the scene placed them; moved lights get that F (save the scene and render it to walk for these)".into();
         }
     }
