@@ -831,7 +831,7 @@ mod tests {
             let r = r_deg.to_radians();
             let sin2 = r.sin().powi(2);
             for &eta in &[1.0, 1.3, 1.6] {
-                let (mut worst, n) = (0.0f64, 400);
+                let (mut worst, n) = (0.0f64, 200);
                 for k in 0..=60 {
                     // Centre from straight up to below the horizon by more than the radius.
                     let theta = (PI / 2.0 + 1.2 * r) * k as f64 / 60.0;
