@@ -129,7 +129,7 @@ fn a_soft_sun_is_lit_as_a_disc_on_both_sides() {
     let r = radius_deg.to_radians();
     let towards = light.rotation.as_dquat() * translucent::environment::sky::sun_direction();
     let pre = common::preprocess(&scene, SettingsOverrides::default());
-    let reference = TexelReference::compute(&scene, &pre.atlas, 4, 4096);
+    let reference = TexelReference::compute(&scene, &pre.atlas, 6, 4096);
     let (map, _) = illumination(&scene, &pre);
     let all = reference.error_of(&pre.atlas, &map);
     // The texels whose horizon hides the whole disc.
