@@ -344,37 +344,22 @@ impl Surface {
         let mut irradiance = [(DVec3::ZERO, 0.0f64); MAX_LIGHTS + 1];
         let mut total = 0.0;
         if let Some((towards, e)) = sky.and_then(|s| s.sample(c, rng.uniform())) {
-            let cos = n.dot(towards);
-            let mut e_c = e * cos;
-            if self.eta != 1.0 {
-                e_c *= fresnel_transmittance(self.eta, cos);
-            }
-            if e_c > 0.0
-                && !(shadows
-                    && self
-                        .bvh
-                        .intersect(x + n * self.eps, towards, f64::INFINITY)
-                        .is_some())
-            {
+            let e_c = self.entering(e, (x, n), towards, f64::INFINITY, shadows);
+            if e_c > 0.0 {
                 irradiance[MAX_LIGHTS] = (-towards, e_c);
                 total += e_c;
             }
         }
         for (e, lamp) in irradiance.iter_mut().zip(lamps) {
             let (towards, distance, factor) = lamp.towards(x);
-            let cos = n.dot(towards);
-            let mut e_c = lamp.radiance[c] as f64 * factor * cos;
-            if self.eta != 1.0 {
-                // The light that enters, as the illumination pass weighs a lamp's.
-                e_c *= fresnel_transmittance(self.eta, cos);
-            }
-            if e_c > 0.0
-                && !(shadows
-                    && self
-                        .bvh
-                        .intersect(x + n * self.eps, towards, distance)
-                        .is_some())
-            {
+            let e_c = self.entering(
+                lamp.radiance[c] as f64 * factor,
+                (x, n),
+                towards,
+                distance,
+                shadows,
+            );
+            if e_c > 0.0 {
                 *e = (-towards, e_c);
                 total += e_c;
             }
@@ -397,6 +382,35 @@ impl Surface {
         }
         // Rounding: the last light that reaches x.
         last
+    }
+
+    /// The irradiance `e` (on a plane facing it) arriving at `x` (outward normal `n`) from
+    /// `towards` that enters: times the cosine and, behind a refractive boundary, Fresnel's
+    /// transmittance, as the illumination pass weighs a lamp's; 0 where it comes from below
+    /// the horizon or, with `shadows`, the mesh blocks it within `distance`.
+    fn entering(
+        &self,
+        e: f64,
+        (x, n): (DVec3, DVec3),
+        towards: DVec3,
+        distance: f64,
+        shadows: bool,
+    ) -> f64 {
+        let cos = n.dot(towards);
+        let mut e_c = e * cos;
+        if self.eta != 1.0 {
+            e_c *= fresnel_transmittance(self.eta, cos);
+        }
+        let blocked = || {
+            self.bvh
+                .intersect(x + n * self.eps, towards, distance)
+                .is_some()
+        };
+        if e_c > 0.0 && !(shadows && blocked()) {
+            e_c
+        } else {
+            0.0
+        }
     }
 
     /// A walk travelling along `d` inside meets the surface at `hit` (on triangle `hit.triangle`
