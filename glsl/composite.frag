@@ -40,6 +40,8 @@ layout(location = 7) centroid in vec3 in_drift_g;
 layout(location = 8) centroid in vec3 in_drift_b;
 // The position at the pixel's centre, for the triangle's normal from its screen derivatives.
 layout(location = 9) in vec3 in_position_centre;
+// The normal at the pixel's centre, for the mirror reflection's points within the pixel.
+layout(location = 10) in vec3 in_normal_centre;
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_display;
@@ -71,6 +73,12 @@ layout(constant_id = 4) const bool SURFACE = false;
 // The display's tone curve (`output::ToneMap`): 0 the sRGB clip, 1 Khronos PBR Neutral, 2 AgX,
 // applied to exposure * L before the sRGB encoding (`src/output/tonemap.rs` has the same).
 layout(constant_id = 5) const uint TONEMAP = 0u;
+// Points per side of the grid over the pixel at which the surface's mirror reflection is
+// evaluated (SURFACE): 1 (the pixel's centre) where the view takes one sample per pixel, more
+// where it is multisampled, so that a small bright source's reflection (a sun's glint, whose
+// image is a few pixels wide) gets the share of the pixel it covers, as the rest of a
+// multisampled pixel does.
+layout(constant_id = 6) const uint MIRROR_GRID = 1u;
 
 
 vec3 local_response(vec2 atlas) {
@@ -155,17 +163,69 @@ vec3 oblique_exit(vec3 x, vec3 n, float mu, vec3 k, vec3 walks) {
     return mix(walks, lobe, lit);
 }
 
+// How position and normal change across the pixel (their screen derivatives), for the mirror
+// reflection's points within it, at the pixel's centre (centroid inputs jump between pixels
+// where triangles are smaller than a pixel), and the triangle's own normal. Taken in uniform
+// control flow, before any branch.
+struct Footprint {
+    vec3 centre;
+    vec3 dx;
+    vec3 dy;
+    vec3 normal;
+    vec3 ndx;
+    vec3 ndy;
+    vec3 facet;
+};
+
+// The environment map's pixel in the mirror direction times Fresnel's reflectance, the mean
+// over MIRROR_GRID^2 points of the pixel: at each, the position and the interpolated normal
+// carried along their screen derivatives from the pixel's centre (the normal field of the
+// smooth surface the mesh stands for, continued across the pixel), adapted to the viewer as n
+// is. Points where the carried surface faces away from the camera are off the object (past
+// the silhouette) and left out; none left: the value at the fragment (normal n).
+vec3 mirror_reflection(vec3 n, vec3 v, Footprint f) {
+    float eta = frame.material.x;
+    vec3 at_fragment = (1.0 - fresnel_transmittance(eta, max(dot(n, v), 0.0)))
+        * environment_from(reflect(-v, n));
+    if (MIRROR_GRID <= 1u || frame.surface.z == 0.0) {
+        return at_fragment;
+    }
+    vec3 sum = vec3(0.0);
+    float count = 0.0;
+    for (uint i = 0u; i < MIRROR_GRID; ++i) {
+        for (uint j = 0u; j < MIRROR_GRID; ++j) {
+            vec2 o = (vec2(i, j) + 0.5) / float(MIRROR_GRID) - 0.5;
+            vec3 nk = f.normal + f.ndx * o.x + f.ndy * o.y;
+            vec3 vk = frame.camera_pos.xyz - (f.centre + f.dx * o.x + f.dy * o.y);
+            float len = length(nk) * length(vk);
+            if (!(len > 0.0) || isinf(len)) {
+                continue;
+            }
+            vk = normalize(vk);
+            // On the side of the triangle seen, as adapted_normal turns it.
+            nk = normalize(nk) * (dot(f.facet, vk) < 0.0 ? -1.0 : 1.0);
+            if (dot(nk, vk) <= 0.0) {
+                continue;
+            }
+            nk = adapted_normal(nk, f.facet, vk);
+            float c = dot(nk, vk);
+            sum += (1.0 - fresnel_transmittance(eta, c)) * environment_from(reflect(-vk, nk));
+            count += 1.0;
+        }
+    }
+    return count > 0.0 ? sum / count : at_fragment;
+}
+
 // The surface's own reflection towards v at x (normal n facing v): the environment map's pixel
 // in the mirror direction (the piecewise-constant map the truth and the reference read) times
-// Fresnel's reflectance, and for a rough surface (alpha > 0) each lamp's GGX highlight, D G2 F /
+// Fresnel's reflectance (mirror_reflection), and for a rough surface (alpha > 0) each lamp's GGX highlight, D G2 F /
 // (4 cos_o) with the height-correlated Smith masking, times its irradiance, cosine and shadow
 // (physics::surface::ggx_reflection). The environment's sun is in its map: no highlight of its
 // own. The mirror ray is not traced: where it would meet the object itself the map is seen.
-vec3 surface_reflection(vec3 x, vec3 n, vec3 v) {
+vec3 surface_reflection(vec3 x, vec3 n, vec3 v, Footprint f) {
     float eta = frame.material.x;
     float cos_o = max(dot(n, v), 0.0);
-    vec3 l = vec3(0.0);
-    l += (1.0 - fresnel_transmittance(eta, cos_o)) * environment_from(reflect(-v, n));
+    vec3 l = mirror_reflection(n, v, f);
     float a = frame.surface.x;
     if (a > 0.0 && cos_o > 0.0) {
         float a2 = a * a;
@@ -224,8 +284,13 @@ void main() {
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
     vec3 interpolated = normalize(in_normal);
     // The normal the light leaves through, towards v.
-    vec3 n = adapted_normal(interpolated, facet_normal(in_position_centre, interpolated), v);
+    vec3 facet = facet_normal(in_position_centre, interpolated);
+    vec3 n = adapted_normal(interpolated, facet, v);
     float cos_o = max(dot(n, v), 0.0);
+    vec3 normal_centre = normalize(in_normal_centre);
+    Footprint footprint = Footprint(in_position_centre, dFdx(in_position_centre),
+                                    dFdy(in_position_centre), normal_centre,
+                                    dFdx(normal_centre), dFdy(normal_centre), facet);
     // The optimized fit and the direct term are bounded so that light on any texel gives every
     // texel a non-negative response (tests/preprocess.rs light_is_never_negative); where the
     // bound is met with equality the f32 sums of the passes round it to a few ulp either side.
@@ -258,7 +323,7 @@ void main() {
         l += s.rgb * shown;
     }
     if (SURFACE) {
-        l += surface_reflection(in_position, n, v);
+        l += surface_reflection(in_position, n, v, footprint);
     }
     out_radiance = vec4(l, 1.0);
     out_display = vec4(display_value(l * push.exposure, TONEMAP), 1.0);

@@ -29,11 +29,16 @@ layout(location = 8) out vec3 out_drift_b;
 // The position again, interpolated at the pixel's centre (not the centroid): its screen
 // derivatives give the triangle's plane (those of centroid inputs are not reliable).
 layout(location = 9) out vec3 out_position_centre;
+// The normal at the pixel's centre, for its screen derivatives: where triangles are smaller
+// than a pixel the centroid of the covered samples jumps from pixel to pixel, and the
+// derivatives of centroid inputs with it.
+layout(location = 10) out vec3 out_normal_centre;
 
 void main() {
     out_position = in_position;
     out_position_centre = in_position;
     out_normal = in_normal;
+    out_normal_centre = in_normal;
     out_uv = in_uv;
     out_atlas = in_atlas;
     out_exit_slope = in_exit_slope;

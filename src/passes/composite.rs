@@ -135,6 +135,7 @@ pub fn add(
                     i.oblique as u32,
                     i.surface as u32,
                     curve.constant(),
+                    mirror_grid(t.samples.map_or(1, |s| s.2)),
                 ],
                 samples: t.samples.map_or(1, |s| s.2),
             },
@@ -165,4 +166,17 @@ pub fn add(
             });
         }))
     });
+}
+
+/// Points per side of the grid over each pixel at which the surface's mirror reflection is
+/// evaluated (`MIRROR_GRID` in glsl/composite.frag): the pixel's centre alone where the view
+/// takes one sample per pixel, as every other term; otherwise 4 x 4, finer than the samples,
+/// since a sun's reflection in a curved surface is a glint a few pixels wide whose share of
+/// the pixel the samples alone would catch in steps of a quarter.
+fn mirror_grid(samples: u32) -> u32 {
+    if samples > 1 {
+        4
+    } else {
+        1
+    }
 }
