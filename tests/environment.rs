@@ -673,7 +673,13 @@ fn bad_environments_are_refused_by_name() {
 #[test]
 fn prt_reports_order_against_error_and_cost() {
     let dir = common::temp_dir("prt");
-    std::fs::write(dir.join("sky.toml"), SKY).unwrap();
+    // The transfer's orders are the question, not the model: the half-space's F, without the
+    // walks that are the default under a sky.
+    std::fs::write(
+        dir.join("sky.toml"),
+        format!("{SKY}[material]\nmodel = \"halfspace\"\n"),
+    )
+    .unwrap();
     let mut cmd = common::bin();
     cmd.args([
         "--validate",

@@ -500,7 +500,8 @@ fn the_environment_turns_and_switches_maps_in_the_viewer() {
     assert!(o.status.success(), "{}", common::stderr(&o));
     std::fs::write(
         dir.join("scene.toml"),
-        "[[lights]]\nkind = \"environment\"\n[output]\nwidth = 256\nheight = 256\n",
+        "[[lights]]\nkind = \"environment\"\n[output]\nwidth = 256\nheight = 256\n\
+         [material]\nmodel = \"halfspace\"\n",
     )
     .unwrap();
     let script = "frames 2; screenshot sky\n\

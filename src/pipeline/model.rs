@@ -5,14 +5,20 @@
 //! Otherwise, in this order (the first two are the material's and the lights' kind alone,
 //! `Model::default_for`, which a scene's material takes before a command decides the rest):
 //!
-//! - **eta != 1: `halfspace`**, the half-space profile of every order behind the refractive
-//!   boundary (its own tables, with Fresnel reflection and refraction at every crossing).
-//!   `volume` holds the boundary too, and is nearer the truth on closed meshes lit by lamps,
-//!   but its walks cost far more to prepare: a user names it.
+//! - **An environment light on a closed mesh: `volume`** ([`volume_reason`]) at any eta: its
+//!   walks enter from the map and carry the map's single scattering but for the sun's, behind
+//!   a refractive boundary refracted, reflected and leaving as the light does. Under a sky
+//!   the half-space's F is several times further from the truth than the walks' on small
+//!   and thin objects and on the bunnies (docs/results/environment.md), so the walks'
+//!   preprocessing is worth its time there.
+//! - **eta != 1 otherwise: `halfspace`**, the half-space profile of every order behind the
+//!   refractive boundary (its own tables, with Fresnel reflection and refraction at every
+//!   crossing). `volume` holds the boundary too, and is nearer the truth on small and thin
+//!   objects lit by lamps, but its walks and its refracting single-scattering pass cost far
+//!   more: a user names it.
 //! - **An environment light on an open mesh: `halfspace`**, whose profile carries every
 //!   order: the per-frame single scattering integrates delta lights along the view rays and
-//!   would see the map's sun alone. On a closed mesh `volume` (below): its walks enter from the
-//!   map too and carry the map's single scattering but for the sun's.
+//!   would see the map's sun alone.
 //! - **Single scattering below the target error: `halfspace`** ([`without_single_pass`]):
 //!   single scattering's share of the light a half-space gives back, per channel, under light
 //!   from every direction of the hemisphere weighted by its cosine (the incidences a convex
@@ -20,7 +26,7 @@
 //!   Chandrasekhar's H function (`physics::incidence`). For isotropic scattering it is
 //!   (2/3) (1 - ln 2) = 20.5 % at albedo 1 and more at lower albedos, so the rule takes the pass
 //!   out only under a coarse target.
-//! - **A closed mesh lit by lamps or an environment: `volume`** ([`volume_reason`]): F from
+//! - **A closed mesh lit by lamps (eta = 1): `volume`** ([`volume_reason`]): F from
 //!   random walks inside the mesh entering along the lamps' light and from the environment's
 //!   map, the composite's oblique exit lobe and the walks' drift; the most accurate model
 //!   against the volumetric truth (docs/results/models.md, environment.md).
@@ -66,10 +72,10 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
     }
     let m = &scene.material;
     // Behind a refractive boundary and under an environment, the material and the lights'
-    // kind decide alone.
+    // kind decide alone, but for the walks under an environment.
     let (model, why) = Model::default_for(m.eta, scene.environment.is_some());
     if model != Model::HalfspaceSingle {
-        // Index-matched under an environment, the walks enter from its map as well.
+        // Under an environment the walks enter from its map as well, at any eta.
         if let Some(why) = volume_reason(scene) {
             return Some((Model::Volume, why));
         }
@@ -126,16 +132,17 @@ fn lamps(scene: &Scene) -> usize {
         .count()
 }
 
-/// Why the default is `volume`: the mesh is closed (the walks need an inside) and lamps or an
-/// environment light it (the walks enter along the lamps' light and from the environment's
-/// map, `preprocess::walk`). None where one of these fails, eta is not 1 or the model is
-/// given.
+/// Why the default is `volume`: the mesh is closed (the walks need an inside) and an
+/// environment's map lights it, or lamps do at eta = 1 (the walks enter along the lamps' light
+/// and from the environment's map, `preprocess::walk`). None where one of these fails or the
+/// model is given.
 pub fn volume_reason(scene: &Scene) -> Option<String> {
     let lamps = lamps(scene);
     let sky = scene
         .environment_light()
         .is_some_and(|(env, light)| crate::preprocess::walk::WalkSky::new(env, light).is_some());
-    (is_default(scene) && scene.material.eta == 1.0 && (lamps > 0 || sky) && scene.mesh.is_closed())
+    let eta = scene.material.eta;
+    (is_default(scene) && (sky || (eta == 1.0 && lamps > 0)) && scene.mesh.is_closed())
         .then(|| {
             let entering = if sky {
                 "entering from the environment's map and its sun".to_string()
@@ -146,8 +153,13 @@ pub fn volume_reason(scene: &Scene) -> Option<String> {
                 )
             };
             let other = if sky { "halfspace" } else { "halfspace-single" };
+            let boundary = if eta == 1.0 {
+                "eta = 1".to_string()
+            } else {
+                format!("behind the refractive boundary eta = {eta}, refracted and reflected there as the light is")
+            };
             format!(
-                "F from random walks inside the mesh {entering} (eta = 1, a closed mesh): the most accurate model (--model {other} keeps the half-space's F)"
+                "F from random walks inside the mesh {entering} ({boundary}, a closed mesh): the most accurate model (--model {other} keeps the half-space's F)"
             )
         })
 }
@@ -234,6 +246,21 @@ mod tests {
         assert_eq!(model(&scene(&matched), 0.5), Some(Model::Halfspace));
         let sky = format!("[[lights]]\nkind = \"environment\"\n{matched}");
         assert_eq!(model(&scene(&sky), 0.02), Some(Model::Volume));
+        // Under an environment the walks are the default behind a boundary too; under a lamp
+        // the half-space is.
+        let sky_behind = format!("[[lights]]\nkind = \"environment\"\n{skim}");
+        assert_eq!(model(&scene(&sky_behind), 0.02), Some(Model::Volume));
+        let why = decide(&scene(&sky_behind), 0.02).unwrap().1;
+        assert!(
+            why.contains("behind the refractive boundary eta = 1.3"),
+            "{why}"
+        );
+        let mut open_behind = scene(&sky_behind);
+        open_behind
+            .mesh
+            .indices
+            .truncate(open_behind.mesh.indices.len() - 3);
+        assert_eq!(model(&open_behind, 0.02), Some(Model::Halfspace));
         let mut open_sky = scene(&sky);
         open_sky
             .mesh
