@@ -74,9 +74,9 @@ layout(constant_id = 4) const bool SURFACE = false;
 // applied to exposure * L before the sRGB encoding (`src/output/tonemap.rs` has the same).
 layout(constant_id = 5) const uint TONEMAP = 0u;
 // Points per side of the grid over the pixel at which the surface's mirror reflection is
-// evaluated (SURFACE): 1 (the pixel's centre) where the view takes one sample per pixel, more
-// where it is multisampled, so that a small bright source's reflection (a sun's glint, whose
-// image is a few pixels wide) gets the share of the pixel it covers, as the rest of a
+// evaluated where it may hold the environment's sun (SURFACE): 1 (the pixel's centre) where
+// the view takes one sample per pixel, more where it is multisampled, so that the sun's glint,
+// whose image is a few pixels wide, gets the share of the pixel it covers, as the rest of a
 // multisampled pixel does.
 layout(constant_id = 6) const uint MIRROR_GRID = 1u;
 
@@ -165,8 +165,7 @@ vec3 oblique_exit(vec3 x, vec3 n, float mu, vec3 k, vec3 walks) {
 
 // How position and normal change across the pixel (their screen derivatives), for the mirror
 // reflection's points within it, at the pixel's centre (centroid inputs jump between pixels
-// where triangles are smaller than a pixel), and the triangle's own normal. Taken in uniform
-// control flow, before any branch.
+// where triangles are smaller than a pixel), and the triangle's own normal (footprint()).
 struct Footprint {
     vec3 centre;
     vec3 dx;
@@ -175,19 +174,63 @@ struct Footprint {
     vec3 ndx;
     vec3 ndy;
     vec3 facet;
+    // The angle (radians) by which the mirror direction may turn from the pixel's centre to
+    // its corners: half the sum of its screen derivatives' lengths (not a number or infinite
+    // where a lane's derivative is: then the glint is taken as possible).
+    float spread;
 };
 
-// The environment map's pixel in the mirror direction times Fresnel's reflectance, the mean
-// over MIRROR_GRID^2 points of the pixel: at each, the position and the interpolated normal
-// carried along their screen derivatives from the pixel's centre (the normal field of the
-// smooth surface the mesh stands for, continued across the pixel), adapted to the viewer as n
-// is. Points where the carried surface faces away from the camera are off the object (past
-// the silhouette) and left out; none left: the value at the fragment (normal n).
+// The point at offset o (in pixels, from the pixel's centre) of footprint f: the direction
+// vk towards the camera and the interpolated normal nk carried there along its screen
+// derivatives (the normal field of the smooth surface the mesh stands for, continued across
+// the pixel), adapted to the viewer as the fragment's is. False where the carried surface
+// faces away from the camera: off the object, past the silhouette.
+bool footprint_point(Footprint f, vec2 o, out vec3 nk, out vec3 vk) {
+    nk = f.normal + f.ndx * o.x + f.ndy * o.y;
+    vk = frame.camera_pos.xyz - (f.centre + f.dx * o.x + f.dy * o.y);
+    float len = length(nk) * length(vk);
+    if (!(len > 0.0) || isinf(len)) {
+        return false;
+    }
+    vk = normalize(vk);
+    // On the side of the triangle seen, as adapted_normal turns it.
+    nk = normalize(nk) * (dot(f.facet, vk) < 0.0 ? -1.0 : 1.0);
+    if (dot(nk, vk) <= 0.0) {
+        return false;
+    }
+    nk = adapted_normal(nk, f.facet, vk);
+    return true;
+}
+
+// Whether the mirror directions across the pixel may reach the environment's sun (a light of
+// kind LIGHT_SUN; its disc is in the map): the angle from the mirror direction r at the
+// fragment to the sun within the sun's radius plus the directions' spread to the pixel's
+// corners (f.spread) and a map pixel's height. Elsewhere the map seen in the mirror is its
+// smooth sky, whose mean over the pixel is its value at the centre.
+bool glint_possible(vec3 r, Footprint f) {
+    uint lights = frame.counts.x;
+    for (uint i = 0u; i < lights; ++i) {
+        if (uint(frame.lights[i].params.w) != LIGHT_SUN) {
+            continue;
+        }
+        vec3 towards = -normalize(frame.lights[i].direction.xyz);
+        float radius = asin(sqrt(clamp(frame.lights[i].direction.w, 0.0, 1.0)));
+        float margin = PI / max(frame.surface.w, 1.0);
+        return acos(clamp(dot(r, towards), -1.0, 1.0)) < radius + f.spread + margin;
+    }
+    return false;
+}
+
+// The environment map's pixel in the mirror direction times Fresnel's reflectance: where the
+// pixel may hold the sun's glint (glint_possible), the mean over MIRROR_GRID^2 points of the
+// pixel (footprint_point), points off the object left out; elsewhere, and where no point is on
+// it, the value at the fragment (normal n).
 vec3 mirror_reflection(vec3 n, vec3 v, Footprint f) {
     float eta = frame.material.x;
+    vec3 r = reflect(-v, n);
     vec3 at_fragment = (1.0 - fresnel_transmittance(eta, max(dot(n, v), 0.0)))
-        * environment_from(reflect(-v, n));
-    if (MIRROR_GRID <= 1u || frame.surface.z == 0.0) {
+        * environment_from(r);
+    if (MIRROR_GRID <= 1u || frame.surface.z == 0.0 || !glint_possible(r, f)) {
         return at_fragment;
     }
     vec3 sum = vec3(0.0);
@@ -195,22 +238,12 @@ vec3 mirror_reflection(vec3 n, vec3 v, Footprint f) {
     for (uint i = 0u; i < MIRROR_GRID; ++i) {
         for (uint j = 0u; j < MIRROR_GRID; ++j) {
             vec2 o = (vec2(i, j) + 0.5) / float(MIRROR_GRID) - 0.5;
-            vec3 nk = f.normal + f.ndx * o.x + f.ndy * o.y;
-            vec3 vk = frame.camera_pos.xyz - (f.centre + f.dx * o.x + f.dy * o.y);
-            float len = length(nk) * length(vk);
-            if (!(len > 0.0) || isinf(len)) {
-                continue;
+            vec3 nk, vk;
+            if (footprint_point(f, o, nk, vk)) {
+                float c = dot(nk, vk);
+                sum += (1.0 - fresnel_transmittance(eta, c)) * environment_from(reflect(-vk, nk));
+                count += 1.0;
             }
-            vk = normalize(vk);
-            // On the side of the triangle seen, as adapted_normal turns it.
-            nk = normalize(nk) * (dot(f.facet, vk) < 0.0 ? -1.0 : 1.0);
-            if (dot(nk, vk) <= 0.0) {
-                continue;
-            }
-            nk = adapted_normal(nk, f.facet, vk);
-            float c = dot(nk, vk);
-            sum += (1.0 - fresnel_transmittance(eta, c)) * environment_from(reflect(-vk, nk));
-            count += 1.0;
         }
     }
     return count > 0.0 ? sum / count : at_fragment;
@@ -254,6 +287,28 @@ vec3 surface_reflection(vec3 x, vec3 n, vec3 v, Footprint f) {
     return l;
 }
 
+// The pixel's footprint for the mirror reflection (Footprint), where it is taken over the
+// pixel (MIRROR_GRID above 1 and a map to reflect); elsewhere zero. Called in uniform control
+// flow (the condition is a constant and a uniform), as its screen derivatives need.
+Footprint footprint(vec3 facet) {
+    Footprint f = Footprint(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0),
+                            facet, 0.0);
+    if (MIRROR_GRID <= 1u || frame.surface.z == 0.0) {
+        return f;
+    }
+    vec3 normal = normalize(in_normal_centre);
+    vec3 mirror = reflect(-normalize(frame.camera_pos.xyz - in_position_centre), normal);
+    float spread = 0.5 * (length(dFdx(mirror)) + length(dFdy(mirror)));
+    f.centre = in_position_centre;
+    f.dx = dFdx(in_position_centre);
+    f.dy = dFdy(in_position_centre);
+    f.normal = normal;
+    f.ndx = dFdx(normal);
+    f.ndy = dFdy(normal);
+    f.spread = (spread >= 0.0 && !isinf(spread)) ? spread : PI;
+    return f;
+}
+
 // The `single` pass's value at pixel p. That pass takes one sample per pixel, at its centre; a
 // multisampled silhouette pixel whose centre the object misses is shaded from its samples
 // inside, and takes the mean of its neighbours that the object covers (none: black).
@@ -287,10 +342,6 @@ void main() {
     vec3 facet = facet_normal(in_position_centre, interpolated);
     vec3 n = adapted_normal(interpolated, facet, v);
     float cos_o = max(dot(n, v), 0.0);
-    vec3 normal_centre = normalize(in_normal_centre);
-    Footprint footprint = Footprint(in_position_centre, dFdx(in_position_centre),
-                                    dFdy(in_position_centre), normal_centre,
-                                    dFdx(normal_centre), dFdy(normal_centre), facet);
     // The optimized fit and the direct term are bounded so that light on any texel gives every
     // texel a non-negative response (tests/preprocess.rs light_is_never_negative); where the
     // bound is met with equality the f32 sums of the passes round it to a few ulp either side.
@@ -323,7 +374,7 @@ void main() {
         l += s.rgb * shown;
     }
     if (SURFACE) {
-        l += surface_reflection(in_position, n, v, footprint);
+        l += surface_reflection(in_position, n, v, footprint(facet));
     }
     out_radiance = vec4(l, 1.0);
     out_display = vec4(display_value(l * push.exposure, TONEMAP), 1.0);

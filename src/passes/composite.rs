@@ -63,6 +63,11 @@ pub struct CompositeInputs {
     pub environment: ResourceId,
     /// Whether the surface's own reflection is added (`scene::Surface::reflects`).
     pub surface: bool,
+    /// Whether that reflection may hold the environment's sun as a glint: a scene with an
+    /// environment light. The mirror image is then the mean over the pixel near the sun
+    /// ([`mirror_grid`]); without one the grid's code is compiled out (llvmpipe pays for its
+    /// presence even where a uniform skips it).
+    pub glint: bool,
 }
 
 /// The images `composite` writes.
@@ -135,7 +140,7 @@ pub fn add(
                     i.oblique as u32,
                     i.surface as u32,
                     curve.constant(),
-                    mirror_grid(t.samples.map_or(1, |s| s.2)),
+                    mirror_grid(i.glint, t.samples.map_or(1, |s| s.2)),
                 ],
                 samples: t.samples.map_or(1, |s| s.2),
             },
@@ -169,12 +174,13 @@ pub fn add(
 }
 
 /// Points per side of the grid over each pixel at which the surface's mirror reflection is
-/// evaluated (`MIRROR_GRID` in glsl/composite.frag): the pixel's centre alone where the view
-/// takes one sample per pixel, as every other term; otherwise 4 x 4, finer than the samples,
-/// since a sun's reflection in a curved surface is a glint a few pixels wide whose share of
-/// the pixel the samples alone would catch in steps of a quarter.
-fn mirror_grid(samples: u32) -> u32 {
-    if samples > 1 {
+/// evaluated where the pixel may hold the environment's sun (`MIRROR_GRID` and
+/// `glint_possible` in glsl/composite.frag): the pixel's centre alone where the view takes one
+/// sample per pixel, as every other term, or no glint can show; otherwise 4 x 4, finer than the samples, since a
+/// sun's reflection in a curved surface is a glint a few pixels wide whose share of the pixel
+/// the samples alone would catch in steps of a quarter.
+fn mirror_grid(glint: bool, samples: u32) -> u32 {
+    if glint && samples > 1 {
         4
     } else {
         1

@@ -415,6 +415,7 @@ impl<'a> Assembly<'a> {
                 oblique: scene.material.takes_oblique_exit() && scene.environment.is_none(),
                 environment,
                 surface: scene.surface.reflects(&scene.material),
+                glint: scene.surface.reflects(&scene.material) && scene.environment.is_some(),
             },
             passes::composite::CompositeTargets {
                 hdr,
