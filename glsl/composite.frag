@@ -174,10 +174,13 @@ struct Footprint {
     vec3 ndx;
     vec3 ndy;
     vec3 facet;
-    // The angle (radians) by which the mirror direction may turn from the pixel's centre to
-    // its corners: half the sum of its screen derivatives' lengths (not a number or infinite
-    // where a lane's derivative is: then the glint is taken as possible).
+    // The angle (radians) by which the mirror direction turns from the pixel's centre to its
+    // corners where it turns linearly: half the sum of the angles its screen derivatives span
+    // (not a number or infinite where a lane's derivative is: then the glint is taken as
+    // possible).
     float spread;
+    // The mirror direction at the pixel's centre (of the interpolated normal there).
+    vec3 mirror;
 };
 
 // The point at offset o (in pixels, from the pixel's centre) of footprint f: the direction
@@ -193,30 +196,36 @@ bool footprint_point(Footprint f, vec2 o, out vec3 nk, out vec3 vk) {
         return false;
     }
     vk = normalize(vk);
-    // On the side of the triangle seen, as adapted_normal turns it.
-    nk = normalize(nk) * (dot(f.facet, vk) < 0.0 ? -1.0 : 1.0);
-    if (dot(nk, vk) <= 0.0) {
+    nk = normalize(nk);
+    // Facing the camera on the side of the triangle seen (adapted_normal turns both over
+    // where its back is seen).
+    float side = dot(f.facet, vk) < 0.0 ? -1.0 : 1.0;
+    if (side * dot(nk, vk) <= 0.0) {
         return false;
     }
     nk = adapted_normal(nk, f.facet, vk);
     return true;
 }
 
-// Whether the mirror directions across the pixel may reach the environment's sun (a light of
-// kind LIGHT_SUN; its disc is in the map): the angle from the mirror direction r at the
-// fragment to the sun within the sun's radius plus the directions' spread to the pixel's
-// corners (f.spread) and a map pixel's height. Elsewhere the map seen in the mirror is its
-// smooth sky, whose mean over the pixel is its value at the centre.
-bool glint_possible(vec3 r, Footprint f) {
+// Whether the mirror directions across the pixel may reach the environment's sun (the light
+// of kind LIGHT_SUN, where the map has one: its disc is in the map): the angle from the
+// mirror direction at the pixel's centre (f.mirror) to the sun within the sun's radius, one
+// and a half times the directions' spread to the pixel's corners (f.spread: linear across the
+// pixel, where at a rim the angle grows faster than the quad's one-sided difference says; a
+// rim pixel it still misses is taken at its centre, as a pixel of one sample is) and two map
+// pixels' height (the disc's edge in the piecewise-constant map). Elsewhere the map seen in
+// the mirror is its smooth sky, whose mean over the pixel is its value at the centre.
+bool glint_possible(Footprint f) {
     uint lights = frame.counts.x;
     for (uint i = 0u; i < lights; ++i) {
-        if (uint(frame.lights[i].params.w) != LIGHT_SUN) {
+        Light l = frame.lights[i];
+        if (uint(l.params.w) != LIGHT_SUN || all(equal(l.radiance.rgb, vec3(0.0)))) {
             continue;
         }
-        vec3 towards = -normalize(frame.lights[i].direction.xyz);
-        float radius = asin(sqrt(clamp(frame.lights[i].direction.w, 0.0, 1.0)));
-        float margin = PI / max(frame.surface.w, 1.0);
-        return acos(clamp(dot(r, towards), -1.0, 1.0)) < radius + f.spread + margin;
+        vec3 towards = -normalize(l.direction.xyz);
+        float radius = asin(sqrt(clamp(l.direction.w, 0.0, 1.0)));
+        float margin = 2.0 * PI / max(frame.surface.w, 1.0);
+        return acos(clamp(dot(f.mirror, towards), -1.0, 1.0)) < radius + 1.5 * f.spread + margin;
     }
     return false;
 }
@@ -227,11 +236,9 @@ bool glint_possible(vec3 r, Footprint f) {
 // it, the value at the fragment (normal n).
 vec3 mirror_reflection(vec3 n, vec3 v, Footprint f) {
     float eta = frame.material.x;
-    vec3 r = reflect(-v, n);
-    vec3 at_fragment = (1.0 - fresnel_transmittance(eta, max(dot(n, v), 0.0)))
-        * environment_from(r);
-    if (MIRROR_GRID <= 1u || frame.surface.z == 0.0 || !glint_possible(r, f)) {
-        return at_fragment;
+    if (MIRROR_GRID <= 1u || frame.surface.z == 0.0 || !glint_possible(f)) {
+        return (1.0 - fresnel_transmittance(eta, max(dot(n, v), 0.0)))
+            * environment_from(reflect(-v, n));
     }
     vec3 sum = vec3(0.0);
     float count = 0.0;
@@ -246,15 +253,20 @@ vec3 mirror_reflection(vec3 n, vec3 v, Footprint f) {
             }
         }
     }
-    return count > 0.0 ? sum / count : at_fragment;
+    if (count > 0.0) {
+        return sum / count;
+    }
+    return (1.0 - fresnel_transmittance(eta, max(dot(n, v), 0.0)))
+        * environment_from(reflect(-v, n));
 }
 
 // The surface's own reflection towards v at x (normal n facing v): the environment map's pixel
 // in the mirror direction (the piecewise-constant map the truth and the reference read) times
-// Fresnel's reflectance (mirror_reflection), and for a rough surface (alpha > 0) each lamp's GGX highlight, D G2 F /
-// (4 cos_o) with the height-correlated Smith masking, times its irradiance, cosine and shadow
-// (physics::surface::ggx_reflection). The environment's sun is in its map: no highlight of its
-// own. The mirror ray is not traced: where it would meet the object itself the map is seen.
+// Fresnel's reflectance (mirror_reflection), and for a rough surface (alpha > 0) each lamp's
+// GGX highlight, D G2 F / (4 cos_o) with the height-correlated Smith masking, times its
+// irradiance, cosine and shadow (physics::surface::ggx_reflection). The environment's sun is in
+// its map: no highlight of its own. The mirror ray is not traced: where it would meet the
+// object itself the map is seen.
 vec3 surface_reflection(vec3 x, vec3 n, vec3 v, Footprint f) {
     float eta = frame.material.x;
     float cos_o = max(dot(n, v), 0.0);
@@ -280,8 +292,8 @@ vec3 surface_reflection(vec3 x, vec3 n, vec3 v, Footprint f) {
             float d = a2 / (PI * q * q);
             float masking = 0.5 / (cos_o * sqrt(cos_i * cos_i * (1.0 - a2) + a2)
                 + cos_i * sqrt(cos_o * cos_o * (1.0 - a2) + a2));
-            float f = 1.0 - fresnel_transmittance(eta, max(dot(hv, wi), 0.0));
-            l += irradiance * (d * masking * f * cos_i * shadow_visibility(shadow_maps, i, x, n));
+            float fr = 1.0 - fresnel_transmittance(eta, max(dot(hv, wi), 0.0));
+            l += irradiance * (d * masking * fr * cos_i * shadow_visibility(shadow_maps, i, x, n));
         }
     }
     return l;
@@ -292,13 +304,15 @@ vec3 surface_reflection(vec3 x, vec3 n, vec3 v, Footprint f) {
 // flow (the condition is a constant and a uniform), as its screen derivatives need.
 Footprint footprint(vec3 facet) {
     Footprint f = Footprint(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0),
-                            facet, 0.0);
+                            facet, 0.0, vec3(0.0));
     if (MIRROR_GRID <= 1u || frame.surface.z == 0.0) {
         return f;
     }
     vec3 normal = normalize(in_normal_centre);
     vec3 mirror = reflect(-normalize(frame.camera_pos.xyz - in_position_centre), normal);
-    float spread = 0.5 * (length(dFdx(mirror)) + length(dFdy(mirror)));
+    // The angles between neighbouring pixels' unit directions (not their chords).
+    float spread = asin(min(0.5 * length(dFdx(mirror)), 1.0))
+        + asin(min(0.5 * length(dFdy(mirror)), 1.0));
     f.centre = in_position_centre;
     f.dx = dFdx(in_position_centre);
     f.dy = dFdy(in_position_centre);
@@ -306,6 +320,7 @@ Footprint footprint(vec3 facet) {
     f.ndx = dFdx(normal);
     f.ndy = dFdy(normal);
     f.spread = (spread >= 0.0 && !isinf(spread)) ? spread : PI;
+    f.mirror = mirror;
     return f;
 }
 

@@ -176,9 +176,9 @@ pub fn add(
 /// Points per side of the grid over each pixel at which the surface's mirror reflection is
 /// evaluated where the pixel may hold the environment's sun (`MIRROR_GRID` and
 /// `glint_possible` in glsl/composite.frag): the pixel's centre alone where the view takes one
-/// sample per pixel, as every other term, or no glint can show; otherwise 4 x 4, finer than the samples, since a
-/// sun's reflection in a curved surface is a glint a few pixels wide whose share of the pixel
-/// the samples alone would catch in steps of a quarter.
+/// sample per pixel, as every other term, or no glint can show; otherwise 4 x 4, finer than
+/// the samples, since a sun's reflection in a curved surface is a glint a few pixels wide
+/// whose share of the pixel the samples alone would catch in steps of a quarter.
 fn mirror_grid(glint: bool, samples: u32) -> u32 {
     if glint && samples > 1 {
         4
