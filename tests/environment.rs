@@ -793,8 +793,12 @@ fn an_environment_adds_to_the_other_lights() {
     assert!(d.rel_rms > 0.05, "the environment added little");
 }
 
+/// The material's own model under an environment at eta = 1 (`Model::default_for`, before a
+/// command decides the default, `volume` on a closed mesh: `pipeline::model`'s tests) is the
+/// full half-space profile; a model named is kept, and one with a single-scattering pass is
+/// told what it misses.
 #[test]
-fn under_an_environment_the_index_matched_default_is_the_full_half_space_profile() {
+fn under_an_environment_the_materials_own_model_is_the_full_half_space_profile() {
     let s = common::scene(
         "[[lights]]\nkind = \"environment\"\n[material]\npreset = \"skimmilk\"\neta = 1.0\n",
     );

@@ -2,10 +2,12 @@
 //! for `render`, `bench`, `chart` and `view`, said with its reason. No timing enters it, so the
 //! same command renders the same image on an idle machine and on a loaded one. A model given
 //! in the scene file (`[material] model`) or on the command line (`--model`) is used as given.
-//! Otherwise, in this order (the first two are the material's and the lights' kind alone,
-//! `Model::default_for`, which a scene's material takes before a command decides the rest):
+//! Otherwise, in this order (the second and third are the material's and the lights' kind
+//! alone, `Model::default_for`, which a scene's material takes before a command decides the
+//! rest):
 //!
-//! - **An environment light on a closed mesh: `volume`** ([`volume_reason`]) at any eta: its
+//! - **An environment light on a closed mesh: `volume`** ([`volume_reason`]) at any eta,
+//!   where the map lights it besides its sun (a map that is only a sun is a lamp): its
 //!   walks enter from the map and carry the map's single scattering but for the sun's, behind
 //!   a refractive boundary refracted, reflected and leaving as the light does. Under a sky
 //!   the half-space's F is several times further from the truth than the walks' on small

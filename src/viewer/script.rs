@@ -55,7 +55,7 @@ pub enum Action {
     SigmaA([f64; 3]),
     /// The relative index of refraction.
     Eta(f64),
-    /// The model (at eta != 1 the dipole or `halfspace`).
+    /// The model (at eta != 1 the dipole, `halfspace` or `volume`).
     Model(Model),
     /// The settings given instead of derived (None: derived); a new atlas where they change it.
     Settings(SettingsOverrides),
