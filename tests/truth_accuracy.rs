@@ -306,15 +306,12 @@ fn bunny_in_marble() {
 // 128x128 gives the same (`halfspace-air` in docs/results/models.md). `halfspace-single`,
 // whose response does not cross the air, is checked at 64x64 above. Skim milk's green bound
 // catches G's exit lobe taken at normal incidence (the table's) instead of under
-// cosine-weighted light. The truths' noise after 4x4 binning keeps every bound above 4.25 %.
+// cosine-weighted light. The truth's noise after 4x4 binning keeps every bound above 4.25 %.
+// (Marble's 128x128 truth, `tests/truth-data/bunny-marble-128`, is kept for measurements:
+// `halfspace-air` on the bunny in marble is tested at 64x64 above.)
 #[test]
 fn bunny_in_skim_milk_at_128() {
     at_128("bunny-skimmilk", [0.07, 0.05, 0.043]);
-}
-
-#[test]
-fn bunny_in_marble_at_128() {
-    at_128("bunny-marble", [0.0435; 3]);
 }
 
 /// Scene `name` at 128x128 against `tests/truth-data/NAME-128`, under `halfspace-air` with
@@ -454,9 +451,9 @@ fn bunny_in_skim_milk_under_the_sky() {
 /// from the first scattering event on) and along the sun: the ketchup sphere under a soft sun
 /// (a disc of 8 degrees radius behind it) comes to the walks' accuracy under lamps, far nearer
 /// the truth than the half-space profile (docs/results/environment.md; the bunny under the sky
-/// is tested behind its boundary, above). Fewer walks than derived (4096 per node and
-/// channel): ketchup's green and blue are almost all single scattering, which still fewer walks
-/// leave noisy.
+/// is tested behind its boundary, above). Far fewer walks than derived (1024 per node and
+/// channel): ketchup's green and blue are almost all single scattering, which so few walks
+/// leave noisy, so their bounds sit above red's; the half-space profile is 40-60 % off.
 #[test]
 fn under_an_environment_with_walks() {
     let walks = |n: u32| SettingsOverrides {
@@ -466,7 +463,7 @@ fn under_an_environment_with_walks() {
     case_with(
         "sphere-ketchup-soft-sun",
         Model::Volume,
-        walks(4096),
-        [0.05, 0.05, 0.05],
+        walks(1024),
+        [0.07, 0.095, 0.095],
     );
 }

@@ -65,7 +65,7 @@ pub struct CompositeInputs {
     pub surface: bool,
     /// Whether that reflection may hold the environment's sun as a glint: a scene with an
     /// environment light. The mirror image is then the mean over the pixel near the sun
-    /// ([`mirror_grid`]); without one the grid's code is compiled out (llvmpipe pays for its
+    /// (`mirror_grid`); without one the grid's code is compiled out (llvmpipe pays for its
     /// presence even where a uniform skips it).
     pub glint: bool,
 }
