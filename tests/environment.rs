@@ -259,20 +259,9 @@ fn the_surface_reflects_the_sky_and_the_lamp_with_fresnels_weight() {
     );
     let on = scene_in(&text, &dir).unwrap();
     assert!(on.surface.on && on.surface.roughness == 0.4 && on.material.eta == 1.5);
-    let mut off = on.clone();
-    off.surface.on = false;
-    let pre = common::preprocess(&on, SettingsOverrides::default());
-    let a = common::render(&on, &pre, Options::default(), 1);
-    let b = common::render(&off, &pre, Options::default(), 1);
+    let surface = surface_alone(&on);
 
-    let eta = on.material.eta;
-    // Exact Fresnel reflectance from outside at cosine c.
-    let fresnel = |c: f64| {
-        let t = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();
-        let rs = (c - eta * t) / (c + eta * t);
-        let rp = (eta * c - t) / (eta * c + t);
-        0.5 * (rs * rs + rp * rp)
-    };
+    let fresnel = |c: f64| exact_fresnel(on.material.eta, c);
     let alpha = 0.4f64 * 0.4;
     let a2 = alpha * alpha;
     let (env, sky) = on.environment_light().unwrap();
@@ -310,7 +299,7 @@ fn the_surface_reflects_the_sky_and_the_lamp_with_fresnels_weight() {
                 let want = fresnel(cos_o) * sky.radiance[c] as f64 * mirror[c]
                     + lamp.radiance[c] as f64 * ggx;
                 let i = 4 * (y * 64 + x) as usize + c;
-                let got = (a.radiance[i] - b.radiance[i]) as f64;
+                let got = surface[i] as f64;
                 err[c] += (got - want).powi(2);
                 norm[c] += want * want;
                 if c == 0 {
@@ -372,32 +361,15 @@ fn a_glint_takes_the_mean_over_the_pixel() {
          [output]\nwidth = 64\nheight = 64\nsamples = 4\n";
     let on = scene_in(text, &dir).unwrap();
     assert!(on.surface.on && on.material.eta == 1.5 && on.samples == 4);
-    let mut off = on.clone();
-    off.surface.on = false;
-    let pre = common::preprocess(&on, SettingsOverrides::default());
-    let a = common::render(&on, &pre, Options::default(), 1);
-    let b = common::render(&off, &pre, Options::default(), 1);
+    let surface = surface_alone(&on);
 
-    let eta = on.material.eta;
-    let fresnel = |c: f64| {
-        let t = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();
-        let rs = (c - eta * t) / (c + eta * t);
-        let rp = (eta * c - t) / (eta * c + t);
-        0.5 * (rs * rs + rp * rp)
-    };
+    let fresnel = |c: f64| exact_fresnel(on.material.eta, c);
     let (env, light) = on.environment_light().unwrap();
     let turn = light.rotation.as_dquat().inverse();
-    let cam = on.camera;
-    let f = (cam.target - cam.position).as_dvec3().normalize();
-    let side = f.cross(cam.up.as_dvec3()).normalize();
-    let up = side.cross(f);
-    let t = (0.5 * cam.fov_y as f64).tan();
-    let o = cam.position.as_dvec3();
     // The mirror reflection along the camera ray through (x, y) in pixels; None off the
     // sphere.
     let mirror = |x: f64, y: f64| {
-        let d = (f + side * ((2.0 * x / 64.0 - 1.0) * t) + up * ((1.0 - 2.0 * y / 64.0) * t))
-            .normalize();
+        let (o, d) = translucent::scene::camera_ray_through(&on, x, y);
         let bq = o.dot(d);
         let disc = bq * bq - (o.length_squared() - 400.0);
         (disc > 0.0).then(|| {
@@ -425,7 +397,7 @@ fn a_glint_takes_the_mean_over_the_pixel() {
             let want = rays.iter().flatten().sum::<f64>() / (k * k) as f64;
             let centre = mirror(x as f64 + 0.5, y as f64 + 0.5).unwrap();
             let i = 4 * (y * 64 + x) as usize + 1;
-            let got = (a.radiance[i] - b.radiance[i]) as f64;
+            let got = surface[i] as f64;
             err += (got - want).powi(2);
             err_centre += (centre - want).powi(2);
             norm += want * want;
@@ -458,6 +430,31 @@ fn a_glint_takes_the_mean_over_the_pixel() {
         (glint_got / glint - 1.0).abs() < 0.03,
         "glint {glint_got} against {glint}"
     );
+}
+
+/// The surface's own reflection alone: the radiance of `on` (its surface reflecting) minus that
+/// of the same scene with the surface off, rendered from one preprocessing (nothing else
+/// differs).
+fn surface_alone(on: &Scene) -> Vec<f32> {
+    let mut off = on.clone();
+    off.surface.on = false;
+    let pre = common::preprocess(on, SettingsOverrides::default());
+    let a = common::render(on, &pre, Options::default(), 1);
+    let b = common::render(&off, &pre, Options::default(), 1);
+    a.radiance
+        .iter()
+        .zip(&b.radiance)
+        .map(|(a, b)| a - b)
+        .collect()
+}
+
+/// The exact Fresnel reflectance of unpolarised light from outside a medium of relative index
+/// `eta` at incidence cosine `c` (the test's own, not the renderer's).
+fn exact_fresnel(eta: f64, c: f64) -> f64 {
+    let t = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();
+    let rs = (c - eta * t) / (c + eta * t);
+    let rp = (eta * c - t) / (eta * c + t);
+    0.5 * (rs * rs + rp * rp)
 }
 
 /// A map that is black but for a small disc at `towards` of radiance `l`, written as EXR.

@@ -15,6 +15,14 @@ use translucent::preprocess::operators::Blend;
 use translucent::preprocess::settings::SettingsOverrides;
 use translucent::renderer::Options;
 
+/// Settings with `n` walks per node and channel (`volume`), the rest derived.
+fn walks(n: u32) -> SettingsOverrides {
+    SettingsOverrides {
+        walk_paths: Some(n),
+        ..Default::default()
+    }
+}
+
 fn case(name: &str, model: Model, bounds: [f64; 3]) {
     case_with(name, model, SettingsOverrides::default(), bounds)
 }
@@ -206,10 +214,6 @@ fn behind_refractive_boundaries() {
 /// nearer the truth than the half-space profile's 50 % in red.
 #[test]
 fn small_and_thin_behind_a_boundary_with_walks() {
-    let walks = |n| SettingsOverrides {
-        walk_paths: Some(n),
-        ..Default::default()
-    };
     refractive(
         "sphere-ketchup",
         1.3,
@@ -250,10 +254,6 @@ fn under_an_environment_behind_a_boundary() {
         translucent::pipeline::model::apply_default(&mut scene, 0.02).unwrap();
         assert_eq!(scene.material.model, Model::Volume, "{name}: the default");
     }
-    let walks = |n| SettingsOverrides {
-        walk_paths: Some(n),
-        ..Default::default()
-    };
     refractive(
         "bunny-skimmilk-sky",
         1.3,
@@ -368,10 +368,7 @@ fn ketchup_sphere_with_walks() {
     case_with(
         "sphere-ketchup",
         Model::Volume,
-        SettingsOverrides {
-            walk_paths: Some(2048),
-            ..Default::default()
-        },
+        walks(2048),
         [0.065, 0.055, 0.063],
     );
 }
@@ -389,19 +386,13 @@ fn bunnies_with_walks() {
     case_with(
         "bunny-skimmilk",
         Model::Volume,
-        SettingsOverrides {
-            walk_paths: Some(1024),
-            ..Default::default()
-        },
+        walks(1024),
         [0.052, 0.055, 0.062],
     );
     case_with(
         "bunny-marble",
         Model::Volume,
-        SettingsOverrides {
-            walk_paths: Some(1024),
-            ..Default::default()
-        },
+        walks(1024),
         [0.075, 0.083, 0.085],
     );
 }
@@ -456,10 +447,6 @@ fn bunny_in_skim_milk_under_the_sky() {
 /// leave noisy, so their bounds sit above red's; the half-space profile is 40-60 % off.
 #[test]
 fn under_an_environment_with_walks() {
-    let walks = |n: u32| SettingsOverrides {
-        walk_paths: Some(n),
-        ..Default::default()
-    };
     case_with(
         "sphere-ketchup-soft-sun",
         Model::Volume,

@@ -170,6 +170,13 @@ pub fn volume_reason(scene: &Scene) -> Option<String> {
 mod tests {
     use super::*;
 
+    /// `scene` with its last triangle taken out: a mesh with a hole, no inside.
+    fn opened(mut scene: Scene) -> Scene {
+        let n = scene.mesh.indices.len();
+        scene.mesh.indices.truncate(n - 3);
+        scene
+    }
+
     #[test]
     fn the_pass_is_left_out_only_below_the_target_in_every_channel() {
         // The preset's eta is 1.3: index-matched, its default is halfspace-single.
@@ -218,8 +225,7 @@ mod tests {
         let dark = "[[lights]]\nkind = \"directional\"\nintensity = 0.0";
         assert!(volume_reason(&scene(text(sphere, dark, ""))).is_none());
         // A mesh with no inside.
-        let mut open = scene(text(sphere, lamp, ""));
-        open.mesh.indices.truncate(open.mesh.indices.len() - 3);
+        let open = opened(scene(text(sphere, lamp, "")));
         assert!(!open.mesh.is_closed() && volume_reason(&open).is_none());
     }
 
@@ -257,21 +263,15 @@ mod tests {
             why.contains("behind the refractive boundary eta = 1.3"),
             "{why}"
         );
-        let mut open_behind = scene(&sky_behind);
-        open_behind
-            .mesh
-            .indices
-            .truncate(open_behind.mesh.indices.len() - 3);
-        assert_eq!(model(&open_behind, 0.02), Some(Model::Halfspace));
-        let mut open_sky = scene(&sky);
-        open_sky
-            .mesh
-            .indices
-            .truncate(open_sky.mesh.indices.len() - 3);
-        assert_eq!(model(&open_sky, 0.02), Some(Model::Halfspace));
-        let mut open = scene(&matched);
-        open.mesh.indices.truncate(open.mesh.indices.len() - 3);
-        assert_eq!(model(&open, 0.02), Some(Model::HalfspaceSingle));
+        assert_eq!(
+            model(&opened(scene(&sky_behind)), 0.02),
+            Some(Model::Halfspace)
+        );
+        assert_eq!(model(&opened(scene(&sky)), 0.02), Some(Model::Halfspace));
+        assert_eq!(
+            model(&opened(scene(&matched)), 0.02),
+            Some(Model::HalfspaceSingle)
+        );
         let given = format!("{matched}model = \"dipole\"\n");
         assert_eq!(model(&scene(&given), 0.02), None);
         let mut s = scene(&matched);

@@ -261,14 +261,20 @@ impl Scene {
 
 /// A camera ray through the centre of pixel (x, y): origin and unit direction.
 pub fn camera_ray(scene: &Scene, x: u32, y: u32) -> (glam::DVec3, glam::DVec3) {
+    camera_ray_through(scene, x as f64 + 0.5, y as f64 + 0.5)
+}
+
+/// A camera ray through the image point (x, y) in pixels from the top left corner (pixel
+/// (i, j) spans i..i + 1, j..j + 1): origin and unit direction.
+pub fn camera_ray_through(scene: &Scene, x: f64, y: f64) -> (glam::DVec3, glam::DVec3) {
     let cam = scene.camera;
     let (w, h) = (scene.width as f64, scene.height as f64);
     let f = (cam.target - cam.position).as_dvec3().normalize();
     let s = f.cross(cam.up.as_dvec3()).normalize();
     let u = s.cross(f);
     let t = (0.5 * cam.fov_y as f64).tan();
-    let nx = (2.0 * (x as f64 + 0.5) / w - 1.0) * t * w / h;
-    let ny = (1.0 - 2.0 * (y as f64 + 0.5) / h) * t;
+    let nx = (2.0 * x / w - 1.0) * t * w / h;
+    let ny = (1.0 - 2.0 * y / h) * t;
     (cam.position.as_dvec3(), (f + s * nx + u * ny).normalize())
 }
 
