@@ -80,7 +80,7 @@ pub struct Prepared {
 pub fn plan(scene: &mut Scene, request: &Request) -> Result<Plan> {
     model::apply_default(scene, request.target_error)?;
     let choice = choose(scene, &request.overrides, request.target_error)?;
-    let estimate = estimate(&scene.mesh, &scene.material, &choice.settings);
+    let estimate = estimate(&scene.mesh, &scene.material, &choice);
     Ok(Plan { choice, estimate })
 }
 
@@ -109,7 +109,7 @@ fn preprocessing(
     progress: Progress<'_>,
 ) -> Result<(Preprocessed, CacheOutcome)> {
     // Before anything is allocated, in every command and in the viewer.
-    estimate(&scene.mesh, &scene.material, &choice.settings).check_host()?;
+    estimate(&scene.mesh, &scene.material, choice).check_host()?;
     let Some(dir) = cache_dir else {
         return Ok((
             Preprocessed::build(&scene.mesh, &scene.material, choice, progress),

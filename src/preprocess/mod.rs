@@ -173,8 +173,10 @@ pub const MIN_NODES: u64 = 8;
 /// 2D image of common devices.
 pub const MAX_ATLAS_TEXELS: u64 = 16384 * 16384;
 
-/// Estimates a preprocessing run (see [`Estimate`]).
-pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
+/// Estimates a preprocessing run (see [`Estimate`]) with the settings `choice` made: its
+/// settings, and the environment's sky its walks enter from.
+pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
+    let s = &choice.settings;
     let area = mesh.surface_area();
     // Bounded so that every product below stays within u64 (a 1e-9 mm texel would wrap it at
     // 1.8e19 kernel elements); far beyond any device limit either way.
@@ -211,13 +213,20 @@ pub fn estimate(mesh: &Mesh, material: &Material, s: &Settings) -> Estimate {
     let reach = 0.5 * operators::FIT_WINDOW_TEXELS * h * std::f64::consts::SQRT_2 + sp;
     let near_nodes = (std::f64::consts::PI * reach * reach / (0.866 * sp * sp)).max(1.0);
     let near_texels = std::f64::consts::PI * (reach + sp) * (reach + sp) / (h * h);
+    // Under a sky, the starts whose drawn block is below their horizon (and that no lamp
+    // faces) start no walk.
+    let entering = if s.walk_paths > 0 {
+        walk::entry_fraction(mesh, &s.walk_lights, choice.sky.as_ref())
+    } else {
+        1.0
+    };
     let work = Work {
         kernel_taps: texels.saturating_mul(kk),
         dense_entries: nodes * nodes,
         fit_products: nodes as f64 * (near_texels * near_nodes.min(16.0) + near_nodes.powi(3)),
         triangles: mesh.triangle_count() as u64,
-        walks: 3.0 * nodes as f64 * s.walk_paths as f64,
-        walk_collisions: walk_collisions(material, nodes, s.walk_paths),
+        walks: 3.0 * nodes as f64 * s.walk_paths as f64 * entering,
+        walk_collisions: walk_collisions(material, nodes, s.walk_paths) * entering,
     };
     Estimate {
         texels,

@@ -156,6 +156,64 @@ impl WalkSky {
     }
 }
 
+/// Faces at most that [`entry_fraction`] looks at (evenly strided over the mesh).
+const ENTRY_FRACTION_FACES: usize = 4096;
+
+/// The expected fraction of the walks' start points that enter the object under `lamps`
+/// ([`entry_lights`]) and `sky`, for the preprocessing estimate. Under a sky each start draws
+/// one block of the map: a block below the point's horizon, where no lamp faces the point
+/// either, starts no walk (under lamps alone a node that no lamp reaches enters along its
+/// normal instead: 1). Over the faces by area and the channels: 1 - (1 - s(n)) (1 - u(n)),
+/// s the share of the channel's sky above the face's plane, u 1 where a lamp faces it. Shadows
+/// are not counted.
+pub fn entry_fraction(mesh: &Mesh, lamps: &[Option<Light>], sky: Option<&WalkSky>) -> f64 {
+    let Some(sky) = sky else {
+        return 1.0;
+    };
+    let orientation = if mesh.signed_volume() < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let totals: [f64; 3] = std::array::from_fn(|c| sky.cdf[c].last().copied().unwrap_or(0.0));
+    let faces = mesh.triangle_count();
+    let (mut sum, mut area) = (0.0, 0.0);
+    for tri in (0..faces).step_by(faces.div_ceil(ENTRY_FRACTION_FACES).max(1)) {
+        let [a, b, c] = triangle(mesh, tri);
+        let cross = (b - a).cross(c - a) * orientation;
+        let weight = 0.5 * cross.length();
+        if weight <= 0.0 || !weight.is_finite() {
+            continue;
+        }
+        let n = cross.normalize();
+        let centre = (a + b + c) / 3.0;
+        let lamp = lamps.iter().flatten().any(|l| {
+            let (towards, _, factor) = l.towards(centre);
+            factor > 0.0 && n.dot(towards) > 0.0
+        });
+        let mut above = [0.0; 3];
+        for (w, power) in &sky.pixels {
+            if n.dot(*w) > 0.0 {
+                for c in 0..3 {
+                    above[c] += power[c];
+                }
+            }
+        }
+        let entered: f64 = (0..3)
+            .filter(|&c| totals[c] > 0.0)
+            .map(|c| if lamp { 1.0 } else { above[c] / totals[c] })
+            .sum::<f64>()
+            / totals.iter().filter(|&&t| t > 0.0).count().max(1) as f64;
+        sum += weight * entered;
+        area += weight;
+    }
+    if area > 0.0 {
+        sum / area
+    } else {
+        1.0
+    }
+}
+
 /// The line that says how the walks enter under `lamps` ([`entry_lights`]) and, where `sky`,
 /// an environment's map ([`WalkSky`]), with the derived settings.
 pub fn entry_reason(lamps: &[Option<Light>], sky: bool) -> String {
