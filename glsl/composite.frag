@@ -15,6 +15,9 @@ layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
 layout(set = 0, binding = 3) uniform sampler2D albedo_texture;
 // Single scattering along the view ray (the `single` pass), added where SINGLE.
 layout(set = 0, binding = 4) uniform sampler2D single;
+// The depth of the surface each of its samples sees (read where it takes fewer samples than
+// pixels).
+layout(set = 0, binding = 7) uniform sampler2D single_depth;
 // The lights' shadow maps, for the oblique exit lobe's visibility (OBLIQUE) and the lamps'
 // highlights (SURFACE).
 layout(set = 0, binding = 5) uniform sampler2DArrayShadow shadow_maps;
@@ -79,6 +82,9 @@ layout(constant_id = 5) const uint TONEMAP = 0u;
 // whose image is a few pixels wide, gets the share of the pixel it covers, as the rest of a
 // multisampled pixel does.
 layout(constant_id = 6) const uint MIRROR_GRID = 1u;
+// Image pixels per `single` sample along x and y (1: one per pixel).
+layout(constant_id = 7) const float SINGLE_RATIO_X = 1.0;
+layout(constant_id = 8) const float SINGLE_RATIO_Y = 1.0;
 
 
 vec3 local_response(vec2 atlas) {
@@ -350,6 +356,54 @@ vec4 single_at(ivec2 p) {
     return count > 0.0 ? sum / count : s;
 }
 
+// Extra depth, over the slopes' extrapolation across a sample's spacing, that a sample may lie
+// from this pixel's surface and still count as seeing it: the surface's curvature between
+// them, not the step to another surface behind or in front.
+const float UPSAMPLE_SLOPES = 2.0;
+
+// The `single` pass's value at the pixel whose centre is `frag` (depth z, screen slopes dz),
+// where it took one sample per SINGLE_RATIO pixels: the bilinear mean of the four samples
+// around the centre that see this pixel's surface (their depth within UPSAMPLE_SLOPES times
+// the slopes over the spacing of the depth extrapolated from the pixel to them), else the one
+// nearest in depth among those that see the object (a pixel at a step between surfaces, or
+// at the silhouette); black where none does.
+vec4 single_upsampled(vec2 frag, float z, vec2 dz) {
+    vec2 ratio = vec2(SINGLE_RATIO_X, SINGLE_RATIO_Y);
+    ivec2 size = textureSize(single, 0);
+    vec2 f = frag / ratio - 0.5;
+    ivec2 base = ivec2(floor(f));
+    vec2 t = f - vec2(base);
+    float margin = UPSAMPLE_SLOPES * dot(abs(dz), ratio) + 4.0 * z / 8388608.0;
+    vec4 sum = vec4(0.0);
+    float weights = 0.0;
+    vec4 nearest = vec4(0.0);
+    float nearest_off = 1.0 / 0.0;
+    for (int k = 0; k < 4; ++k) {
+        ivec2 o = ivec2(k & 1, k >> 1);
+        ivec2 q = base + o;
+        if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) {
+            continue;
+        }
+        float zq = texelFetch(single_depth, q, 0).r;
+        if (zq >= 1.0) {
+            continue;
+        }
+        vec2 centre = (vec2(q) + 0.5) * ratio;
+        float off = abs(zq - (z + dot(dz, centre - frag)));
+        vec4 s = texelFetch(single, q, 0);
+        if (off < nearest_off) {
+            nearest_off = off;
+            nearest = s;
+        }
+        if (off <= margin) {
+            float w = (o.x == 1 ? t.x : 1.0 - t.x) * (o.y == 1 ? t.y : 1.0 - t.y);
+            sum += w * s;
+            weights += w;
+        }
+    }
+    return weights > 0.0 ? sum / weights : nearest;
+}
+
 void main() {
     vec3 v = normalize(frame.camera_pos.xyz - in_position);
     vec3 interpolated = normalize(in_normal);
@@ -381,7 +435,10 @@ void main() {
     lobe = max(lobe + vec3(dot(in_drift_r, t), dot(in_drift_g, t), dot(in_drift_b, t)), vec3(0.0));
     vec3 l = fresnel_transmittance(frame.material.x, cos_o) * lobe * b / PI;
     if (SINGLE) {
-        vec4 s = single_at(ivec2(gl_FragCoord.xy));
+        vec2 dz = vec2(dFdx(gl_FragCoord.z), dFdy(gl_FragCoord.z));
+        vec4 s = SINGLE_RATIO_X > 1.0 || SINGLE_RATIO_Y > 1.0
+                     ? single_upsampled(gl_FragCoord.xy, gl_FragCoord.z, dz)
+                     : single_at(ivec2(gl_FragCoord.xy));
         if (CHORD && s.a > 0.0) {
             l *= 1.0 - exp(-frame.sigma_t.rgb * s.a);
         }

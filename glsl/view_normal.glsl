@@ -1,4 +1,5 @@
-// The normal through which light leaves towards the viewer, for fragment shaders.
+// The normal through which light leaves towards the viewer, for fragment shaders (and, with
+// VIEW_NORMAL_WITHOUT_DERIVATIVES defined, `adapted_normal` alone for compute shaders).
 #ifndef VIEW_NORMAL_GLSL
 #define VIEW_NORMAL_GLSL
 
@@ -27,6 +28,7 @@ vec3 adapted_normal(vec3 n, vec3 g, vec3 v) {
     return len > 0.0 ? bent / len : g;
 }
 
+#ifndef VIEW_NORMAL_WITHOUT_DERIVATIVES
 // The normal of the triangle under the fragment, from the screen derivatives of its position
 // (any two directions in its plane), on the side of the interpolated normal n (as the
 // triangle's winding would give it); n where they are degenerate or not finite.
@@ -39,5 +41,6 @@ vec3 facet_normal(vec3 position, vec3 n) {
     }
     return dot(g, n) < 0.0 ? -g / len : g / len;
 }
+#endif
 
 #endif

@@ -177,8 +177,8 @@ pub struct Traffic {
 ///   texels;
 /// - gather / global: row starts, entries, and the source vector once (the map's covered
 ///   texels, or the node irradiance); writes one value per node;
-/// - entry / thickness / single: the shadow maps, the mesh, the back depth and the entry
-///   depths once; write their images;
+/// - entry / thickness / front: the shadow maps or the mesh; write their images;
+/// - single: the front surface, the back depth and the entry depths once; writes its image;
 /// - composite: mesh, node radiosity, the local response once (at most one texel per pixel);
 ///   writes the radiance, display and depth of every pixel;
 /// - readback: both images, written to host memory.
@@ -222,9 +222,17 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
         ),
         PassName::Entry => (b(I::ShadowMaps), b(I::EntryDepth)),
         PassName::Thickness => (mesh, b(I::BackDepth)),
+        PassName::Front => (
+            mesh,
+            b(I::SingleDepth) + b(I::FrontPosition) + b(I::FrontNormal) + b(I::FrontFacet),
+        ),
         PassName::Single => (
-            mesh + b(I::BackDepth) + b(I::EntryDepth),
-            b(I::SingleScattering) + b(I::SingleDepth),
+            b(I::FrontPosition)
+                + b(I::FrontNormal)
+                + b(I::FrontFacet)
+                + b(I::BackDepth)
+                + b(I::EntryDepth),
+            b(I::SingleScattering),
         ),
         PassName::Composite => (
             mesh + b(I::NodeRadiosity) + per(I::LocalResponse, c.pixels.min(c.texels)),

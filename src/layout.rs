@@ -61,12 +61,20 @@ pub enum Item {
     RadianceReadback,
     /// Host-visible copy of the display image.
     DisplayReadback,
-    /// Single-scattered radiance per output pixel (models with the pass; 1 element else).
+    /// Single-scattered radiance per sample of the single-scattering passes (models with the
+    /// pass; 1 element else).
     SingleScattering,
-    /// Depth of the nearest back face per output pixel (the same models).
+    /// Depth of the nearest back face per sample (the same models).
     BackDepth,
-    /// Depth of the single-scattering pass (the same models).
+    /// Depth of the surface the camera sees per sample (the same models).
     SingleDepth,
+    /// Position of the surface the camera sees per sample, and whether it sees one (the same
+    /// models).
+    FrontPosition,
+    /// Interpolated normal there, turned to the camera (the same models).
+    FrontNormal,
+    /// Normal of the triangle there (the same models).
+    FrontFacet,
     /// Light-entry depth per shadow-map texel, without the shadow bias (the same models).
     EntryDepth,
     /// The environment's transfer per atlas texel: its spherical-harmonic coefficients as f16,
@@ -83,7 +91,7 @@ pub enum Item {
 
 impl Item {
     /// Every item, in the memory report's order.
-    pub const ALL: [Item; 32] = [
+    pub const ALL: [Item; 35] = [
         Item::AtlasVertices,
         Item::AtlasIndices,
         Item::CoveredTexels,
@@ -113,6 +121,9 @@ impl Item {
         Item::SingleScattering,
         Item::BackDepth,
         Item::SingleDepth,
+        Item::FrontPosition,
+        Item::FrontNormal,
+        Item::FrontFacet,
         Item::EntryDepth,
         Item::EnvironmentTransfer,
         Item::EnvironmentMap,
@@ -150,6 +161,9 @@ impl Item {
             Item::SingleScattering => "single scattering",
             Item::BackDepth => "back-face depth",
             Item::SingleDepth => "single-scattering depth",
+            Item::FrontPosition => "front position",
+            Item::FrontNormal => "front normal",
+            Item::FrontFacet => "front facet",
             Item::EntryDepth => "light-entry depth",
             Item::EnvironmentTransfer => "environment transfer",
             Item::EnvironmentMap => "environment map",
@@ -179,6 +193,9 @@ impl Item {
             | Item::RadianceSamples
             | Item::RadianceReadback
             | Item::SingleScattering
+            | Item::FrontPosition
+            | Item::FrontNormal
+            | Item::FrontFacet
             | Item::EntryDepth
             | Item::TextureEntry
             | Item::EnvironmentMap => F::R32G32B32A32_SFLOAT,
@@ -255,6 +272,8 @@ pub struct Counts {
     pub samples: u64,
     /// Whether the model has the single-scattering passes.
     pub single: bool,
+    /// Samples of the single-scattering passes (their images' pixels).
+    pub single_pixels: u64,
     /// Environment transfer elements per atlas texel (0 without an environment light).
     pub transfer_per_texel: u64,
     /// Environment map pixels the surface's reflection reads (0 where it reads none).
@@ -306,9 +325,14 @@ impl Counts {
                     0
                 }
             }
-            Item::SingleScattering | Item::BackDepth | Item::SingleDepth => {
+            Item::SingleScattering
+            | Item::BackDepth
+            | Item::SingleDepth
+            | Item::FrontPosition
+            | Item::FrontNormal
+            | Item::FrontFacet => {
                 if self.single {
-                    self.pixels
+                    self.single_pixels
                 } else {
                     0
                 }

@@ -67,7 +67,8 @@ pub struct Captured {
     pub node_irradiance: Vec<[f32; 4]>,
     /// Global node radiosity.
     pub node_radiosity: Vec<[f32; 4]>,
-    /// Single-scattered radiance, RGBA per output pixel (empty without the pass).
+    /// Single-scattered radiance, RGBA per sample of the `single` pass (row by row over its
+    /// image, `crate::scene::single::downsampled`; empty without the pass).
     pub single: Vec<[f32; 4]>,
 }
 
@@ -324,11 +325,11 @@ impl Renderer {
         assembly.add_responses(&mut g, global_variant);
         let single_pass = scene.material.model.has_single_pass();
         let single = assembly.add_single_scattering(&mut g, single_pass)?;
-        assembly.add_composite(&mut g, single, single_pass);
+        assembly.add_composite(&mut g, single);
         let window = assembly.add_window(&mut g, options.window.as_ref())?;
         assembly.add_readback(&mut g);
         let capture = if options.capture {
-            Some(assembly.add_capture(&mut g, single, single_pass)?)
+            Some(assembly.add_capture(&mut g, single)?)
         } else {
             None
         };
@@ -528,7 +529,9 @@ impl Renderer {
             single: match &b.single {
                 Some(buffer) => {
                     let s = &self.scene;
-                    read_back(buffer, s.width as usize * s.height as usize)?
+                    let k = crate::scene::single::downsample(s).0;
+                    let (w, h) = crate::scene::single::downsampled(s.width, s.height, k);
+                    read_back(buffer, w as usize * h as usize)?
                 }
                 None => Vec::new(),
             },

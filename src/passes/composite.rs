@@ -26,6 +26,21 @@ pub const DISPLAY_FORMAT: vk::Format = Item::Display.format();
 /// Format of the camera depth buffer.
 pub const DEPTH_FORMAT: vk::Format = Item::Depth.format();
 
+/// What the composite reads of the `single` pass.
+#[derive(Clone, Copy)]
+pub struct SingleImages {
+    /// Single-scattered radiance per sample, and the length of the view ray inside (a 1x1
+    /// black image where the model has no such pass).
+    pub radiance: ResourceId,
+    /// The depth of the surface each sample sees (`radiance` where the model has no pass).
+    pub depth: ResourceId,
+    /// Whether the model has the pass (the shader adds its light only then).
+    pub pass: bool,
+    /// Image pixels per sample along x and y (1: one sample per pixel); above 1 the composite
+    /// takes the samples around each pixel that see its surface, by their depth.
+    pub ratio: [f32; 2],
+}
+
 /// Resources the composite reads.
 pub struct CompositeInputs {
     /// Frame uniforms.
@@ -45,11 +60,8 @@ pub struct CompositeInputs {
     /// Whether the scene has a texture; without one (T = 1) the shader is specialised without
     /// the sample (a measurable share of the pass on lavapipe: docs/results/figures.md).
     pub textured: bool,
-    /// Single-scattered radiance per pixel (from `single`; a 1x1 black image where the model
-    /// has no such pass).
-    pub single: ResourceId,
-    /// Whether the model has the single-scattering pass (the shader adds `single` only then).
-    pub single_pass: bool,
+    /// What the composite reads of the `single` pass.
+    pub single: SingleImages,
     /// Whether the profile's radiance is scaled by the view ray's length inside (the `single`
     /// image's alpha): the half-space's higher orders gathered over a finite chord
     /// (`halfspace-single`).
@@ -99,12 +111,15 @@ pub fn add(
         .access(i.node_radiosity, Access::TexelRead(Stage::Vertex))
         .access(i.local, Access::StorageRead(Stage::Fragment))
         .access(i.texture, Access::Sampled(Stage::Fragment))
-        .access(i.single, Access::Sampled(Stage::Fragment))
+        .access(i.single.radiance, Access::Sampled(Stage::Fragment))
         .access(i.shadow_maps, Access::Sampled(Stage::Fragment))
         .access(i.environment, Access::StorageRead(Stage::Fragment))
         .access(t.hdr, Access::ColorAttachment)
         .access(t.display, Access::ColorAttachment)
         .access(t.depth, Access::DepthAttachment);
+    if i.single.pass {
+        pass = pass.access(i.single.depth, Access::Sampled(Stage::Fragment));
+    }
     if let Some((hdr, display, _)) = t.samples {
         pass = pass
             .access(hdr, Access::ColorAttachment)
@@ -117,9 +132,10 @@ pub fn add(
             .texel(1, i.node_radiosity, Item::NodeRadiosity.format())
             .storage_image(2, i.local)
             .sampled(3, i.texture, Sampler::linear(gpu, true)?)
-            .sampled(4, i.single, Sampler::nearest(gpu)?)
+            .sampled(4, i.single.radiance, Sampler::nearest(gpu)?)
             .sampled(5, i.shadow_maps, Sampler::shadow(gpu)?)
             .storage_buffer(6, i.environment)
+            .sampled(7, i.single.depth, Sampler::nearest(gpu)?)
             .finish()?;
         let pipeline = Pipeline::graphics::<f32>(
             gpu,
@@ -135,12 +151,14 @@ pub fn add(
                 depth_bias: None,
                 fragment_constants: &[
                     i.textured as u32,
-                    i.single_pass as u32,
+                    i.single.pass as u32,
                     i.chord as u32,
                     i.oblique as u32,
                     i.surface as u32,
                     curve.constant(),
                     mirror_grid(i.glint, t.samples.map_or(1, |s| s.2)),
+                    i.single.ratio[0].to_bits(),
+                    i.single.ratio[1].to_bits(),
                 ],
                 samples: t.samples.map_or(1, |s| s.2),
             },

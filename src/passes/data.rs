@@ -430,6 +430,11 @@ pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::
         pixels: scene.width as u64 * scene.height as u64,
         samples: scene.samples as u64,
         single: scene.material.model.has_single_pass(),
+        single_pixels: {
+            let k = crate::scene::single::downsample(scene).0;
+            let (w, h) = crate::scene::single::downsampled(scene.width, scene.height, k);
+            w as u64 * h as u64
+        },
         transfer_per_texel: transfer_per_texel(scene),
         environment_pixels: environment_pixels(scene),
     }

@@ -299,7 +299,7 @@ mod tests {
     fn uniforms_match_the_shaders_block_member_by_member() {
         for (name, spv) in [
             ("composite.frag", shaders::COMPOSITE_FRAG),
-            ("single.frag", shaders::SINGLE_FRAG),
+            ("single.comp", shaders::SINGLE_COMP),
         ] {
             let block = spirv::block_layout(spv, 0).unwrap();
             let frame = fields!(FrameUniforms {

@@ -39,6 +39,8 @@ pub enum PassName {
     Entry,
     /// Back-face depth from the camera (the same models).
     Thickness,
+    /// The surface the camera sees: position and normals (the same models).
+    Front,
     /// Single scattering along the view rays.
     Single,
     /// Final image.
@@ -55,7 +57,7 @@ pub enum PassName {
 
 impl PassName {
     /// Every pass.
-    pub const ALL: [PassName; 14] = [
+    pub const ALL: [PassName; 15] = [
         PassName::Shadow,
         PassName::Entry,
         PassName::Illum,
@@ -64,6 +66,7 @@ impl PassName {
         PassName::Gather,
         PassName::Global,
         PassName::Thickness,
+        PassName::Front,
         PassName::Single,
         PassName::Composite,
         PassName::Readback,
@@ -98,6 +101,7 @@ impl PassName {
             PassName::Global => "global",
             PassName::Entry => "entry",
             PassName::Thickness => "thickness",
+            PassName::Front => "front",
             PassName::Single => "single",
             PassName::Composite => "composite",
             PassName::Readback => "readback",
@@ -133,8 +137,9 @@ pub fn set_viewport(gpu: &Gpu, cmd: vk::CommandBuffer, extent: vk::Extent2D) {
     }
 }
 
-/// Most colour attachments a mesh pass writes.
-pub const MAX_COLOR_ATTACHMENTS: usize = 2;
+/// Most colour attachments a mesh pass writes (`front`'s three; every Vulkan device takes at
+/// least four).
+pub const MAX_COLOR_ATTACHMENTS: usize = 3;
 
 /// Where a mesh pass draws: up to [`MAX_COLOR_ATTACHMENTS`] colour attachments (cleared to zero)
 /// and an optional depth attachment (cleared to 1, stored or discarded), all of `extent`.

@@ -4,9 +4,15 @@
 //!   bias, where each light's ray enters the object (glsl/entry.comp);
 //! - `thickness`: the depth of the nearest face turned away from the camera, where each view
 //!   ray leaves the object;
-//! - `single`: per covered pixel, the light scattered once inside, from the visible surface
-//!   to that exit, with each light's attenuation from the distance it travels inside (its
-//!   shadow map's first surface to the point); `composite` adds it. See `glsl/single.frag`.
+//! - `front`: the surface the camera sees, its position and normals, and its depth;
+//! - `single` (compute): per sample that `front` covered, the light scattered once inside,
+//!   from the visible surface to that exit, with each light's attenuation from the distance it
+//!   travels inside (its shadow map's first surface to the point); `composite` adds it. See
+//!   `glsl/single.comp`. Shading the mesh's triangles directly, lavapipe pays for whole blocks
+//!   of pixels on triangles a few pixels wide; the compute pass keeps every lane busy.
+//!
+//! The three camera passes take one sample per [`crate::scene::single::downsample`] pixels
+//! along each side; the composite brings them to every pixel, following the depth.
 
 use super::data::{ATLAS_VERTEX_ATTRIBUTES, ATLAS_VERTEX_BINDINGS};
 use super::PassName;
@@ -18,7 +24,9 @@ use ash::vk;
 
 /// Format of the single-scattering image.
 pub const FORMAT: vk::Format = Item::SingleScattering.format();
-/// Format of the back-face depth and of the pass's own depth.
+/// Format of the front surface's images (position, normal, facet).
+pub const FRONT_FORMAT: vk::Format = Item::FrontPosition.format();
+/// Format of the back-face depth and of the front surface's depth.
 pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 
 /// Intervals along each view ray (equal optical depth in the least extinguishing channel).
@@ -116,57 +124,105 @@ pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
         });
 }
 
-/// What `single` reads besides the mesh.
+/// The surface the camera sees, per sample (from `front`).
+#[derive(Clone, Copy)]
+pub struct FrontImages {
+    /// Its depth (kept for the composite's upsample).
+    pub depth: ResourceId,
+    /// Position, and 1 where a view ray meets the object (0 elsewhere).
+    pub position: ResourceId,
+    /// Interpolated normal, turned to the camera.
+    pub normal: ResourceId,
+    /// The triangle's normal on the same side.
+    pub facet: ResourceId,
+}
+
+/// Declares `front`, writing the surface the camera sees into `f`.
+pub fn front(graph: &mut RenderGraph, m: MeshInputs, f: FrontImages) {
+    graph
+        .pass(PassName::Front.as_str())
+        .access(m.frame, Access::Uniform(Stage::Fragment))
+        .mesh(m.vertices, m.indices)
+        .access(f.position, Access::ColorAttachment)
+        .access(f.normal, Access::ColorAttachment)
+        .access(f.facet, Access::ColorAttachment)
+        .access(f.depth, Access::DepthAttachment)
+        .setup(move |gpu, res| {
+            let set = res.bind().uniform(0, m.frame).finish()?;
+            let pipeline = Pipeline::graphics::<()>(
+                gpu,
+                PassName::Front.as_str(),
+                &camera_desc(shaders::FRONT_FRAG, &[FRONT_FORMAT; 3]),
+                set,
+            )?;
+            let color = [f.position, f.normal, f.facet].map(|id| res.image(id).view);
+            let depth = res.image(f.depth).clone();
+            let mesh = MeshDraw::of(res, m.vertices, m.indices, m.index_count);
+            Ok(Box::new(move |rec| {
+                let target = DrawTarget {
+                    color: &color,
+                    resolve: &[],
+                    depth: Some((depth.view, vk::AttachmentStoreOp::STORE)),
+                    extent: depth.info.extent,
+                };
+                draw_mesh(rec, &target, &pipeline, mesh, || {});
+            }))
+        });
+}
+
+/// What `single` reads.
 pub struct SingleInputs {
+    /// Frame uniforms.
+    pub frame: ResourceId,
     /// Light-entry depths (from `entry`).
     pub entry: ResourceId,
     /// Back-face depth from `thickness`.
     pub back: ResourceId,
+    /// The surface the camera sees (from `front`).
+    pub front: FrontImages,
 }
 
-/// Declares `single`, writing the single-scattered radiance into `out` (with its own depth
-/// buffer `depth`, discarded).
-pub fn single(
-    graph: &mut RenderGraph,
-    m: MeshInputs,
-    i: SingleInputs,
-    out: ResourceId,
-    depth: ResourceId,
-) {
+/// Declares `single`, writing the single-scattered radiance per sample into `out`: a compute
+/// pass over the samples `front` drew.
+pub fn single(graph: &mut RenderGraph, i: SingleInputs, out: ResourceId) {
     graph
         .pass(PassName::Single.as_str())
-        .access(m.frame, Access::Uniform(Stage::Fragment))
-        .mesh(m.vertices, m.indices)
-        .access(i.entry, Access::Sampled(Stage::Fragment))
-        .access(i.back, Access::Sampled(Stage::Fragment))
-        .access(out, Access::ColorAttachment)
-        .access(depth, Access::DepthAttachment)
+        .access(i.frame, Access::Uniform(Stage::Compute))
+        .access(i.entry, Access::Sampled(Stage::Compute))
+        .access(i.back, Access::Sampled(Stage::Compute))
+        .access(i.front.position, Access::Sampled(Stage::Compute))
+        .access(i.front.normal, Access::Sampled(Stage::Compute))
+        .access(i.front.facet, Access::Sampled(Stage::Compute))
+        .access(out, Access::StorageWrite(Stage::Compute))
         .setup(move |gpu, res| {
             let set = res
                 .bind()
-                .uniform(0, m.frame)
+                .uniform(0, i.frame)
                 .sampled(1, i.entry, Sampler::nearest(gpu)?)
                 .sampled(2, i.back, Sampler::nearest(gpu)?)
+                .sampled(3, i.front.position, Sampler::nearest(gpu)?)
+                .sampled(4, i.front.normal, Sampler::nearest(gpu)?)
+                .sampled(5, i.front.facet, Sampler::nearest(gpu)?)
+                .storage_image(6, out)
                 .finish()?;
-            let pipeline = Pipeline::graphics::<u32>(
+            let pipeline = Pipeline::compute::<u32>(
                 gpu,
                 PassName::Single.as_str(),
-                &camera_desc(shaders::SINGLE_FRAG, &[FORMAT]),
+                shaders::SINGLE_COMP,
                 set,
             )?;
-            let out = res.image(out).clone();
-            let depth = res.image(depth).clone();
-            let mesh = MeshDraw::of(res, m.vertices, m.indices, m.index_count);
+            let extent = res.image(out).info.extent;
             Ok(Box::new(move |rec| {
-                let target = DrawTarget {
-                    color: &[out.view],
-                    resolve: &[],
-                    depth: Some((depth.view, vk::AttachmentStoreOp::DONT_CARE)),
-                    extent: out.info.extent,
+                pipeline.bind(rec.cmd);
+                pipeline.push(rec.cmd, &STEPS);
+                unsafe {
+                    rec.gpu.device.cmd_dispatch(
+                        rec.cmd,
+                        extent.width.div_ceil(8),
+                        extent.height.div_ceil(8),
+                        1,
+                    )
                 };
-                draw_mesh(rec, &target, &pipeline, mesh, || {
-                    pipeline.push(rec.cmd, &STEPS)
-                });
             }))
         });
 }

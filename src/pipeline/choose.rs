@@ -6,12 +6,9 @@ use crate::scene::Scene;
 
 /// Scene-derived scales for [`crate::preprocess::settings::derive`].
 pub fn object_scale(scene: &Scene, target_error: f64, max_texels: f64) -> ObjectScale {
-    let (center, _) = scene.bounds();
-    let dist = scene.camera.position.distance(center) as f64;
-    let pixel_mm = 2.0 * dist * (0.5 * scene.camera.fov_y as f64).tan() / scene.height as f64;
     ObjectScale {
         area_mm2: scene.mesh.surface_area(),
-        pixel_mm,
+        pixel_mm: scene.pixel_mm(),
         max_texels,
         target_error,
     }
@@ -97,6 +94,11 @@ pub fn choose(
     // Not a preprocessing setting, but chosen from the texel like them: said here with them.
     let (_, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
     choice.reasons.push(why);
+    if scene.material.model.has_single_pass() {
+        choice
+            .reasons
+            .push(crate::scene::single::downsample(scene).1);
+    }
     if let Some(env) = &scene.environment {
         let p = scene.prt;
         choice.reasons.push(format!(

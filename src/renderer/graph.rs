@@ -315,13 +315,19 @@ impl<'a> Assembly<'a> {
     }
 
     /// Adds the single-scattering passes (`entry`, `thickness`, `single`) when `single_pass`,
-    /// and returns the image the composite reads for it (a black pixel without the pass).
+    /// at one sample per `scene::single::downsample` pixels along each side, and returns
+    /// what the composite reads of them (a black pixel without the pass).
     pub(super) fn add_single_scattering(
         &self,
         g: &mut RenderGraph,
         single_pass: bool,
-    ) -> Result<ResourceId> {
-        let (w, h) = (self.scene.width, self.scene.height);
+    ) -> Result<passes::composite::SingleImages> {
+        let k = crate::scene::single::downsample(self.scene).0;
+        let (w, h) = crate::scene::single::downsampled(
+            self.scene.width,
+            self.scene.height,
+            if single_pass { k } else { 1 },
+        );
         let Imported {
             frame,
             vertices,
@@ -351,16 +357,33 @@ impl<'a> Assembly<'a> {
             passes::single::entry(g, shadow_maps, entry);
             let back = image(g, Item::BackDepth);
             let single = image(g, Item::SingleScattering);
-            let single_depth = image(g, Item::SingleDepth);
+            let front = passes::single::FrontImages {
+                depth: image(g, Item::SingleDepth),
+                position: image(g, Item::FrontPosition),
+                normal: image(g, Item::FrontNormal),
+                facet: image(g, Item::FrontFacet),
+            };
             passes::single::thickness(g, mesh, back);
+            passes::single::front(g, mesh, front);
             passes::single::single(
                 g,
-                mesh,
-                passes::single::SingleInputs { entry, back },
+                passes::single::SingleInputs {
+                    frame,
+                    entry,
+                    back,
+                    front,
+                },
                 single,
-                single_depth,
             );
-            single
+            passes::composite::SingleImages {
+                radiance: single,
+                depth: front.depth,
+                pass: true,
+                ratio: [
+                    self.scene.width as f32 / w as f32,
+                    self.scene.height as f32 / h as f32,
+                ],
+            }
         } else {
             let black = Image::from_pixels(
                 self.gpu,
@@ -370,14 +393,24 @@ impl<'a> Assembly<'a> {
                 1,
                 &[0; 16],
             )?;
-            g.import_image(Arc::new(black), Access::Sampled(Stage::Fragment))
+            let black = g.import_image(Arc::new(black), Access::Sampled(Stage::Fragment));
+            passes::composite::SingleImages {
+                radiance: black,
+                depth: black,
+                pass: false,
+                ratio: [1.0; 2],
+            }
         };
         Ok(single)
     }
 
     /// Adds the `composite` pass that shades the object into the output images, with the
-    /// single scattering in `single` (when `single_pass`).
-    pub(super) fn add_composite(&self, g: &mut RenderGraph, single: ResourceId, single_pass: bool) {
+    /// single scattering in `single` (where the model has the pass).
+    pub(super) fn add_composite(
+        &self,
+        g: &mut RenderGraph,
+        single: passes::composite::SingleImages,
+    ) {
         let (scene, data) = (self.scene, self.data);
         let Imported {
             frame,
@@ -409,7 +442,6 @@ impl<'a> Assembly<'a> {
                 texture,
                 textured: scene.texture.is_some(),
                 single,
-                single_pass,
                 chord: scene.material.model.gathers_over_chord(),
                 shadow_maps,
                 oblique: scene.material.takes_oblique_exit() && scene.environment.is_none(),
@@ -518,12 +550,13 @@ impl<'a> Assembly<'a> {
     pub(super) fn add_capture(
         &self,
         g: &mut RenderGraph,
-        single: ResourceId,
-        single_pass: bool,
+        single: passes::composite::SingleImages,
     ) -> Result<CaptureBuffers> {
         let (gpu, data) = (self.gpu, self.data);
         let (aw, ah) = data.atlas_size;
-        let pixels = self.scene.width as u64 * self.scene.height as u64;
+        let k = crate::scene::single::downsample(self.scene).0;
+        let (sw, sh) = crate::scene::single::downsampled(self.scene.width, self.scene.height, k);
+        let samples = sw as u64 * sh as u64;
         let Imported { local, .. } = self.imported;
         let Transients {
             map,
@@ -538,8 +571,9 @@ impl<'a> Assembly<'a> {
             local: host_buffer(gpu, "capture local", atlas_bytes)?,
             node_irradiance: host_buffer(gpu, "capture node irradiance", node_bytes)?,
             node_radiosity: host_buffer(gpu, "capture node radiosity", node_bytes)?,
-            single: single_pass
-                .then(|| host_buffer(gpu, "capture single scattering", pixels * 16))
+            single: single
+                .pass
+                .then(|| host_buffer(gpu, "capture single scattering", samples * 16))
                 .transpose()?,
         };
         let mut to_host =
@@ -551,7 +585,7 @@ impl<'a> Assembly<'a> {
             (node_radiosity, to_host(&b.node_radiosity)),
         ];
         if let Some(buffer) = &b.single {
-            pairs.push((single, to_host(buffer)));
+            pairs.push((single.radiance, to_host(buffer)));
         }
         passes::readback::add(g, PassName::Capture.as_str(), pairs);
         Ok(b)

@@ -766,6 +766,9 @@ pub(super) fn resolve_material(
 /// supports for the camera view's attachments, gives the silhouette five levels of coverage.
 pub const DEFAULT_SAMPLES: u32 = 4;
 
+/// Most image pixels per single-scattering sample along each side that a scene may ask.
+pub const MAX_SINGLE_DOWNSAMPLE: u32 = 8;
+
 /// The relative index of refraction of a material given by coefficients, colour or a glTF
 /// volume without an index: about that of milk, water and skin.
 const DEFAULT_ETA: f64 = 1.3;
@@ -782,6 +785,7 @@ pub(super) struct Output {
     pub(super) settings: super::settings::SettingsOverrides,
     /// Shadow-map edge length in texels, when given.
     pub(super) shadow_map: Option<u32>,
+    pub(super) single_downsample: Option<u32>,
     /// Radiance -> display multiplier.
     pub(super) exposure: f64,
     /// Samples per pixel of the camera view.
@@ -829,6 +833,12 @@ pub(super) fn resolve_output(
             bail!("[output] shadow_map = {s} must lie between 16 and 16384");
         }
     }
+    let single_downsample = od.single_downsample;
+    if let Some(k) = single_downsample {
+        if !(1..=MAX_SINGLE_DOWNSAMPLE).contains(&k) {
+            bail!("[output] single_downsample = {k} must lie between 1 and {MAX_SINGLE_DOWNSAMPLE} (image pixels per single-scattering sample along each side)");
+        }
+    }
     let samples = *od.samples.get_or_insert(DEFAULT_SAMPLES);
     if ![1, 2, 4, 8].contains(&samples) {
         bail!("[output] samples = {samples} must be 1, 2, 4 or 8 (samples per pixel)");
@@ -843,6 +853,7 @@ pub(super) fn resolve_output(
         height,
         settings,
         shadow_map,
+        single_downsample,
         exposure,
     })
 }

@@ -6,6 +6,7 @@ pub mod light;
 pub mod mesh;
 pub mod settings;
 pub mod shadow;
+pub mod single;
 
 use crate::physics::Material;
 use anyhow::{Context, Result};
@@ -117,6 +118,9 @@ pub struct Scene {
     /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
     /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
+    /// Image pixels per single-scattering sample along each side, when the scene sets it;
+    /// otherwise derived (`single::downsample`).
+    pub single_downsample: Option<u32>,
     /// The surface's own reflection.
     pub surface: Surface,
     /// The preprocessing settings the scene file gives (`[settings]`); the command line's
@@ -228,6 +232,7 @@ impl Scene {
             samples: output.samples,
             tonemap: output.tonemap,
             shadow_map: output.shadow_map,
+            single_downsample: output.single_downsample,
             surface: output.surface,
             settings: output.settings,
             resolved: desc,
@@ -256,6 +261,13 @@ impl Scene {
     /// Centre and radius of the object's bounding sphere.
     pub fn bounds(&self) -> (Vec3, f32) {
         self.mesh.bounding_sphere()
+    }
+
+    /// The size of a pixel, in mm, at the object's centre.
+    pub fn pixel_mm(&self) -> f64 {
+        let (center, _) = self.bounds();
+        let dist = self.camera.position.distance(center) as f64;
+        2.0 * dist * (0.5 * self.camera.fov_y as f64).tan() / self.height as f64
     }
 }
 
@@ -483,6 +495,14 @@ mod tests {
             (
                 "[output]\nsamples = 3",
                 "samples = 3 must be 1, 2, 4 or 8",
+            ),
+            (
+                "[output]\nsingle_downsample = 0",
+                "single_downsample = 0 must lie between 1 and 8",
+            ),
+            (
+                "[output]\nsingle_downsample = 9",
+                "single_downsample = 9 must lie between 1 and 8",
             ),
             (
                 "[mesh]\nfile = \"Cargo.toml\"",

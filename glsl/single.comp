@@ -15,6 +15,8 @@
 // object's shape as the shadow map sees it), and the light is weighed by the Fresnel
 // transmittance at both ends, by cos_i / cos_t (the beam inside is narrower) and by 1 / eta^2
 // (radiance leaving a medium of index eta).
+// A compute pass over the samples the `front` pass drew (shading the triangles themselves,
+// lavapipe pays for whole blocks of pixels on triangles a few pixels wide).
 // Alpha holds the length of the ray inside (to the nearest back face; 0 where the pass found
 // none, as in a pixel it did not draw), for the composite's chord factor of the higher orders.
 // The ray is cut into STEPS intervals of equal optical depth in the least extinguishing
@@ -22,16 +24,19 @@
 // so the exponential integrates exactly per channel.
 #include "frame.glsl"
 #include "shadow.glsl"
+#define VIEW_NORMAL_WITHOUT_DERIVATIVES
 #include "view_normal.glsl"
+
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(set = 0, binding = 1) uniform sampler2DArray entry_depth;
 layout(set = 0, binding = 2) uniform sampler2D back_depth;
-
-layout(location = 0) in vec3 in_position;
-// The surface's normal at the view ray's entry (camera.vert, which `thickness` shares).
-layout(location = 1) in vec3 in_normal;
-
-layout(location = 0) out vec4 out_single;
+// The surface each view ray enters (`front`): position (w: 1 where the ray meets the object),
+// the interpolated normal turned to the camera, the triangle's normal.
+layout(set = 0, binding = 3) uniform sampler2D front_position;
+layout(set = 0, binding = 4) uniform sampler2D front_normal;
+layout(set = 0, binding = 5) uniform sampler2D front_facet;
+layout(set = 0, binding = 6, rgba32f) uniform writeonly image2D out_single;
 
 layout(push_constant) uniform Push {
     uint steps;
@@ -311,24 +316,32 @@ float refracted_exit(vec3 x, vec3 inside, float longest, vec2 size) {
 }
 
 void main() {
-    vec3 x = in_position;
+    ivec2 pixel = ivec2(gl_GlobalInvocationID.xy);
+    vec2 size = vec2(textureSize(back_depth, 0));
+    if (any(greaterThanEqual(pixel, ivec2(size)))) {
+        return;
+    }
+    vec4 front = texelFetch(front_position, pixel, 0);
+    if (front.w == 0.0) {
+        imageStore(out_single, pixel, vec4(0.0));
+        return;
+    }
+    vec3 x = front.xyz;
     vec3 d = normalize(x - frame.camera_pos.xyz);
     float eta = frame.material.x;
     bool refracts = eta != 1.0;
     // The view ray inside: refracted towards the normal behind a refractive boundary.
-    vec3 normal = normalize(in_normal);
-    normal = dot(normal, d) > 0.0 ? -normal : normal;
+    vec3 normal = texelFetch(front_normal, pixel, 0).xyz;
     // The normal the view ray enters through (adapted to the viewer as the composite's).
-    vec3 facet = facet_normal(x, normal);
+    vec3 facet = texelFetch(front_facet, pixel, 0).xyz;
     vec3 through = adapted_normal(normal, facet, -d);
     float cos_o = max(-dot(through, d), 0.0);
     vec3 inside = refracts ? refract(d, through, 1.0 / eta) : d;
     if (dot(inside, inside) == 0.0) {
         inside = d;
     }
-    vec2 size = vec2(textureSize(back_depth, 0));
-    float zb = texelFetch(back_depth, ivec2(gl_FragCoord.xy), 0).r;
-    vec2 ndc = gl_FragCoord.xy / size * 2.0 - 1.0;
+    float zb = texelFetch(back_depth, pixel, 0).r;
+    vec2 ndc = (vec2(pixel) + 0.5) / size * 2.0 - 1.0;
     float s_exit = zb < 1.0 ? max(dot(unproject(frame.inverse_view_proj, ndc, zb) - x, d), 0.0) : 0.0;
     if (refracts && s_exit > 0.0) {
         s_exit = refracted_exit(x, inside, s_exit / max(cos_o, 0.05), size);
@@ -375,5 +388,5 @@ void main() {
     }
     // Leaving: the Fresnel transmittance of the view's exit and radiance over eta^2.
     float leave = refracts ? fresnel_transmittance(eta, cos_o) / (eta * eta) : 1.0;
-    out_single = vec4(frame.sigma_s.rgb / (4.0 * PI) * sum * leave, s_exit);
+    imageStore(out_single, pixel, vec4(frame.sigma_s.rgb / (4.0 * PI) * sum * leave, s_exit));
 }
