@@ -1,7 +1,7 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 // The atlas mesh seen from the camera, position and normal: the back-face depth of
-// `thickness` and the view rays of `single`.
+// `thickness` and the surface `front` writes for the view rays of `single`.
 #include "frame.glsl"
 
 layout(location = 0) in vec3 in_position;

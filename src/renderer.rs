@@ -68,7 +68,7 @@ pub struct Captured {
     /// Global node radiosity.
     pub node_radiosity: Vec<[f32; 4]>,
     /// Single-scattered radiance, RGBA per sample of the `single` pass (row by row over its
-    /// image, `crate::scene::single::downsampled`; empty without the pass).
+    /// image, `scene::single::size`; empty without the pass).
     pub single: Vec<[f32; 4]>,
 }
 
@@ -529,8 +529,7 @@ impl Renderer {
             single: match &b.single {
                 Some(buffer) => {
                     let s = &self.scene;
-                    let k = crate::scene::single::downsample(s).0;
-                    let (w, h) = crate::scene::single::downsampled(s.width, s.height, k);
+                    let (w, h) = crate::scene::single::size(s);
                     read_back(buffer, w as usize * h as usize)?
                 }
                 None => Vec::new(),

@@ -55,8 +55,9 @@ fn estimate_bounds_the_requirements() {
             "1000-segment cylinder",
         ),
     ];
-    check(&cases);
+    let failures = check(&cases);
     let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// The same for the walks that fill F (`model = "volume"`), their count within 0.8x to 1.2x
@@ -84,12 +85,13 @@ fn estimate_bounds_the_walks() {
             "skim-milk sphere under the sky behind a boundary, F from walks",
         ),
     ];
-    check(&cases);
+    let failures = check(&cases);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// Estimates and preprocesses each `(scene text, name)` and checks the estimate's counts
-/// against what the run built and did.
-fn check(cases: &[(String, &str)]) {
+/// against what the run built and did: what fell outside its range.
+fn check(cases: &[(String, &str)]) -> Vec<String> {
     let mut failures = Vec::new();
     for (text, what) in cases {
         let scene = common::scene(text);
@@ -182,5 +184,5 @@ fn check(cases: &[(String, &str)]) {
             }
         }
     }
-    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    failures
 }

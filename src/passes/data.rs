@@ -431,8 +431,7 @@ pub fn counts(scene: &Scene, pre: &Preprocessed, mode: Blend) -> crate::layout::
         samples: scene.samples as u64,
         single: scene.material.model.has_single_pass(),
         single_pixels: {
-            let k = crate::scene::single::downsample(scene).0;
-            let (w, h) = crate::scene::single::downsampled(scene.width, scene.height, k);
+            let (w, h) = crate::scene::single::size(scene);
             w as u64 * h as u64
         },
         transfer_per_texel: transfer_per_texel(scene),

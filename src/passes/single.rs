@@ -99,7 +99,7 @@ fn camera_desc<'a>(fragment: &'a [u8], color: &'a [vk::Format]) -> GraphicsDesc<
 pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
     graph
         .pass(PassName::Thickness.as_str())
-        .access(i.frame, Access::Uniform(Stage::Fragment))
+        .access(i.frame, Access::Uniform(Stage::Vertex))
         .mesh(i.vertices, i.indices)
         .access(back, Access::DepthAttachment)
         .setup(move |gpu, res| {
@@ -141,7 +141,7 @@ pub struct FrontImages {
 pub fn front(graph: &mut RenderGraph, m: MeshInputs, f: FrontImages) {
     graph
         .pass(PassName::Front.as_str())
-        .access(m.frame, Access::Uniform(Stage::Fragment))
+        .access(m.frame, Access::Uniform(Stage::Vertex))
         .mesh(m.vertices, m.indices)
         .access(f.position, Access::ColorAttachment)
         .access(f.normal, Access::ColorAttachment)

@@ -19,7 +19,7 @@ pub enum Model {
     /// half-space with Fresnel reflection and refraction; the exit lobe the half-space's.
     Halfspace,
     /// The exact half-space profile of orders >= 2 and single scattering computed per frame
-    /// along each view ray (the `thickness` and `single` passes); eta = 1 only.
+    /// along each view ray (the `thickness`, `front` and `single` passes); eta = 1 only.
     HalfspaceSingle,
     /// As `halfspace-single`, with the light that crosses the air between parts of the object
     /// (`preprocess::air`): F keeps no pair whose segment leaves the medium and enters it
@@ -165,7 +165,7 @@ impl Model {
 /// The properties of a model ([`Model::traits`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ModelTraits {
-    /// Single scattering is its own pass (`entry`, `thickness`, `single`).
+    /// Single scattering is its own pass (`entry`, `thickness`, `front`, `single`).
     pub single_pass: bool,
     /// F is the half-space profile of orders >= 2 (single scattering apart).
     pub halfspace_orders: bool,

@@ -214,19 +214,19 @@ pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
     let near_nodes = (std::f64::consts::PI * reach * reach / (0.866 * sp * sp)).max(1.0);
     let near_texels = std::f64::consts::PI * (reach + sp) * (reach + sp) / (h * h);
     // Under a sky, the starts whose drawn block is below their horizon (and that no lamp
-    // faces) start no walk.
+    // lights) start no walk.
     let entering = if s.walk_paths > 0 {
-        walk::entry_fraction(mesh, &s.walk_lights, choice.sky.as_ref())
+        walk::entry_fraction(mesh, &s.walk_lights, choice.sky.as_ref(), s.walk_paths)
     } else {
-        1.0
+        [1.0; 3]
     };
     let work = Work {
         kernel_taps: texels.saturating_mul(kk),
         dense_entries: nodes * nodes,
         fit_products: nodes as f64 * (near_texels * near_nodes.min(16.0) + near_nodes.powi(3)),
         triangles: mesh.triangle_count() as u64,
-        walks: 3.0 * nodes as f64 * s.walk_paths as f64 * entering,
-        walk_collisions: walk_collisions(material, nodes, s.walk_paths) * entering,
+        walks: nodes as f64 * s.walk_paths as f64 * entering.iter().sum::<f64>(),
+        walk_collisions: walk_collisions(material, nodes, s.walk_paths, entering),
     };
     Estimate {
         texels,
@@ -248,8 +248,14 @@ pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
 /// 1 / sqrt(1 - a) times; thin objects end their walks sooner, so this lies mostly above the
 /// count there. Behind a refractive boundary the walks reflected back inside collide longer, by
 /// the ratio of the light absorbed in a half-space with the boundary and without it (the
-/// dipole's 1 - R_total for each).
-pub fn walk_collisions(material: &Material, nodes: u64, walk_paths: u32) -> f64 {
+/// dipole's 1 - R_total for each). Each channel's walks times `entering`, the share of starts
+/// that walk ([`walk::entry_fraction`]).
+pub fn walk_collisions(
+    material: &Material,
+    nodes: u64,
+    walk_paths: u32,
+    entering: [f64; 3],
+) -> f64 {
     if walk_paths == 0 {
         return 0.0;
     }
@@ -263,7 +269,7 @@ pub fn walk_collisions(material: &Material, nodes: u64, walk_paths: u32) -> f64 
             let albedo = s / (s + a).max(1e-300);
             let boundary = (1.0 - behind[c].total_reflectance())
                 / (1.0 - matched[c].total_reflectance()).max(1e-6);
-            (1.0 / (1.0 - albedo).max(1e-6).sqrt()).min(1e3) * boundary.max(1.0)
+            (1.0 / (1.0 - albedo).max(1e-6).sqrt()).min(1e3) * boundary.max(1.0) * entering[c]
         })
         .sum();
     nodes as f64 * walk_paths as f64 * per_walk

@@ -160,15 +160,21 @@ impl WalkSky {
 const ENTRY_FRACTION_FACES: usize = 4096;
 
 /// The expected fraction of the walks' start points that enter the object under `lamps`
-/// ([`entry_lights`]) and `sky`, for the preprocessing estimate. Under a sky each start draws
-/// one block of the map: a block below the point's horizon, where no lamp faces the point
-/// either, starts no walk (under lamps alone a node that no lamp reaches enters along its
-/// normal instead: 1). Over the faces by area and the channels: 1 - (1 - s(n)) (1 - u(n)),
-/// s the share of the channel's sky above the face's plane, u 1 where a lamp faces it. Shadows
-/// are not counted.
-pub fn entry_fraction(mesh: &Mesh, lamps: &[Option<Light>], sky: Option<&WalkSky>) -> f64 {
+/// ([`entry_lights`]) and `sky`, per channel, with `paths` walks per node and channel, for the
+/// preprocessing estimate. Under a sky each start draws one block of the map: a block below
+/// the point's horizon, where no lamp lights the point either, starts no walk. Where none of a
+/// node's starts enters, its walks start again without shadows and then along the normal, all
+/// of them (so under lamps alone, or where a channel's sky is black, every start walks). Over
+/// the faces by area: s + (1 - s)^paths where no lamp of the channel faces the face, s the
+/// share of the channel's sky above its plane; 1 where one does. Shadows are not counted.
+pub fn entry_fraction(
+    mesh: &Mesh,
+    lamps: &[Option<Light>],
+    sky: Option<&WalkSky>,
+    paths: u32,
+) -> [f64; 3] {
     let Some(sky) = sky else {
-        return 1.0;
+        return [1.0; 3];
     };
     let orientation = if mesh.signed_volume() < 0.0 {
         -1.0
@@ -177,7 +183,7 @@ pub fn entry_fraction(mesh: &Mesh, lamps: &[Option<Light>], sky: Option<&WalkSky
     };
     let totals: [f64; 3] = std::array::from_fn(|c| sky.cdf[c].last().copied().unwrap_or(0.0));
     let faces = mesh.triangle_count();
-    let (mut sum, mut area) = (0.0, 0.0);
+    let (mut sum, mut area) = ([0.0; 3], 0.0);
     for tri in (0..faces).step_by(faces.div_ceil(ENTRY_FRACTION_FACES).max(1)) {
         let [a, b, c] = triangle(mesh, tri);
         let cross = (b - a).cross(c - a) * orientation;
@@ -187,9 +193,11 @@ pub fn entry_fraction(mesh: &Mesh, lamps: &[Option<Light>], sky: Option<&WalkSky
         }
         let n = cross.normalize();
         let centre = (a + b + c) / 3.0;
-        let lamp = lamps.iter().flatten().any(|l| {
-            let (towards, _, factor) = l.towards(centre);
-            factor > 0.0 && n.dot(towards) > 0.0
+        let lamp: [bool; 3] = std::array::from_fn(|c| {
+            lamps.iter().flatten().any(|l| {
+                let (towards, _, factor) = l.towards(centre);
+                l.radiance[c] as f64 * factor > 0.0 && n.dot(towards) > 0.0
+            })
         });
         let mut above = [0.0; 3];
         for (w, power) in &sky.pixels {
@@ -199,18 +207,21 @@ pub fn entry_fraction(mesh: &Mesh, lamps: &[Option<Light>], sky: Option<&WalkSky
                 }
             }
         }
-        let entered: f64 = (0..3)
-            .filter(|&c| totals[c] > 0.0)
-            .map(|c| if lamp { 1.0 } else { above[c] / totals[c] })
-            .sum::<f64>()
-            / totals.iter().filter(|&&t| t > 0.0).count().max(1) as f64;
-        sum += weight * entered;
+        for c in 0..3 {
+            let entered = if lamp[c] || totals[c] <= 0.0 {
+                1.0
+            } else {
+                let s = above[c] / totals[c];
+                s + (1.0 - s).powi(paths.min(i32::MAX as u32) as i32)
+            };
+            sum[c] += weight * entered;
+        }
         area += weight;
     }
     if area > 0.0 {
-        sum / area
+        sum.map(|s| s / area)
     } else {
-        1.0
+        [1.0; 3]
     }
 }
 

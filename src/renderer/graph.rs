@@ -314,7 +314,8 @@ impl<'a> Assembly<'a> {
         );
     }
 
-    /// Adds the single-scattering passes (`entry`, `thickness`, `single`) when `single_pass`,
+    /// Adds the single-scattering passes (`entry`, `thickness`, `front`, `single`) when
+    /// `single_pass`,
     /// at one sample per `scene::single::downsample` pixels along each side, and returns
     /// what the composite reads of them (a black pixel without the pass).
     pub(super) fn add_single_scattering(
@@ -322,12 +323,7 @@ impl<'a> Assembly<'a> {
         g: &mut RenderGraph,
         single_pass: bool,
     ) -> Result<passes::composite::SingleImages> {
-        let k = crate::scene::single::downsample(self.scene).0;
-        let (w, h) = crate::scene::single::downsampled(
-            self.scene.width,
-            self.scene.height,
-            if single_pass { k } else { 1 },
-        );
+        let (w, h) = crate::scene::single::size(self.scene);
         let Imported {
             frame,
             vertices,
@@ -554,8 +550,7 @@ impl<'a> Assembly<'a> {
     ) -> Result<CaptureBuffers> {
         let (gpu, data) = (self.gpu, self.data);
         let (aw, ah) = data.atlas_size;
-        let k = crate::scene::single::downsample(self.scene).0;
-        let (sw, sh) = crate::scene::single::downsampled(self.scene.width, self.scene.height, k);
+        let (sw, sh) = crate::scene::single::size(self.scene);
         let samples = sw as u64 * sh as u64;
         let Imported { local, .. } = self.imported;
         let Transients {

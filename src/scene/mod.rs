@@ -118,8 +118,8 @@ pub struct Scene {
     /// Shadow-map edge length in texels, when the scene sets it; otherwise it follows the atlas
     /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
-    /// Image pixels per single-scattering sample along each side, when the scene sets it;
-    /// otherwise derived (`single::downsample`).
+    /// Image pixels per single-scattering sample along each side, when the scene sets it
+    /// (otherwise 1: `single::downsample`).
     pub single_downsample: Option<u32>,
     /// The surface's own reflection.
     pub surface: Surface,

@@ -5,7 +5,7 @@ use super::Scene;
 
 /// Image pixels per single-scattering sample along each side for `scene`, and why: the
 /// scene's `[output] single_downsample` when set, else 1 (a sample per pixel). Fewer samples
-/// make the pass several times quicker, and the composite's upsample follows the depth so that
+/// make the pass quicker, and the composite's upsample follows the depth so that
 /// another surface's samples (at a silhouette, or an ear in front of the head) do not mix in;
 /// but single scattering steps at the mesh's edges and near the light's terminator from one
 /// pixel to the next, which fewer samples blur, so the default keeps every pixel.
@@ -14,9 +14,18 @@ pub fn downsample(scene: &Scene) -> (u32, String) {
         Some(k) => (k, format!("single scattering at one sample per {k}x{k} pixels: given")),
         None => (
             1,
-            "single scattering at every pixel ([output] single_downsample = 2 takes one sample per 2x2 pixels, several times quicker, blurring its steps at the mesh's edges)".to_string(),
+            "single scattering at every pixel ([output] single_downsample = 2 takes one sample per 2x2 pixels: the pass is quicker, its steps at the mesh's edges blurred)".to_string(),
         ),
     }
+}
+
+/// The single-scattering images' size for `scene` (its output at [`downsample`]'s factor).
+pub fn size(scene: &Scene) -> (u32, u32) {
+    downsampled(
+        scene.width,
+        scene.height,
+        scene.single_downsample.unwrap_or(1),
+    )
 }
 
 /// The single-scattering images' size for an image of `width` x `height` at `downsample`.
@@ -42,7 +51,7 @@ mod tests {
     #[test]
     fn the_downsample_is_the_scenes_or_one() {
         assert_eq!(
-            downsample(&scene("[output]\nwidth = 2048\nheight = 2048\n")).0,
+            downsample(&scene("[output]\nwidth = 64\nheight = 64\n")).0,
             1
         );
         let given = scene("[output]\nwidth = 64\nheight = 64\nsingle_downsample = 3\n");
