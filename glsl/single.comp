@@ -29,7 +29,9 @@
 
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
-layout(set = 0, binding = 1) uniform sampler2DArray entry_depth;
+// Read as a storage image, in the layout `entry` leaves it in: a frame under the same lights
+// skips `entry` and finds the image as the last frame left it.
+layout(set = 0, binding = 1, rgba32f) uniform readonly image2DArray entry_depth;
 layout(set = 0, binding = 2) uniform sampler2D back_depth;
 // The surface each view ray enters (`front`): position (w: 1 where the ray meets the object),
 // the interpolated normal turned to the camera, the triangle's normal.
@@ -52,11 +54,11 @@ vec3 unproject(mat4 inverse_matrix, vec2 ndc, float z) {
 // along u and v per texel, which of them are known (`entry` pass); and the offset of `uv`
 // from the texel's centre, in texels.
 vec4 entry_texel(uint layer, vec2 uv, out vec2 offset) {
-    ivec2 size = textureSize(entry_depth, 0).xy;
+    ivec2 size = imageSize(entry_depth).xy;
     vec2 f = uv * vec2(size);
     ivec2 i = clamp(ivec2(floor(f)), ivec2(0), size - 1);
     offset = f - (vec2(i) + 0.5);
-    return texelFetch(entry_depth, ivec3(i, int(layer)), 0);
+    return imageLoad(entry_depth, ivec3(i, int(layer)));
 }
 
 // Where the light of `l` first meets the surface on its straight line through p: true with
@@ -113,7 +115,7 @@ vec3 entry_normal(vec3 entry, uint layer, vec3 slopes, vec3 travel) {
     if (known != 3u) {
         return -travel;
     }
-    vec2 texel = 1.0 / vec2(textureSize(entry_depth, 0).xy);
+    vec2 texel = 1.0 / vec2(imageSize(entry_depth).xy);
     vec4 clip = frame.shadow_view_proj[layer] * vec4(entry, 1.0);
     vec3 ndc = clip.xyz / clip.w;
     vec3 du = unproject(frame.shadow_inverse[layer], ndc.xy + vec2(2.0 * texel.x, 0.0), ndc.z + slopes.x) - entry;

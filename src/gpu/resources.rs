@@ -392,11 +392,11 @@ impl Image {
     fn written(
         gpu: &Arc<Gpu>,
         name: &str,
-        info: ImageInfo,
+        (info, array_view): (ImageInfo, bool),
         (stage, layout): (vk::PipelineStageFlags2, vk::ImageLayout),
         write: impl FnOnce(vk::CommandBuffer, &Image),
     ) -> GpuResult<Image> {
-        let image = Image::new(gpu, name, info, false)?;
+        let image = Image::new(gpu, name, info, array_view)?;
         gpu.one_shot(|cmd| {
             image.transition(
                 gpu,
@@ -440,7 +440,7 @@ impl Image {
             vk::ImageLayout::TRANSFER_DST_OPTIMAL,
         );
         let info = ImageInfo::single(format, width, height, usage);
-        Image::written(gpu, name, info, to, |cmd, image| unsafe {
+        Image::written(gpu, name, (info, false), to, |cmd, image| unsafe {
             let region = [whole_image_copy(vk::Extent2D { width, height })];
             gpu.device.cmd_copy_buffer_to_image(
                 cmd,
@@ -480,27 +480,52 @@ impl Image {
         width: u32,
         height: u32,
     ) -> GpuResult<Image> {
+        Image::zeroed_storage_layers(gpu, name, format, (width, height), None)
+    }
+
+    /// [`Image::zeroed_storage`] with `layers` array layers seen through an array view (Some),
+    /// or a single layer and a plain view (None).
+    pub fn zeroed_storage_layers(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        format: vk::Format,
+        (width, height): (u32, u32),
+        layers: Option<u32>,
+    ) -> GpuResult<Image> {
         let usage = vk::ImageUsageFlags::STORAGE
             | vk::ImageUsageFlags::TRANSFER_DST
             | vk::ImageUsageFlags::TRANSFER_SRC;
         let to = (vk::PipelineStageFlags2::CLEAR, vk::ImageLayout::GENERAL);
-        let info = ImageInfo::single(format, width, height, usage);
-        Image::written(gpu, name, info, to, |cmd, image| unsafe {
-            gpu.device.cmd_clear_color_image(
-                cmd,
-                image.raw,
-                vk::ImageLayout::GENERAL,
-                &vk::ClearColorValue { float32: [0.0; 4] },
-                &[image.range()],
-            );
-            let done = [vk::MemoryBarrier2::default()
-                .src_stage_mask(vk::PipelineStageFlags2::CLEAR)
-                .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                .dst_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
-                .dst_access_mask(vk::AccessFlags2::MEMORY_READ | vk::AccessFlags2::MEMORY_WRITE)];
-            gpu.device
-                .cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().memory_barriers(&done));
-        })
+        let info = ImageInfo {
+            layers: layers.unwrap_or(1).max(1),
+            ..ImageInfo::single(format, width, height, usage)
+        };
+        Image::written(
+            gpu,
+            name,
+            (info, layers.is_some()),
+            to,
+            |cmd, image| unsafe {
+                gpu.device.cmd_clear_color_image(
+                    cmd,
+                    image.raw,
+                    vk::ImageLayout::GENERAL,
+                    &vk::ClearColorValue { float32: [0.0; 4] },
+                    &[image.range()],
+                );
+                let done = [vk::MemoryBarrier2::default()
+                    .src_stage_mask(vk::PipelineStageFlags2::CLEAR)
+                    .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+                    .dst_stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+                    .dst_access_mask(
+                        vk::AccessFlags2::MEMORY_READ | vk::AccessFlags2::MEMORY_WRITE,
+                    )];
+                gpu.device.cmd_pipeline_barrier2(
+                    cmd,
+                    &vk::DependencyInfo::default().memory_barriers(&done),
+                );
+            },
+        )
     }
 }
 

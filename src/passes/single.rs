@@ -188,7 +188,7 @@ pub fn single(graph: &mut RenderGraph, i: SingleInputs, out: ResourceId) {
     graph
         .pass(PassName::Single.as_str())
         .access(i.frame, Access::Uniform(Stage::Compute))
-        .access(i.entry, Access::Sampled(Stage::Compute))
+        .access(i.entry, Access::StorageRead(Stage::Compute))
         .access(i.back, Access::Sampled(Stage::Compute))
         .access(i.front.position, Access::Sampled(Stage::Compute))
         .access(i.front.normal, Access::Sampled(Stage::Compute))
@@ -198,7 +198,7 @@ pub fn single(graph: &mut RenderGraph, i: SingleInputs, out: ResourceId) {
             let set = res
                 .bind()
                 .uniform(0, i.frame)
-                .sampled(1, i.entry, Sampler::nearest(gpu)?)
+                .storage_image(1, i.entry)
                 .sampled(2, i.back, Sampler::nearest(gpu)?)
                 .sampled(3, i.front.position, Sampler::nearest(gpu)?)
                 .sampled(4, i.front.normal, Sampler::nearest(gpu)?)

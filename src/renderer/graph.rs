@@ -346,10 +346,16 @@ impl<'a> Assembly<'a> {
             let image = |g: &mut RenderGraph, item: Item| {
                 g.image(item.name(), ImageDesc::new(item.format(), w, h))
             };
-            let entry = g.image(
+            // Kept across frames and imported in the layout `entry` writes and `single` reads
+            // it in, so that a frame under the same lights can skip `entry`.
+            let entry = Image::zeroed_storage_layers(
+                self.gpu,
                 Item::EntryDepth.name(),
-                ImageDesc::layered(passes::single::ENTRY_FORMAT, s, s, layers),
-            );
+                passes::single::ENTRY_FORMAT,
+                (s, s),
+                Some(layers),
+            )?;
+            let entry = g.import_image(Arc::new(entry), Access::StorageRead(Stage::Compute));
             passes::single::entry(g, shadow_maps, entry);
             let back = image(g, Item::BackDepth);
             let single = image(g, Item::SingleScattering);

@@ -122,7 +122,7 @@ impl Running {
             Action::Quit => return Ok(false),
         }
         self.take_view(v);
-        self.note_moved_walk_lights();
+        self.walk_for_moved_lights(app);
         Ok(true)
     }
 
@@ -165,10 +165,12 @@ impl Running {
         }
     }
 
-    /// Says in the status when the lights differ from those the walks' F was walked for.
-    fn note_moved_walk_lights(&mut self) {
-        // The walks' F answers the lamps where they were when it was walked: said, not hidden,
-        // once a light moves away from there.
+    /// Where the lights differ from those the walks' F was walked for, asks for the walks
+    /// again with the lights where they are now (once they have stayed for `view
+    /// --settle-ms`), and says so in the status: until then the image shows the F walked for
+    /// the lights where they were.
+    fn walk_for_moved_lights(&mut self, app: &AppSettings) {
+        // The walks' F answers the lamps where they were when it was walked.
         let walked = &self.prepared.pre.settings.walk_lights;
         let lights = self.rig.lights(&self.view);
         let now = crate::preprocess::walk::entry_lights(&lights, self.scene.environment.as_deref());
@@ -195,7 +197,10 @@ impl Running {
             || (walked.iter().any(Option::is_some)
                 && walked.iter().zip(&now).any(|(a, b)| moved(a, b)))
         {
-            self.status = "volume: F was walked for the lights where the scene placed them; moved lights get that F (save the scene and render it to walk for these)".into();
+            self.request_walk_lights(lights, app);
+            if self.job.is_none() {
+                self.status = "volume: the lights moved; the walks start again for them once they stay (until then F answers the lights where they were)".into();
+            }
         }
     }
 

@@ -18,6 +18,9 @@ pub(super) struct Wanted {
     pub(super) preset: Option<String>,
     pub(super) material: Material,
     pub(super) overrides: SettingsOverrides,
+    /// The lights the walks enter along where they were moved in the viewer (models that
+    /// walk); None: where the scene placed them.
+    pub(super) walk_lights: Option<Vec<crate::scene::Light>>,
 }
 
 impl Wanted {
@@ -119,6 +122,7 @@ impl Running {
             preset: Some(name),
             material,
             overrides: app.given,
+            walk_lights: self.wanted().walk_lights,
         };
         self.request(w, app);
         Ok(())
@@ -131,7 +135,7 @@ impl Running {
         if self.scene.model_reason.is_none() {
             return Ok(material);
         }
-        let mut scene = self.scene_for(material);
+        let mut scene = self.scene_for(material, None);
         scene.resolved.material.model = None;
         Ok(match pipeline::model::decide(&scene, target_error) {
             Some((model, _)) => material.with_model(model)?,
@@ -158,20 +162,43 @@ impl Running {
         {
             return Ok(*o);
         }
-        Ok(
-            pipeline::choose(&self.scene_for(w.material), o, app.target_error)?
-                .settings
-                .pinned(),
-        )
+        Ok(pipeline::choose(
+            &self.scene_for(w.material, w.walk_lights.as_deref()),
+            o,
+            app.target_error,
+        )?
+        .settings
+        .pinned())
     }
 
     /// The scene with `material`, as a run for it sees it: without the scene file's settings,
     /// which the wanted overrides hold already (and may have dropped).
-    fn scene_for(&self, material: Material) -> Scene {
+    /// With `lights` where given (moved in the viewer), for the walks to enter along.
+    fn scene_for(&self, material: Material, lights: Option<&[crate::scene::Light]>) -> Scene {
         let mut scene = self.scene.clone();
         scene.material = material;
         scene.settings = SettingsOverrides::default();
+        if let Some(lights) = lights {
+            scene.lights = lights.to_vec();
+        }
         scene
+    }
+
+    /// Asks for the walks to be made again for `lights` (the lights as moved in the viewer)
+    /// where the model walks and they are not what the walks were, or will be, made for: once
+    /// the lights have stayed for `view --settle-ms`, as a material edit is. True where asked.
+    pub(super) fn request_walk_lights(
+        &mut self,
+        lights: Vec<crate::scene::Light>,
+        app: &AppSettings,
+    ) -> bool {
+        let mut w = self.wanted();
+        if !w.material.model.walks() || w.walk_lights.as_ref() == Some(&lights) {
+            return false;
+        }
+        w.walk_lights = Some(lights);
+        self.request(w, app);
+        true
     }
 
     /// The material of colour `albedo` and scatter distance `distance` (mm) per channel at the
@@ -260,7 +287,7 @@ impl Running {
     /// Prepares `wanted`, asked for at `asked`, on a background thread.
     fn start_job(&mut self, wanted: Wanted, asked: Instant, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
-        let scene = self.scene_for(wanted.material);
+        let scene = self.scene_for(wanted.material, wanted.walk_lights.as_deref());
         let request = Request {
             overrides: wanted.overrides,
             target_error: app.target_error,

@@ -160,6 +160,7 @@ fn assemble(
         preset: config.scene.resolved.material.preset.clone(),
         material: config.scene.material,
         overrides: config.overrides,
+        walk_lights: None,
     };
     Running {
         renderer: None,
