@@ -197,7 +197,7 @@ pub struct ImageInfo {
 }
 
 impl ImageInfo {
-    /// A single-layer image of `format`, `width` x `height`, for `usage`.
+    /// An image of `format`, `width` x `height`, for `usage`.
     pub fn single(format: vk::Format, width: u32, height: u32, usage: vk::ImageUsageFlags) -> Self {
         ImageInfo {
             format,

@@ -169,21 +169,17 @@ impl Running {
     /// again with the lights where they are now (once they have stayed for `view
     /// --settle-ms`), and says so in the status: until then the image shows the F walked for
     /// the lights where they were.
-    fn walk_for_moved_lights(&mut self, app: &AppSettings) {
-        // The walks' F answers the lamps where they were when it was walked.
+    pub(super) fn walk_for_moved_lights(&mut self, app: &AppSettings) {
+        // The walks' F answers the lamps where they were when it was walked (shown walks only).
+        if self.prepared.pre.settings.walk_paths == 0 {
+            return;
+        }
         let walked = &self.prepared.pre.settings.walk_lights;
         let lights = self.rig.lights(&self.view);
         let now = crate::preprocess::walk::entry_lights(&lights, self.scene.environment.as_deref());
         // And the environment's map they entered from, as it is turned and switched now.
-        let walked_sky = self.prepared.pre.settings.walk_sky;
-        let sky_moved = walked_sky.is_some() && {
-            let sky = lights
-                .iter()
-                .find(|l| l.kind == crate::scene::desc::LightKind::Environment)
-                .zip(self.scene.environment.as_deref())
-                .and_then(|(l, env)| crate::preprocess::walk::WalkSky::new(env, l));
-            sky.map(|s| s.key()) != walked_sky
-        };
+        let sky = self.walk_sky_now(&lights);
+        let sky_moved = sky != self.prepared.pre.settings.walk_sky;
         let moved = |a: &Option<Light>, b: &Option<Light>| match (a, b) {
             (Some(a), Some(b)) => {
                 a.kind != b.kind
@@ -193,15 +189,23 @@ impl Running {
             }
             (a, b) => a.is_some() != b.is_some(),
         };
-        if sky_moved
-            || (walked.iter().any(Option::is_some)
-                && walked.iter().zip(&now).any(|(a, b)| moved(a, b)))
-        {
-            self.request_walk_lights(lights, app);
-            if self.job.is_none() {
+        if sky_moved || walked.iter().zip(&now).any(|(a, b)| moved(a, b)) {
+            let asked = self.request_walk_lights((lights, sky), app);
+            if asked && self.job.is_none() {
                 self.status = "volume: the lights moved; the walks start again for them once they stay (until then F answers the lights where they were)".into();
             }
         }
+    }
+
+    /// The key of the environment's sky the walks would enter from under `lights` (the map
+    /// shown, turned as they say); None without one.
+    pub(super) fn walk_sky_now(&self, lights: &[Light]) -> Option<u64> {
+        lights
+            .iter()
+            .find(|l| l.kind == crate::scene::desc::LightKind::Environment)
+            .zip(self.scene.environment.as_deref())
+            .and_then(|(l, env)| crate::preprocess::walk::WalkSky::new(env, l))
+            .map(|s| s.key())
     }
 
     /// Shows the environment map `step` places on in the list (the scene's, the shipped sky,

@@ -18,9 +18,10 @@ pub(super) struct Wanted {
     pub(super) preset: Option<String>,
     pub(super) material: Material,
     pub(super) overrides: SettingsOverrides,
-    /// The lights the walks enter along where they were moved in the viewer (models that
-    /// walk); None: where the scene placed them.
-    pub(super) walk_lights: Option<Vec<crate::scene::Light>>,
+    /// The lights the walks enter along where they were moved in the viewer, with the key of
+    /// the environment's sky as it was turned and switched (models that walk); None: where
+    /// the scene placed them.
+    pub(super) walk_lights: Option<(Vec<crate::scene::Light>, Option<u64>)>,
 }
 
 impl Wanted {
@@ -163,7 +164,7 @@ impl Running {
             return Ok(*o);
         }
         Ok(pipeline::choose(
-            &self.scene_for(w.material, w.walk_lights.as_deref()),
+            &self.scene_for(w.material, w.walk_lights.as_ref().map(|l| l.0.as_slice())),
             o,
             app.target_error,
         )?
@@ -189,7 +190,7 @@ impl Running {
     /// the lights have stayed for `view --settle-ms`, as a material edit is. True where asked.
     pub(super) fn request_walk_lights(
         &mut self,
-        lights: Vec<crate::scene::Light>,
+        lights: (Vec<crate::scene::Light>, Option<u64>),
         app: &AppSettings,
     ) -> bool {
         let mut w = self.wanted();
@@ -284,10 +285,17 @@ impl Running {
         });
     }
 
-    /// Prepares `wanted`, asked for at `asked`, on a background thread.
-    fn start_job(&mut self, wanted: Wanted, asked: Instant, app: &AppSettings) {
+    /// Prepares `wanted`, asked for at `asked`, on a background thread: for a model that
+    /// walks, with the lights where they are when it starts.
+    fn start_job(&mut self, mut wanted: Wanted, asked: Instant, app: &AppSettings) {
         let progress = Arc::new(Mutex::new(("starting".to_string(), 0, 1)));
-        let scene = self.scene_for(wanted.material, wanted.walk_lights.as_deref());
+        if wanted.material.model.walks() {
+            let lights = self.rig.lights(&self.view);
+            let sky = self.walk_sky_now(&lights);
+            wanted.walk_lights = Some((lights, sky));
+        }
+        let lights = wanted.walk_lights.as_ref().map(|l| l.0.as_slice());
+        let scene = self.scene_for(wanted.material, lights);
         let request = Request {
             overrides: wanted.overrides,
             target_error: app.target_error,
@@ -330,6 +338,8 @@ impl Running {
         if self.job.as_ref().is_some_and(|j| j.handle.is_finished()) {
             self.take_job()?;
             self.update_preview();
+            // The lights may have moved on while it ran.
+            self.walk_for_moved_lights(app);
         }
         self.start_settled(app);
         Ok(())
