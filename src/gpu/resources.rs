@@ -386,7 +386,7 @@ impl Image {
         }
     }
 
-    /// A single-layer 2D image of `info`, written once in a
+    /// An image of `info` (`array_view`: seen through an array view), written once in a
     /// one-shot command buffer by `write`, after its first transition (from `UNDEFINED`, the
     /// contents discarded) to `layout` for a transfer write at `stage`.
     fn written(
