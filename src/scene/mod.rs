@@ -295,8 +295,8 @@ mod tests {
     use super::*;
 
     /// The scene of a description's text, relative paths from the working folder, nothing
-    /// overridden.
-    fn from_text(text: &str) -> Scene {
+    /// overridden (the scene module's tests share it).
+    pub(super) fn from_text(text: &str) -> Scene {
         Scene::from_desc(
             SceneDesc::parse(text).unwrap(),
             Path::new(""),

@@ -157,14 +157,7 @@ pub fn shadow_map_size(scene: &Scene, texel_mm: f64) -> (u32, String) {
 mod tests {
     use super::*;
 
-    fn default_scene(extra: &str) -> Scene {
-        Scene::from_desc(
-            crate::scene::desc::SceneDesc::parse(extra).unwrap(),
-            std::path::Path::new(""),
-            &crate::scene::Overrides::default(),
-        )
-        .unwrap()
-    }
+    use crate::scene::tests::from_text as default_scene;
 
     /// The derived shadow map follows the atlas texel and the lights, not the image; a size in
     /// the scene wins.

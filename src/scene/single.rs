@@ -10,22 +10,23 @@ use super::Scene;
 /// but single scattering steps at the mesh's edges and near the light's terminator from one
 /// pixel to the next, which fewer samples blur, so the default keeps every pixel.
 pub fn downsample(scene: &Scene) -> (u32, String) {
-    match scene.single_downsample {
-        Some(k) => (k, format!("single scattering at one sample per {k}x{k} pixels: given")),
-        None => (
-            1,
-            "single scattering at every pixel ([output] single_downsample = 2 takes one sample per 2x2 pixels: the pass is quicker, its steps at the mesh's edges blurred)".to_string(),
-        ),
-    }
+    let k = factor(scene);
+    let why = if scene.single_downsample.is_some() {
+        format!("single scattering at one sample per {k}x{k} pixels: given")
+    } else {
+        "single scattering at every pixel ([output] single_downsample = 2 takes one sample per 2x2 pixels: the pass is quicker, its steps at the mesh's edges blurred)".to_string()
+    };
+    (k, why)
+}
+
+/// [`downsample`]'s factor alone.
+pub fn factor(scene: &Scene) -> u32 {
+    scene.single_downsample.unwrap_or(1)
 }
 
 /// The single-scattering images' size for `scene` (its output at [`downsample`]'s factor).
 pub fn size(scene: &Scene) -> (u32, u32) {
-    downsampled(
-        scene.width,
-        scene.height,
-        scene.single_downsample.unwrap_or(1),
-    )
+    downsampled(scene.width, scene.height, factor(scene))
 }
 
 /// The single-scattering images' size for an image of `width` x `height` at `downsample`.
@@ -38,14 +39,7 @@ pub fn downsampled(width: u32, height: u32, downsample: u32) -> (u32, u32) {
 mod tests {
     use super::*;
 
-    fn scene(text: &str) -> Scene {
-        Scene::from_desc(
-            crate::scene::desc::SceneDesc::parse(text).unwrap(),
-            std::path::Path::new(""),
-            &crate::scene::Overrides::default(),
-        )
-        .unwrap()
-    }
+    use crate::scene::tests::from_text as scene;
 
     /// One sample per pixel unless the scene asks for fewer; the images' size rounds up.
     #[test]
