@@ -40,6 +40,11 @@ layout(set = 0, binding = 4) uniform sampler2D front_normal;
 layout(set = 0, binding = 5) uniform sampler2D front_facet;
 layout(set = 0, binding = 6, rgba32f) uniform writeonly image2D out_single;
 
+// Whether the medium's index differs from the surroundings' (eta != 1), fixed with the
+// pipeline: lavapipe runs both sides of a branch, so the index-matched pass carries none of
+// the refracted path's work.
+layout(constant_id = 0) const bool REFRACTS = false;
+
 layout(push_constant) uniform Push {
     uint steps;
 } push;
@@ -331,7 +336,7 @@ void main() {
     vec3 x = front.xyz;
     vec3 d = normalize(x - frame.camera_pos.xyz);
     float eta = frame.material.x;
-    bool refracts = eta != 1.0;
+    bool refracts = REFRACTS;
     // The view ray inside: refracted towards the normal behind a refractive boundary.
     vec3 normal = texelFetch(front_normal, pixel, 0).xyz;
     // The normal the view ray enters through (adapted to the viewer as the composite's).
@@ -356,37 +361,35 @@ void main() {
     uint n = max(push.steps, 1u);
     uint lights = frame.counts.x;
     vec3 sum = vec3(0.0);
-    // Light depths and irradiances at the start of the interval, and where each light enters
-    // at x, per light.
-    float d0[MAX_LIGHTS];
-    vec3 e0[MAX_LIGHTS];
-    Anchor anchors[MAX_LIGHTS];
+    // Light by light (locals, not arrays indexed by the light: a compiler that cannot keep those
+    // in registers spills them to memory), interval by interval along the ray.
     for (uint i = 0u; i < lights; ++i) {
+        Light l = frame.lights[i];
+        // The light's depth and irradiance at the start of the interval, and where it enters
+        // at x.
         vec3 wi;
-        light_at(frame.lights[i], x, wi, e0[i]);
-        anchors[i] = anchor_at(frame.lights[i], x, normal, facet, -wi);
-        d0[i] = light_inside(frame.lights[i], x, -wi, refracts, eta, anchors[i], inside, 0.0, e0[i]);
-    }
-    float s0 = 0.0;
-    for (uint k = 0u; k < n; ++k) {
-        float s1 = k + 1u == n ? s_exit : -log(1.0 - float(k + 1u) / float(n) * t_exit) / ref;
-        float ds = s1 - s0;
-        vec3 p = x + inside * s1;
-        for (uint i = 0u; i < lights; ++i) {
-            vec3 wi;
+        vec3 e0;
+        light_at(l, x, wi, e0);
+        Anchor a = anchor_at(l, x, normal, facet, -wi);
+        float d0 = light_inside(l, x, -wi, refracts, eta, a, inside, 0.0, e0);
+        float s0 = 0.0;
+        for (uint k = 0u; k < n; ++k) {
+            float s1 = k + 1u == n ? s_exit : -log(1.0 - float(k + 1u) / float(n) * t_exit) / ref;
+            float ds = s1 - s0;
+            vec3 p = x + inside * s1;
             vec3 e1;
-            light_at(frame.lights[i], p, wi, e1);
-            float d1 = light_inside(frame.lights[i], p, -wi, refracts, eta, anchors[i], inside, s1, e1);
+            light_at(l, p, wi, e1);
+            float d1 = light_inside(l, p, -wi, refracts, eta, a, inside, s1, e1);
             if (ds > 0.0) {
                 // s + d_l(s) linear over the interval: the exponential integrates exactly.
-                vec3 rate = sigma_t * max(1.0 + (d1 - d0[i]) / ds, 1e-4);
-                vec3 start = exp(-sigma_t * (s0 + d0[i]));
-                sum += 0.5 * (e0[i] + e1) * start * (1.0 - exp(-rate * ds)) / rate;
+                vec3 rate = sigma_t * max(1.0 + (d1 - d0) / ds, 1e-4);
+                vec3 start = exp(-sigma_t * (s0 + d0));
+                sum += 0.5 * (e0 + e1) * start * (1.0 - exp(-rate * ds)) / rate;
             }
-            d0[i] = d1;
-            e0[i] = e1;
+            d0 = d1;
+            e0 = e1;
+            s0 = s1;
         }
-        s0 = s1;
     }
     // Leaving: the Fresnel transmittance of the view's exit and radiance over eta^2.
     float leave = refracts ? fresnel_transmittance(eta, cos_o) / (eta * eta) : 1.0;

@@ -180,6 +180,9 @@ pub struct SingleInputs {
     pub back: ResourceId,
     /// The surface the camera sees (from `front`).
     pub front: FrontImages,
+    /// Whether the medium refracts (eta != 1): the view ray and the lights' paths bend at the
+    /// surface and are weighed by Fresnel's transmittance.
+    pub refracts: bool,
 }
 
 /// Declares `single`, writing the single-scattered radiance per sample into `out`: a compute
@@ -205,11 +208,12 @@ pub fn single(graph: &mut RenderGraph, i: SingleInputs, out: ResourceId) {
                 .sampled(5, i.front.facet, Sampler::nearest(gpu)?)
                 .storage_image(6, out)
                 .finish()?;
-            let pipeline = Pipeline::compute::<u32>(
+            let pipeline = Pipeline::compute_specialized::<u32>(
                 gpu,
                 PassName::Single.as_str(),
                 shaders::SINGLE_COMP,
                 set,
+                &[i.refracts as u32],
             )?;
             let extent = res.image(out).info.extent;
             Ok(Box::new(move |rec| {

@@ -374,6 +374,7 @@ impl<'a> Assembly<'a> {
                     entry,
                     back,
                     front,
+                    refracts: self.scene.material.eta != 1.0,
                 },
                 single,
             );
