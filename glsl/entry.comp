@@ -17,27 +17,27 @@ layout(push_constant) uniform Push {
     float slope_bias;      // the shadow pass's slope-scaled depth bias factor
 } push;
 
-float depth_at(ivec3 p, ivec2 size) {
-    if (any(lessThan(p.xy, ivec2(0))) || any(greaterThanEqual(p.xy, size))) {
-        return 1.0;
-    }
-    return texelFetch(shadow_depth, p, 0).r;
-}
-
 void main() {
     ivec3 p = ivec3(gl_GlobalInvocationID.xyz);
     ivec2 size = textureSize(shadow_depth, 0).xy;
     if (any(greaterThanEqual(p.xy, size))) {
         return;
     }
-    float z = depth_at(p, size);
+    // The texel and its four neighbours in two gathers, of the 2x2 blocks that p shares with
+    // the texels after it and before it (x: (i0, j1), y: (i1, j1), z: (i1, j0), w: (i0, j0));
+    // a neighbour off the map is no surface (1), as the clamped sampler would repeat the edge.
+    vec2 texel = 1.0 / vec2(size);
+    vec4 after = textureGather(shadow_depth, vec3((vec2(p.xy) + 1.0) * texel, float(p.z)));
+    vec4 before = textureGather(shadow_depth, vec3(vec2(p.xy) * texel, float(p.z)));
+    float z = after.w;
+    vec2 ahead = vec2(p.x + 1 < size.x ? after.z : 1.0, p.y + 1 < size.y ? after.x : 1.0);
+    vec2 behind = vec2(p.x > 0 ? before.x : 1.0, p.y > 0 ? before.z : 1.0);
     vec2 slopes = vec2(0.0);
     float known = 0.0;
     if (z < 1.0) {
         for (int axis = 0; axis < 2; ++axis) {
-            ivec3 o = axis == 0 ? ivec3(1, 0, 0) : ivec3(0, 1, 0);
-            float a = depth_at(p + o, size);
-            float b = depth_at(p - o, size);
+            float a = ahead[axis];
+            float b = behind[axis];
             // The one-sided difference of the smaller size: the same surface, where the other
             // side falls off it or onto another surface (a central difference mixes them in).
             float forward = a < 1.0 ? a - z : 2.0;
