@@ -52,8 +52,10 @@ struct CaptureBuffers {
     local: Arc<Buffer>,
     node_irradiance: Arc<Buffer>,
     node_radiosity: Arc<Buffer>,
-    /// Single-scattered radiance per pixel (models with the pass).
-    single: Option<Arc<Buffer>>,
+    /// Single-scattered radiance per sample (models with the pass), and how many samples: the
+    /// `single` pass's image as the graph was built (the derived downsample follows the
+    /// camera, which a renderer's scene changes without building again).
+    single: Option<(Arc<Buffer>, usize)>,
 }
 
 /// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
@@ -68,7 +70,7 @@ pub struct Captured {
     /// Global node radiosity.
     pub node_radiosity: Vec<[f32; 4]>,
     /// Single-scattered radiance, RGBA per sample of the `single` pass (row by row over its
-    /// image, `scene::single::size`; empty without the pass).
+    /// image, `scene::single::size` as the renderer was built; empty without the pass).
     pub single: Vec<[f32; 4]>,
 }
 
@@ -527,11 +529,7 @@ impl Renderer {
             node_irradiance: read_back(&b.node_irradiance, nodes)?,
             node_radiosity: read_back(&b.node_radiosity, nodes)?,
             single: match &b.single {
-                Some(buffer) => {
-                    let s = &self.scene;
-                    let (w, h) = crate::scene::single::size(s);
-                    read_back(buffer, w as usize * h as usize)?
-                }
+                Some((buffer, samples)) => read_back(buffer, *samples)?,
                 None => Vec::new(),
             },
         }))

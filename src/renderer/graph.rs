@@ -575,7 +575,10 @@ impl<'a> Assembly<'a> {
             node_radiosity: host_buffer(gpu, "capture node radiosity", node_bytes)?,
             single: single
                 .pass
-                .then(|| host_buffer(gpu, "capture single scattering", samples * 16))
+                .then(|| {
+                    host_buffer(gpu, "capture single scattering", samples * 16)
+                        .map(|buffer| (buffer, samples as usize))
+                })
                 .transpose()?,
         };
         let mut to_host =
@@ -586,7 +589,7 @@ impl<'a> Assembly<'a> {
             (node_irradiance, to_host(&b.node_irradiance)),
             (node_radiosity, to_host(&b.node_radiosity)),
         ];
-        if let Some(buffer) = &b.single {
+        if let Some((buffer, _)) = &b.single {
             pairs.push((single.radiance, to_host(buffer)));
         }
         passes::readback::add(g, PassName::Capture.as_str(), pairs);

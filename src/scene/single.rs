@@ -3,25 +3,55 @@
 
 use super::Scene;
 
+/// Single-scattering samples across the object (its bounding sphere's diameter on screen)
+/// above which the default takes one sample per 2x2 pixels.
+pub const MIN_SAMPLES_ACROSS: f64 = 96.0;
+
 /// Image pixels per single-scattering sample along each side for `scene`, and why: the
-/// scene's `[output] single_downsample` when set, else 1 (a sample per pixel). Fewer samples
-/// make the pass quicker, and the composite's upsample follows the depth so that
-/// another surface's samples (at a silhouette, or an ear in front of the head) do not mix in;
-/// but single scattering steps at the mesh's edges and near the light's terminator from one
-/// pixel to the next, which fewer samples blur, so the default keeps every pixel.
+/// scene's `[output] single_downsample` when set; else 2 where the object spans at least
+/// [`MIN_SAMPLES_ACROSS`] samples at that rate, 1 (a sample per pixel) where it is smaller.
+/// Single scattering is smooth over the surface but at its edges and near the light's
+/// terminator, where it steps from one pixel to the next; the composite's upsample follows the
+/// depth, so that another surface's samples (at a silhouette, or an ear in front of the head)
+/// do not mix in, and what fewer samples blur is a few pixels along those steps: on an object
+/// that spans many samples, a small share of it. Below that size every pixel is sampled.
 pub fn downsample(scene: &Scene) -> (u32, String) {
-    let k = factor(scene);
-    let why = if scene.single_downsample.is_some() {
-        format!("single scattering at one sample per {k}x{k} pixels: given")
+    if let Some(k) = scene.single_downsample {
+        return (
+            k,
+            format!("single scattering at one sample per {k}x{k} pixels: given"),
+        );
+    }
+    let across = pixels_across(scene);
+    if across >= 2.0 * MIN_SAMPLES_ACROSS {
+        (
+            2,
+            format!(
+                "single scattering at one sample per 2x2 pixels: the object spans {across:.0} pixels, {:.0} samples (at least {MIN_SAMPLES_ACROSS:.0}; [output] single_downsample = 1 samples every pixel)",
+                across / 2.0
+            ),
+        )
     } else {
-        "single scattering at every pixel ([output] single_downsample = 2 takes one sample per 2x2 pixels: the pass is quicker, its steps at the mesh's edges blurred)".to_string()
-    };
-    (k, why)
+        (
+            1,
+            format!(
+                "single scattering at every pixel: the object spans {across:.0} pixels (one sample per 2x2 from {:.0})",
+                2.0 * MIN_SAMPLES_ACROSS
+            ),
+        )
+    }
+}
+
+/// Pixels the object's bounding sphere spans on screen (its diameter over the pixel size at
+/// its centre).
+pub fn pixels_across(scene: &Scene) -> f64 {
+    let (_, radius) = scene.bounds();
+    2.0 * radius as f64 / scene.pixel_mm()
 }
 
 /// [`downsample`]'s factor alone.
 pub fn factor(scene: &Scene) -> u32 {
-    scene.single_downsample.unwrap_or(1)
+    downsample(scene).0
 }
 
 /// The single-scattering images' size for `scene` (its output at [`downsample`]'s factor).
@@ -41,13 +71,9 @@ mod tests {
 
     use crate::scene::tests::from_text as scene;
 
-    /// One sample per pixel unless the scene asks for fewer; the images' size rounds up.
+    /// The scene's own factor where it gives one; the images' size rounds up.
     #[test]
-    fn the_downsample_is_the_scenes_or_one() {
-        assert_eq!(
-            downsample(&scene("[output]\nwidth = 64\nheight = 64\n")).0,
-            1
-        );
+    fn a_given_downsample_is_kept() {
         let given = scene("[output]\nwidth = 64\nheight = 64\nsingle_downsample = 3\n");
         assert_eq!(
             downsample(&given),
@@ -56,7 +82,38 @@ mod tests {
                 "single scattering at one sample per 3x3 pixels: given".to_string()
             )
         );
+        let one = scene("[output]\nwidth = 1024\nheight = 1024\nsingle_downsample = 1\n");
+        assert_eq!(factor(&one), 1);
         assert_eq!(downsampled(255, 64, 2), (128, 32));
         assert_eq!(downsampled(255, 64, 1), (255, 64));
+    }
+
+    /// Derived: a sample per pixel on a small object, one per 2x2 pixels from
+    /// MIN_SAMPLES_ACROSS samples across, at the image height where the object's span crosses
+    /// that; the span follows the height.
+    #[test]
+    fn the_derived_downsample_follows_the_objects_size_on_screen() {
+        let at = |h: u32| scene(&format!("[output]\nwidth = {h}\nheight = {h}\n"));
+        let small = at(64);
+        let per_pixel = pixels_across(&small) / 64.0;
+        assert!((pixels_across(&at(640)) / 640.0 - per_pixel).abs() < 1e-9 * per_pixel);
+        let threshold = (2.0 * MIN_SAMPLES_ACROSS / per_pixel).ceil() as u32;
+        assert_eq!(
+            factor(&at(threshold - 1)),
+            1,
+            "{}",
+            downsample(&at(threshold - 1)).1
+        );
+        assert_eq!(
+            factor(&at(threshold)),
+            2,
+            "{}",
+            downsample(&at(threshold)).1
+        );
+        assert!(downsample(&at(threshold)).1.contains("2x2"));
+        assert_eq!(
+            size(&at(threshold + 1)),
+            downsampled(threshold + 1, threshold + 1, 2)
+        );
     }
 }
