@@ -160,6 +160,9 @@ pub struct Renderer {
     capture: Option<CaptureBuffers>,
     /// Edge of the shadow maps, texels.
     shadow_map_size: u32,
+    /// Pixels per single-scattering sample along each side, as the graph was built (models
+    /// with the pass).
+    single_downsample: Option<u32>,
     /// How the global pass runs.
     global_variant: compute::GlobalVariant,
     /// The uniforms that follow from the material (fixed for a renderer).
@@ -336,6 +339,7 @@ impl Renderer {
             None
         };
         let shadow_map_size = assembly.shadow_map_size();
+        let single_downsample = single_pass.then(|| crate::scene::single::factor(&scene));
         let graph = g.build(gpu)?;
         let HostBuffers {
             uniforms,
@@ -355,6 +359,7 @@ impl Renderer {
             display_readback,
             capture,
             shadow_map_size,
+            single_downsample,
             global_variant,
             transfer_seconds: data.transfer_seconds,
             last_lights: None,
@@ -367,6 +372,13 @@ impl Renderer {
     /// How the global pass runs (its layout and lanes per row).
     pub fn global_variant(&self) -> compute::GlobalVariant {
         self.global_variant
+    }
+
+    /// Pixels per single-scattering sample along each side that the graph was built with
+    /// (`scene::single::downsample` of the scene then; the camera may have moved since), for
+    /// models with the pass.
+    pub fn single_downsample(&self) -> Option<u32> {
+        self.single_downsample
     }
 
     /// Pass names in execution order.

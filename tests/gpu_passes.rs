@@ -1274,6 +1274,7 @@ fn orders_beyond_single(r: &mut Renderer, lights: &[translucent::scene::Light]) 
     r.frame(lights).unwrap();
     let out = r.output(Vec::new()).unwrap();
     let single = r.captured(0, 0).unwrap().unwrap().single;
+    assert_eq!(4 * single.len(), out.radiance.len(), "one sample per pixel");
     (0..single.len())
         .map(|i| {
             std::array::from_fn(|c| {

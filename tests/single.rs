@@ -130,6 +130,7 @@ fn the_pass_measures_the_view_rays_length_inside() {
     ));
     let (w, h) = (scene.width, scene.height);
     let (out, c) = render_captured(&scene);
+    assert_eq!(c.single.len(), (w * h) as usize, "one sample per pixel");
     let (center, _) = scene.bounds();
     let center = center.as_dvec3();
     let r2 = radius * radius;
@@ -177,6 +178,7 @@ fn face_of_a_box(scale: f64) -> ([f64; 3], f64) {
         "[mesh]\nbuiltin = \"box\"\nsize = [50.0, 50.0, 50.0]\nsegments = 8\n[transform]\nscale = {scale}\n[[lights]]\nkind = \"directional\"\ndirection = [0.2, -1.0, -0.3]\n[material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n[output]\nwidth = 64\nheight = 64\n"
     ));
     let (_, c) = render_captured(&scene);
+    assert_eq!(c.single.len(), 64 * 64, "one sample per pixel");
     let at = |x: usize, y: usize| c.single[y * 64 + x];
     let (mut mean, mut worst) = ([0.0f64; 3], 0.0f64);
     for y in 24..40 {

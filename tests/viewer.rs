@@ -901,6 +901,49 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
     assert!(lines.contains("re-weighted on the CPU"), "{lines}");
 }
 
+/// The single-scattering passes' sample rate follows the object's size on screen when the
+/// graph is built; the camera then moves without building it again. A scene saved after a
+/// zoom keeps the rate the view was drawn at, so that it renders the same image; derived
+/// for the saved camera instead, the rate, and the image, would differ.
+#[test]
+fn a_saved_scene_keeps_the_shown_sample_rate() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer-rate");
+    let cache = dir.join("cache");
+    std::fs::write(
+        dir.join("scene.toml"),
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.5]\n\
+         [material]\npreset = \"ketchup\"\neta = 1.0\nmodel = \"halfspace-single\"\n\
+         [output]\nwidth = 256\nheight = 256\n",
+    )
+    .unwrap();
+    let start = common::scene(&std::fs::read_to_string(dir.join("scene.toml")).unwrap());
+    assert_eq!(translucent::scene::single::factor(&start), 2);
+    let script = "frames 2; zoom 2.5; frames 2; screenshot far; save-scene far; quit";
+    let mut view = scripted_view(&x, script, &cache, &dir);
+    view.arg(dir.join("scene.toml"));
+    let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(120));
+    assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
+    let saved = std::fs::read_to_string(dir.join("far.toml")).unwrap();
+    assert!(saved.contains("single_downsample = 2"), "{saved}");
+    // Derived for the saved camera, the object is too small for one sample per 2x2 pixels.
+    let derived = dir.join("derived.toml");
+    std::fs::write(&derived, saved.replace("single_downsample = 2", "")).unwrap();
+    assert_eq!(
+        translucent::scene::single::factor(&common::scene(
+            &std::fs::read_to_string(&derived).unwrap()
+        )),
+        1
+    );
+    render_into(&cache, &dir.join("render"), Some(&dir.join("far.toml")));
+    assert_same_image(
+        &dir.join("far.exr"),
+        &dir.join("render/render.exr"),
+        "the viewer after the zoom and a render of the saved scene",
+    );
+}
+
 /// Under `volume` the walks enter along the lamps where they are: after a lamp is moved in the
 /// viewer, once it stays, they are walked again for it, and the image then is a fresh render
 /// of the saved scene (the lamp where it was moved) to 0.1 %. Before that the frame shows the

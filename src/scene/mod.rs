@@ -119,7 +119,7 @@ pub struct Scene {
     /// texel (`shadow::shadow_map_size`).
     pub shadow_map: Option<u32>,
     /// Image pixels per single-scattering sample along each side, when the scene sets it
-    /// (otherwise 1: `single::downsample`).
+    /// (otherwise derived from the object's size on screen: `single::downsample`).
     pub single_downsample: Option<u32>,
     /// The surface's own reflection.
     pub surface: Surface,

@@ -42,11 +42,13 @@ pub fn downsample(scene: &Scene) -> (u32, String) {
     }
 }
 
-/// Pixels the object's bounding sphere spans on screen (its diameter over the pixel size at
-/// its centre).
+/// Pixels the object spans on screen: its bounding sphere's diameter over the pixel size at
+/// its centre, at most the image's longer side (an object that fills the view, or a camera
+/// inside the sphere, spans the image).
 pub fn pixels_across(scene: &Scene) -> f64 {
     let (_, radius) = scene.bounds();
-    2.0 * radius as f64 / scene.pixel_mm()
+    let image = scene.width.max(scene.height) as f64;
+    (2.0 * radius as f64 / scene.pixel_mm()).min(image)
 }
 
 /// [`downsample`]'s factor alone.
@@ -115,5 +117,14 @@ mod tests {
             size(&at(threshold + 1)),
             downsampled(threshold + 1, threshold + 1, 2)
         );
+        // Seen from close by, the bounding sphere spans more than the image: the object spans
+        // the image, too few pixels for fewer samples.
+        let close = scene(
+            "[camera]\nposition = [0.0, 24.0, 30.0]\ntarget = [0.0, 24.0, 0.0]\n[output]\nwidth = 100\nheight = 100\n",
+        );
+        let (_, radius) = close.bounds();
+        assert!(2.0 * radius as f64 / close.pixel_mm() > 2.0 * MIN_SAMPLES_ACROSS);
+        assert_eq!(pixels_across(&close), 100.0);
+        assert_eq!(factor(&close), 1);
     }
 }

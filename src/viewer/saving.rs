@@ -80,6 +80,11 @@ impl Running {
         desc.lights = Some(out_lights);
         desc.output.width = Some(self.scene.width);
         desc.output.height = Some(self.scene.height);
+        // The factor derived for the camera the graph was built with, not for the one saved:
+        // the file renders what the view showed.
+        if let Some(k) = self.renderer.as_ref().and_then(|r| r.single_downsample()) {
+            desc.output.single_downsample = Some(k);
+        }
         // The settings given in the viewer (a coefficient edit pins those in use): the
         // operators `render` makes from this file are the shown ones.
         desc.settings = self.current.overrides.into();
