@@ -56,6 +56,8 @@ struct CaptureBuffers {
     /// `single` pass's image as the graph was built (the derived downsample follows the
     /// camera, which a renderer's scene changes without building again).
     single: Option<(Arc<Buffer>, usize)>,
+    /// The light-entry image's first layer, and its texels (models with the pass).
+    entry: Option<(Arc<Buffer>, usize)>,
 }
 
 /// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
@@ -72,6 +74,10 @@ pub struct Captured {
     /// Single-scattered radiance, RGBA per sample of the `single` pass (row by row over its
     /// image, `scene::single::size` as the renderer was built; empty without the pass).
     pub single: Vec<[f32; 4]>,
+    /// The light-entry image's first layer (the `entry` pass: the depth at which the first
+    /// light's rays enter, the slopes along u and v per texel, which slopes are known), row
+    /// by row over the shadow map; empty without the single-scattering pass.
+    pub entry: Vec<[f32; 4]>,
 }
 
 /// How to render.
@@ -329,12 +335,12 @@ impl Renderer {
         assembly.add_shadow_and_illumination(&mut g);
         assembly.add_responses(&mut g, global_variant);
         let single_pass = scene.material.model.has_single_pass();
-        let single = assembly.add_single_scattering(&mut g, single_pass)?;
+        let (single, entry) = assembly.add_single_scattering(&mut g, single_pass)?;
         assembly.add_composite(&mut g, single);
         let window = assembly.add_window(&mut g, options.window.as_ref())?;
         assembly.add_readback(&mut g);
         let capture = if options.capture {
-            Some(assembly.add_capture(&mut g, single)?)
+            Some(assembly.add_capture(&mut g, single, entry)?)
         } else {
             None
         };
@@ -542,6 +548,10 @@ impl Renderer {
             node_radiosity: read_back(&b.node_radiosity, nodes)?,
             single: match &b.single {
                 Some((buffer, samples)) => read_back(buffer, *samples)?,
+                None => Vec::new(),
+            },
+            entry: match &b.entry {
+                Some((buffer, texels)) => read_back(buffer, *texels)?,
                 None => Vec::new(),
             },
         }))

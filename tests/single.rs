@@ -169,6 +169,81 @@ fn the_pass_measures_the_view_rays_length_inside() {
     );
 }
 
+/// The light-entry image (`entry`) of a box lit at an angle, read back: where the map sees
+/// the object, each known slope is the step in depth to the neighbour on one side or the
+/// other along its own axis (u: the next column, v: the next row), and a slope is known
+/// exactly where a neighbour along its axis sees the object too; where the map sees nothing
+/// the depth is 1 and nothing is known. The box's faces slope differently along u and v
+/// there, so axes taken for one another, or neighbours a texel off, fail.
+#[test]
+fn the_light_entry_image_holds_each_texels_slopes() {
+    let scene = common::scene(
+        "[mesh]\nbuiltin = \"box\"\nsize = [50.0, 30.0, 40.0]\nsegments = 4\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [0.35, -1.0, 0.6]\n\
+         [material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n\
+         [output]\nwidth = 64\nheight = 64\n",
+    );
+    let (_, c) = render_captured(&scene);
+    let s = (c.entry.len() as f64).sqrt() as usize;
+    assert!(s > 16 && s * s == c.entry.len(), "{} texels", c.entry.len());
+    let at = |x: usize, y: usize| c.entry[y * s + x];
+    let covered = |x: isize, y: isize| {
+        x >= 0
+            && y >= 0
+            && (x as usize) < s
+            && (y as usize) < s
+            && at(x as usize, y as usize)[0] < 1.0
+    };
+    let (mut inside, mut consistent, mut steeper_u) = (0usize, 0usize, 0usize);
+    for y in 0..s {
+        for x in 0..s {
+            let [z, su, sv, known] = at(x, y);
+            if z >= 1.0 {
+                assert_eq!([su, sv, known], [0.0; 3], "texel ({x}, {y}) sees nothing");
+                continue;
+            }
+            let (xi, yi) = (x as isize, y as isize);
+            let has_u = covered(xi - 1, yi) || covered(xi + 1, yi);
+            let has_v = covered(xi, yi - 1) || covered(xi, yi + 1);
+            let want = (has_u as u32 + 2 * has_v as u32) as f32;
+            assert_eq!(known, want, "known slopes at ({x}, {y})");
+            // Away from the faces' edges and the silhouette (two texels each way covered and on
+            // one plane), the slopes are the steps in depth.
+            let ring = (-2..=2).all(|d| covered(xi + d, yi) && covered(xi, yi + d));
+            if !ring {
+                continue;
+            }
+            let z_at = |dx: isize, dy: isize| at((xi + dx) as usize, (yi + dy) as usize)[0];
+            let plane = (z_at(2, 0) - 2.0 * z_at(1, 0) + z).abs() < 1e-6
+                && (z - 2.0 * z_at(-1, 0) + z_at(-2, 0)).abs() < 1e-6
+                && (z_at(0, 2) - 2.0 * z_at(0, 1) + z).abs() < 1e-6
+                && (z - 2.0 * z_at(0, -1) + z_at(0, -2)).abs() < 1e-6;
+            if !plane {
+                continue;
+            }
+            inside += 1;
+            // The step to one side or the other (the shader keeps the smaller), within the
+            // rounding of depths near 1.
+            let near = |a: f32, b: f32| (a - b).abs() <= 1e-3 * a.abs().max(b.abs()) + 4e-7;
+            let step_u = |m: f32| near(m, z_at(1, 0) - z) || near(m, z - z_at(-1, 0));
+            let step_v = |m: f32| near(m, z_at(0, 1) - z) || near(m, z - z_at(0, -1));
+            if step_u(su) && step_v(sv) {
+                consistent += 1;
+            }
+            if su.abs() > 1.25 * sv.abs() || sv.abs() > 1.25 * su.abs() {
+                steeper_u += 1;
+            }
+        }
+    }
+    println!("entry map {s}x{s}: {inside} texels inside the faces, {consistent} with slopes equal to the steps, {steeper_u} with |u| and |v| slopes a quarter apart");
+    assert!(inside > 500, "{inside} texels inside the faces");
+    assert!(consistent == inside, "{consistent} of {inside}");
+    assert!(
+        steeper_u * 2 > inside,
+        "the slopes along u and v are too alike to tell the axes apart: {steeper_u} of {inside}"
+    );
+}
+
 /// The single-scattering image of the 50 mm box scaled by `scale` (`[transform] scale`) seen
 /// and lit at an angle, 64x64 under `halfspace-single`: the central 16x16 pixels (on the face
 /// in front), their mean per channel and the largest relative difference of a pixel from the

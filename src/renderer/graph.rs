@@ -317,12 +317,13 @@ impl<'a> Assembly<'a> {
     /// Adds the single-scattering passes (`entry`, `thickness`, `front`, `single`) when
     /// `single_pass`,
     /// at one sample per `scene::single::downsample` pixels along each side, and returns
-    /// what the composite reads of them (a black pixel without the pass).
+    /// what the composite reads of them (a black pixel without the pass) and the light-entry
+    /// image (with the pass).
     pub(super) fn add_single_scattering(
         &self,
         g: &mut RenderGraph,
         single_pass: bool,
-    ) -> Result<passes::composite::SingleImages> {
+    ) -> Result<(passes::composite::SingleImages, Option<ResourceId>)> {
         let (w, h) = crate::scene::single::size(self.scene);
         let Imported {
             frame,
@@ -378,7 +379,7 @@ impl<'a> Assembly<'a> {
                 },
                 single,
             );
-            passes::composite::SingleImages {
+            let images = passes::composite::SingleImages {
                 radiance: single,
                 depth: front.depth,
                 pass: true,
@@ -386,7 +387,8 @@ impl<'a> Assembly<'a> {
                     self.scene.width as f32 / w as f32,
                     self.scene.height as f32 / h as f32,
                 ],
-            }
+            };
+            (images, Some(entry))
         } else {
             let black = Image::from_pixels(
                 self.gpu,
@@ -397,12 +399,13 @@ impl<'a> Assembly<'a> {
                 &[0; 16],
             )?;
             let black = g.import_image(Arc::new(black), Access::Sampled(Stage::Fragment));
-            passes::composite::SingleImages {
+            let images = passes::composite::SingleImages {
                 radiance: black,
                 depth: black,
                 pass: false,
                 ratio: [1.0; 2],
-            }
+            };
+            (images, None)
         };
         Ok(single)
     }
@@ -549,11 +552,12 @@ impl<'a> Assembly<'a> {
 
     /// Makes the host buffers of [`super::Options::capture`] and adds the `capture` pass that
     /// copies the intermediate results into them (the single scattering in `single` when
-    /// `single_pass`).
+    /// `single_pass`, and the first layer of the light-entry image `entry`).
     pub(super) fn add_capture(
         &self,
         g: &mut RenderGraph,
         single: passes::composite::SingleImages,
+        entry: Option<ResourceId>,
     ) -> Result<CaptureBuffers> {
         let (gpu, data) = (self.gpu, self.data);
         let (aw, ah) = data.atlas_size;
@@ -580,6 +584,13 @@ impl<'a> Assembly<'a> {
                         .map(|buffer| (buffer, samples as usize))
                 })
                 .transpose()?,
+            entry: entry
+                .map(|_| {
+                    let s = self.transient.shadow_size as u64;
+                    host_buffer(gpu, "capture light entry", s * s * 16)
+                        .map(|buffer| (buffer, (s * s) as usize))
+                })
+                .transpose()?,
         };
         let mut to_host =
             |buffer: &Arc<Buffer>| g.import_buffer(buffer.clone(), Some(Access::HostRead));
@@ -591,6 +602,9 @@ impl<'a> Assembly<'a> {
         ];
         if let Some((buffer, _)) = &b.single {
             pairs.push((single.radiance, to_host(buffer)));
+        }
+        if let (Some(image), Some((buffer, _))) = (entry, &b.entry) {
+            pairs.push((image, to_host(buffer)));
         }
         passes::readback::add(g, PassName::Capture.as_str(), pairs);
         Ok(b)
