@@ -235,9 +235,9 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
 // The path the light travels inside, per unit length of the view ray (`inside`), below a plane
 // of normal n through the ray's start, where it enters straight (index-matched) or refracted;
 // 0 where either direction runs along the plane.
-float plane_path(vec3 inside, vec3 travel, vec3 n, bool refracts, float eta) {
+float plane_path(vec3 inside, vec3 travel, vec3 n, float eta) {
     float below = -dot(inside, n);
-    float cos_in = refracts ? -dot(refract(travel, n, 1.0 / eta), n) : -dot(travel, n);
+    float cos_in = REFRACTS ? -dot(refract(travel, n, 1.0 / eta), n) : -dot(travel, n);
     return below > 1e-3 && cos_in > 1e-3 ? below / cos_in : 0.0;
 }
 
@@ -247,14 +247,14 @@ float plane_path(vec3 inside, vec3 travel, vec3 n, bool refracts, float eta) {
 // cos_i / cos_t (the beam narrows as it bends towards the normal). Where x lies on the lit
 // surface (`a`) and the shadow map's path agrees with the plane's within the rounding, the
 // plane's, from s.
-float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Anchor a, vec3 inside,
+float light_inside(Light l, vec3 p, vec3 travel, float eta, Anchor a, vec3 inside,
                    float s, inout vec3 e) {
     float d;
     float cos_i = 1.0;
     // The depth below x's tangent plane and the path to it, along the light inside.
     float below = -s * dot(inside, a.n);
     float cos_in;
-    if (!refracts) {
+    if (!REFRACTS) {
         d = light_depth(l, p, travel);
         cos_in = -dot(travel, a.n);
     } else {
@@ -274,17 +274,17 @@ float light_inside(Light l, vec3 p, vec3 travel, bool refracts, float eta, Ancho
     // (bounded to [1/2, 2]), and the cosine of its entry, fading over the longest free path
     // in depth (deeper light comes through the neighbouring triangles, as the map measures).
     if (a.near > 0.0) {
-        float facet = plane_path(inside, travel, a.facet_n, refracts, eta);
-        float smooth_path = plane_path(inside, travel, a.smooth_n, refracts, eta);
+        float facet = plane_path(inside, travel, a.facet_n, eta);
+        float smooth_path = plane_path(inside, travel, a.smooth_n, eta);
         if (facet > 0.0 && smooth_path > 0.0) {
             float w = a.near * exp(-a.fade * d);
             d *= mix(1.0, clamp(smooth_path / facet, 0.5, 2.0), w);
-            if (refracts) {
+            if (REFRACTS) {
                 cos_i = clamp(cos_i + w * dot(travel, a.facet_n - a.smooth_n), 0.0, 1.0);
             }
         }
     }
-    if (refracts) {
+    if (REFRACTS) {
         float cos_t = sqrt(max(1.0 - (1.0 - cos_i * cos_i) / (eta * eta), 0.0));
         e *= fresnel_transmittance(eta, cos_i) * cos_i / max(cos_t, 1e-6);
     }
@@ -336,21 +336,20 @@ void main() {
     vec3 x = front.xyz;
     vec3 d = normalize(x - frame.camera_pos.xyz);
     float eta = frame.material.x;
-    bool refracts = REFRACTS;
     // The view ray inside: refracted towards the normal behind a refractive boundary.
     vec3 normal = texelFetch(front_normal, pixel, 0).xyz;
     // The normal the view ray enters through (adapted to the viewer as the composite's).
     vec3 facet = texelFetch(front_facet, pixel, 0).xyz;
     vec3 through = adapted_normal(normal, facet, -d);
     float cos_o = max(-dot(through, d), 0.0);
-    vec3 inside = refracts ? refract(d, through, 1.0 / eta) : d;
+    vec3 inside = REFRACTS ? refract(d, through, 1.0 / eta) : d;
     if (dot(inside, inside) == 0.0) {
         inside = d;
     }
     float zb = texelFetch(back_depth, pixel, 0).r;
     vec2 ndc = (vec2(pixel) + 0.5) / size * 2.0 - 1.0;
     float s_exit = zb < 1.0 ? max(dot(unproject(frame.inverse_view_proj, ndc, zb) - x, d), 0.0) : 0.0;
-    if (refracts && s_exit > 0.0) {
+    if (REFRACTS && s_exit > 0.0) {
         s_exit = refracted_exit(x, inside, s_exit / max(cos_o, 0.05), size);
     }
 
@@ -371,7 +370,7 @@ void main() {
         vec3 e0;
         light_at(l, x, wi, e0);
         Anchor a = anchor_at(l, x, normal, facet, -wi);
-        float d0 = light_inside(l, x, -wi, refracts, eta, a, inside, 0.0, e0);
+        float d0 = light_inside(l, x, -wi, eta, a, inside, 0.0, e0);
         float s0 = 0.0;
         for (uint k = 0u; k < n; ++k) {
             float s1 = k + 1u == n ? s_exit : -log(1.0 - float(k + 1u) / float(n) * t_exit) / ref;
@@ -379,7 +378,7 @@ void main() {
             vec3 p = x + inside * s1;
             vec3 e1;
             light_at(l, p, wi, e1);
-            float d1 = light_inside(l, p, -wi, refracts, eta, a, inside, s1, e1);
+            float d1 = light_inside(l, p, -wi, eta, a, inside, s1, e1);
             if (ds > 0.0) {
                 // s + d_l(s) linear over the interval: the exponential integrates exactly.
                 vec3 rate = sigma_t * max(1.0 + (d1 - d0) / ds, 1e-4);
@@ -392,6 +391,6 @@ void main() {
         }
     }
     // Leaving: the Fresnel transmittance of the view's exit and radiance over eta^2.
-    float leave = refracts ? fresnel_transmittance(eta, cos_o) / (eta * eta) : 1.0;
+    float leave = REFRACTS ? fresnel_transmittance(eta, cos_o) / (eta * eta) : 1.0;
     imageStore(out_single, pixel, vec4(frame.sigma_s.rgb / (4.0 * PI) * sum * leave, s_exit));
 }

@@ -52,12 +52,11 @@ struct CaptureBuffers {
     local: Arc<Buffer>,
     node_irradiance: Arc<Buffer>,
     node_radiosity: Arc<Buffer>,
-    /// Single-scattered radiance per sample (models with the pass), and how many samples: the
-    /// `single` pass's image as the graph was built (the derived downsample follows the
-    /// camera, which a renderer's scene changes without building again).
-    single: Option<(Arc<Buffer>, usize)>,
-    /// The light-entry image's first layer, and its texels (models with the pass).
-    entry: Option<(Arc<Buffer>, usize)>,
+    /// Single-scattered radiance per sample (models with the pass), sized for the `single`
+    /// pass's image as the graph was built.
+    single: Option<Arc<Buffer>>,
+    /// The light-entry image's first layer (models with the pass).
+    entry: Option<Arc<Buffer>>,
 }
 
 /// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
@@ -198,6 +197,14 @@ fn read_back<T: bytemuck::Pod>(buffer: &Buffer, count: usize) -> Result<Vec<T>> 
         .mapped()
         .context("readback buffer is not host-visible")?;
     Ok(bytemuck::cast_slice(&bytes[..count * std::mem::size_of::<T>()]).to_vec())
+}
+
+/// Every element of `buffer` (empty without one), made to hold exactly what it captures.
+fn read_back_whole<T: bytemuck::Pod>(buffer: Option<&Buffer>) -> Result<Vec<T>> {
+    match buffer {
+        Some(b) => read_back(b, b.size as usize / std::mem::size_of::<T>()),
+        None => Ok(Vec::new()),
+    }
 }
 
 /// The buffers a renderer writes or reads between frames, made before its graph.
@@ -546,14 +553,8 @@ impl Renderer {
             local: read_back(&b.local, atlas_texels)?,
             node_irradiance: read_back(&b.node_irradiance, nodes)?,
             node_radiosity: read_back(&b.node_radiosity, nodes)?,
-            single: match &b.single {
-                Some((buffer, samples)) => read_back(buffer, *samples)?,
-                None => Vec::new(),
-            },
-            entry: match &b.entry {
-                Some((buffer, texels)) => read_back(buffer, *texels)?,
-                None => Vec::new(),
-            },
+            single: read_back_whole(b.single.as_deref())?,
+            entry: read_back_whole(b.entry.as_deref())?,
         }))
     }
 

@@ -18,13 +18,20 @@ fn render_captured(scene: &Scene) -> (RenderOutput, Captured) {
 
 /// [`render_captured`] with `overrides` of the derived settings.
 fn render_captured_with(scene: &Scene, overrides: SettingsOverrides) -> (RenderOutput, Captured) {
-    let pre = common::preprocess(scene, overrides);
+    render_captured_from(scene, &common::preprocess(scene, overrides))
+}
+
+/// [`render_captured`] from the preprocessing `pre`.
+fn render_captured_from(
+    scene: &Scene,
+    pre: &translucent::preprocess::Preprocessed,
+) -> (RenderOutput, Captured) {
     let gpu = common::gpu();
     let options = Options {
         capture: true,
         ..Default::default()
     };
-    let mut r = common::renderer(&gpu, scene, &pre, options);
+    let mut r = common::renderer(&gpu, scene, pre, options);
     let out = r.render(1).unwrap();
     let c = r.captured(0, 0).unwrap().unwrap();
     common::assert_no_validation_messages(&gpu);
@@ -406,11 +413,7 @@ fn render_at(scene: &Scene, pre: &translucent::preprocess::Preprocessed, k: u32)
         single_downsample: Some(k),
         ..scene.clone()
     };
-    let gpu = common::gpu();
-    let mut r = common::renderer(&gpu, &scene, pre, Options::default());
-    let out = r.render(1).unwrap();
-    common::assert_no_validation_messages(&gpu);
-    out
+    common::render(&scene, pre, Options::default(), 1)
 }
 
 /// `[output] single_downsample = 2`: one single-scattering sample per 2 x 2 pixels, brought to
@@ -516,13 +519,13 @@ fn fewer_samples_on_sides_they_do_not_divide() {
          [output]\nwidth = 255\nheight = 131\nsingle_downsample = 2\n",
     );
     assert_eq!(translucent::scene::single::size(&scene), (128, 66));
-    let (half, c) = render_captured(&scene);
+    let pre = common::preprocess(&scene, SettingsOverrides::default());
+    let (half, c) = render_captured_from(&scene, &pre);
     assert_eq!(c.single.len(), 128 * 66);
     assert!(
         c.single.iter().any(|s| s[3] > 0.0),
         "no sample saw the sphere"
     );
-    let pre = common::preprocess(&scene, SettingsOverrides::default());
     let full = render_at(&scene, &pre, 1);
     let binned = metrics::compare_binned(&half.radiance, &full.radiance, None, 255, 131, 4);
     println!(

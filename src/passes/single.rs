@@ -22,8 +22,6 @@ use crate::graph::{Access, RenderGraph, ResourceId, Stage};
 use crate::layout::Item;
 use ash::vk;
 
-/// Format of the single-scattering image.
-pub const FORMAT: vk::Format = Item::SingleScattering.format();
 /// Format of the front surface's images (position, normal, facet).
 pub const FRONT_FORMAT: vk::Format = Item::FrontPosition.format();
 /// Format of the back-face depth and of the front surface's depth.
@@ -97,27 +95,53 @@ fn camera_desc<'a>(fragment: &'a [u8], color: &'a [vk::Format]) -> GraphicsDesc<
 
 /// Declares `thickness`, writing the back-face depth `back`.
 pub fn thickness(graph: &mut RenderGraph, i: MeshInputs, back: ResourceId) {
-    graph
-        .pass(PassName::Thickness.as_str())
-        .access(i.frame, Access::Uniform(Stage::Vertex))
-        .mesh(i.vertices, i.indices)
-        .access(back, Access::DepthAttachment)
+    camera_pass(
+        graph,
+        PassName::Thickness,
+        shaders::THICKNESS_FRAG,
+        i,
+        &[],
+        back,
+    );
+}
+
+/// Declares a draw of the mesh seen from the camera, `fragment` writing `colors` (in
+/// [`FRONT_FORMAT`]) and the depth into `depth`, kept for later passes.
+fn camera_pass(
+    graph: &mut RenderGraph,
+    name: PassName,
+    fragment: &'static [u8],
+    m: MeshInputs,
+    colors: &[ResourceId],
+    depth: ResourceId,
+) {
+    let colors = colors.to_vec();
+    let mut pass = graph
+        .pass(name.as_str())
+        .access(m.frame, Access::Uniform(Stage::Vertex))
+        .mesh(m.vertices, m.indices);
+    for &c in &colors {
+        pass = pass.access(c, Access::ColorAttachment);
+    }
+    pass.access(depth, Access::DepthAttachment)
         .setup(move |gpu, res| {
-            let set = res.bind().uniform(0, i.frame).finish()?;
+            let set = res.bind().uniform(0, m.frame).finish()?;
+            let formats = vec![FRONT_FORMAT; colors.len()];
             let pipeline = Pipeline::graphics::<()>(
                 gpu,
-                PassName::Thickness.as_str(),
-                &camera_desc(shaders::THICKNESS_FRAG, &[]),
+                name.as_str(),
+                &camera_desc(fragment, &formats),
                 set,
             )?;
-            let back = res.image(back).clone();
-            let mesh = MeshDraw::of(res, i.vertices, i.indices, i.index_count);
+            let color: Vec<vk::ImageView> = colors.iter().map(|&id| res.image(id).view).collect();
+            let depth = res.image(depth).clone();
+            let mesh = MeshDraw::of(res, m.vertices, m.indices, m.index_count);
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
-                    color: &[],
+                    color: &color,
                     resolve: &[],
-                    depth: Some((back.view, vk::AttachmentStoreOp::STORE)),
-                    extent: back.info.extent,
+                    depth: Some((depth.view, vk::AttachmentStoreOp::STORE)),
+                    extent: depth.info.extent,
                 };
                 draw_mesh(rec, &target, &pipeline, mesh, || {});
             }))
@@ -139,35 +163,15 @@ pub struct FrontImages {
 
 /// Declares `front`, writing the surface the camera sees into `f`.
 pub fn front(graph: &mut RenderGraph, m: MeshInputs, f: FrontImages) {
-    graph
-        .pass(PassName::Front.as_str())
-        .access(m.frame, Access::Uniform(Stage::Vertex))
-        .mesh(m.vertices, m.indices)
-        .access(f.position, Access::ColorAttachment)
-        .access(f.normal, Access::ColorAttachment)
-        .access(f.facet, Access::ColorAttachment)
-        .access(f.depth, Access::DepthAttachment)
-        .setup(move |gpu, res| {
-            let set = res.bind().uniform(0, m.frame).finish()?;
-            let pipeline = Pipeline::graphics::<()>(
-                gpu,
-                PassName::Front.as_str(),
-                &camera_desc(shaders::FRONT_FRAG, &[FRONT_FORMAT; 3]),
-                set,
-            )?;
-            let color = [f.position, f.normal, f.facet].map(|id| res.image(id).view);
-            let depth = res.image(f.depth).clone();
-            let mesh = MeshDraw::of(res, m.vertices, m.indices, m.index_count);
-            Ok(Box::new(move |rec| {
-                let target = DrawTarget {
-                    color: &color,
-                    resolve: &[],
-                    depth: Some((depth.view, vk::AttachmentStoreOp::STORE)),
-                    extent: depth.info.extent,
-                };
-                draw_mesh(rec, &target, &pipeline, mesh, || {});
-            }))
-        });
+    let colors = [f.position, f.normal, f.facet];
+    camera_pass(
+        graph,
+        PassName::Front,
+        shaders::FRONT_FRAG,
+        m,
+        &colors,
+        f.depth,
+    );
 }
 
 /// What `single` reads.

@@ -579,16 +579,12 @@ impl<'a> Assembly<'a> {
             node_radiosity: host_buffer(gpu, "capture node radiosity", node_bytes)?,
             single: single
                 .pass
-                .then(|| {
-                    host_buffer(gpu, "capture single scattering", samples * 16)
-                        .map(|buffer| (buffer, samples as usize))
-                })
+                .then(|| host_buffer(gpu, "capture single scattering", samples * 16))
                 .transpose()?,
             entry: entry
                 .map(|_| {
                     let s = self.transient.shadow_size as u64;
                     host_buffer(gpu, "capture light entry", s * s * 16)
-                        .map(|buffer| (buffer, (s * s) as usize))
                 })
                 .transpose()?,
         };
@@ -600,10 +596,10 @@ impl<'a> Assembly<'a> {
             (node_irradiance, to_host(&b.node_irradiance)),
             (node_radiosity, to_host(&b.node_radiosity)),
         ];
-        if let Some((buffer, _)) = &b.single {
+        if let Some(buffer) = &b.single {
             pairs.push((single.radiance, to_host(buffer)));
         }
-        if let (Some(image), Some((buffer, _))) = (entry, &b.entry) {
+        if let (Some(image), Some(buffer)) = (entry, &b.entry) {
             pairs.push((image, to_host(buffer)));
         }
         passes::readback::add(g, PassName::Capture.as_str(), pairs);
