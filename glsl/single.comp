@@ -6,7 +6,7 @@
 // where s runs along the view ray from the visible surface to where it leaves the object
 // (the nearest back face, from `thickness`), and d_l(s) is the distance the light travels
 // inside before it reaches the point: from the first surface the light's shadow map sees
-// (its depth without the shadow bias, from the `entry` pass) to the point (exact for a convex
+// (its depth without the shadow bias, from the light-entry image `shadow` draws) to the point (exact for a convex
 // object; where the light's path leaves and re-enters the object, the air between is counted
 // as medium).
 // Behind a refractive boundary (eta != 1; Jensen et al. 2001's single-scattering term with its
@@ -29,8 +29,9 @@
 
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
-// Read as a storage image, in the layout `entry` leaves it in: a frame under the same lights
-// skips `entry` and finds the image as the last frame left it.
+// The light-entry image `shadow` draws (glsl/shadow.frag), read as a storage image in the
+// layout it is drawn in: a frame under the same lights skips `shadow` and finds the image as
+// the last frame left it.
 layout(set = 0, binding = 1, rgba32f) uniform readonly image2DArray entry_depth;
 layout(set = 0, binding = 2) uniform sampler2D back_depth;
 // The surface each view ray enters (`front`): position (w: 1 where the ray meets the object),
@@ -56,8 +57,8 @@ vec3 unproject(mat4 inverse_matrix, vec2 ndc, float z) {
 }
 
 // The light-entry map's texel under shadow-map coordinates `uv` of `layer`: depth, slopes
-// along u and v per texel, which of them are known (`entry` pass); and the offset of `uv`
-// from the texel's centre, in texels.
+// along u and v per texel, which of them are known; and the offset of `uv` from the texel's
+// centre, in texels.
 vec4 entry_texel(uint layer, vec2 uv, out vec2 offset) {
     ivec2 size = imageSize(entry_depth).xy;
     vec2 f = uv * vec2(size);

@@ -167,7 +167,8 @@ pub struct Traffic {
 /// per marching step, comes from caches and is not counted; counting it gives bounds that a
 /// GPU beats, docs/results/figures.md):
 /// - shadow: the atlas mesh (vertices and indices) per shadow-map layer (six for a point
-///   light); writes the depth maps;
+///   light); writes the depth maps and, with a single-scattering pass, the light-entry
+///   image;
 /// - illum: the mesh; writes the illumination map (the shadow maps it samples at a texel's
 ///   footprint, at most their size, are left out);
 /// - dilate: its list (covered texels whose centre a triangle may miss) and the map at those
@@ -177,7 +178,7 @@ pub struct Traffic {
 ///   texels;
 /// - gather / global: row starts, entries, and the source vector once (the map's covered
 ///   texels, or the node irradiance); writes one value per node;
-/// - entry / thickness / front: the shadow maps or the mesh; write their images;
+/// - thickness / front: the mesh; write their images;
 /// - single: the front surface, the back depth and the entry depths once; writes its image;
 /// - composite: mesh, node radiosity, the local response once (at most one texel per pixel);
 ///   writes the radiance, display and depth of every pixel;
@@ -190,7 +191,10 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
     // One element of `item` per `n` of them.
     let per = |item: I, n: u64| n * item.bytes();
     let (read, written) = match pass {
-        PassName::Shadow => (mesh * c.shadow_layers, b(I::ShadowMaps)),
+        PassName::Shadow => (
+            mesh * c.shadow_layers,
+            b(I::ShadowMaps) + if c.single { b(I::EntryDepth) } else { 0 },
+        ),
         // With an environment, each rasterised texel reads its transfer.
         PassName::Illum => (
             mesh + per(I::EnvironmentTransfer, c.texels * c.transfer_per_texel),
@@ -220,7 +224,6 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
                 + per(I::NodeIrradiance, (2 * c.global_pairs).min(c.nodes)),
             b(I::NodeRadiosity),
         ),
-        PassName::Entry => (b(I::ShadowMaps), b(I::EntryDepth)),
         PassName::Thickness => (mesh, b(I::BackDepth)),
         PassName::Front => (
             mesh,

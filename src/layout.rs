@@ -75,7 +75,8 @@ pub enum Item {
     FrontNormal,
     /// Normal of the triangle there (the same models).
     FrontFacet,
-    /// Light-entry depth per shadow-map texel, without the shadow bias (the same models).
+    /// Light-entry depth per shadow-map texel, without the shadow bias, with its slopes (the
+    /// same models).
     EntryDepth,
     /// The environment's transfer per atlas texel: its spherical-harmonic coefficients as f16,
     /// eight to an element (scenes with an environment light; 1 element else).

@@ -73,9 +73,9 @@ pub struct Captured {
     /// Single-scattered radiance, RGBA per sample of the `single` pass (row by row over its
     /// image, `scene::single::size` as the renderer was built; empty without the pass).
     pub single: Vec<[f32; 4]>,
-    /// The light-entry image's first layer (the `entry` pass: the depth at which the first
-    /// light's rays enter, the slopes along u and v per texel, which slopes are known), row
-    /// by row over the shadow map; empty without the single-scattering pass.
+    /// The light-entry image's first layer (drawn by the `shadow` pass: the depth at which the
+    /// first light's rays enter, the slopes along u and v per texel, which slopes are known),
+    /// row by row over the shadow map; empty without the single-scattering pass.
     pub entry: Vec<[f32; 4]>,
 }
 
@@ -339,10 +339,11 @@ impl Renderer {
         let host = HostBuffers::new(gpu, &scene)?;
         let mut g = RenderGraph::new();
         let assembly = graph::Assembly::new(&mut g, gpu, &scene, data, &host)?;
-        assembly.add_shadow_and_illumination(&mut g);
-        assembly.add_responses(&mut g, global_variant);
         let single_pass = scene.material.model.has_single_pass();
-        let (single, entry) = assembly.add_single_scattering(&mut g, single_pass)?;
+        let entry = assembly.add_entry_image(&mut g, single_pass)?;
+        assembly.add_shadow_and_illumination(&mut g, entry);
+        assembly.add_responses(&mut g, global_variant);
+        let (single, entry) = assembly.add_single_scattering(&mut g, single_pass, entry)?;
         assembly.add_composite(&mut g, single);
         let window = assembly.add_window(&mut g, options.window.as_ref())?;
         assembly.add_readback(&mut g);

@@ -409,10 +409,10 @@ fn shadow_traffic_counts_every_layer() {
     use translucent::bench::traffic;
     use translucent::passes::PassName;
     use translucent::scene::shadow::shadow_map_size;
-    let scene = |light: &str| {
+    let scene_of = |light: &str, model: &str| {
         Scene::from_desc(
             translucent::scene::desc::SceneDesc::parse(&format!(
-                "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n[[lights]]\n{light}\n[material]\npreset = \"ketchup\"\n[output]\nwidth = 32\nheight = 32\n"
+                "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n[[lights]]\n{light}\n[material]\npreset = \"ketchup\"\n{model}[output]\nwidth = 32\nheight = 32\n"
             ))
             .unwrap(),
             std::path::Path::new(""),
@@ -420,15 +420,27 @@ fn shadow_traffic_counts_every_layer() {
         )
         .unwrap()
     };
+    let scene = |light: &str| scene_of(light, "");
     let directional = scene("kind = \"directional\"\ndirection = [0.0, -1.0, 0.0]");
     let point = scene("kind = \"point\"\nposition = [0.0, 40.0, 0.0]");
+    let single = scene_of(
+        "kind = \"point\"\nposition = [0.0, 40.0, 0.0]",
+        "model = \"volume\"\n",
+    );
+    assert!(single.material.model.has_single_pass());
     let choice =
         translucent::pipeline::choose(&directional, &SettingsOverrides::default(), 0.02).unwrap();
     let pre = Preprocessed::build(&directional.mesh, &directional.material, &choice, &quiet);
-    for (s, layers) in [(&directional, 1), (&point, 6)] {
+    for (s, layers) in [(&directional, 1), (&point, 6), (&single, 6)] {
         let size = shadow_map_size(s, pre.atlas.texel_mm).0 as u64;
+        // Each layer's depth, and the light-entry image's texel for a model that reads it.
+        let entry = if s.material.model.has_single_pass() {
+            16
+        } else {
+            0
+        };
         let t = traffic(PassName::Shadow, s, &pre, Blend::Optimized);
-        assert_eq!(t.written, size * size * 4 * layers);
+        assert_eq!(t.written, size * size * (4 + entry) * layers);
     }
 }
 

@@ -480,21 +480,39 @@ impl Image {
         width: u32,
         height: u32,
     ) -> GpuResult<Image> {
-        Image::zeroed_storage_layers(gpu, name, format, (width, height), None)
+        let usage = vk::ImageUsageFlags::STORAGE;
+        let zero = vk::ClearColorValue::default();
+        Image::cleared_general(gpu, name, format, (width, height), (None, usage), zero)
     }
 
-    /// [`Image::zeroed_storage`] with `layers` array layers seen through an array view (Some),
-    /// or a single layer and a plain view (None).
-    pub fn zeroed_storage_layers(
+    /// An image of `layers` array layers (seen through an array view) that a pass draws into
+    /// as a colour attachment in the `GENERAL` layout and compute passes read as storage,
+    /// cleared to `clear` and left in `GENERAL` layout (for images kept across frames that a
+    /// frame may skip drawing).
+    pub fn cleared_attachment_layers(
+        gpu: &Arc<Gpu>,
+        name: &str,
+        format: vk::Format,
+        size: (u32, u32),
+        layers: u32,
+        clear: vk::ClearColorValue,
+    ) -> GpuResult<Image> {
+        let usage = vk::ImageUsageFlags::STORAGE | vk::ImageUsageFlags::COLOR_ATTACHMENT;
+        Image::cleared_general(gpu, name, format, size, (Some(layers), usage), clear)
+    }
+
+    /// An image with `usage` (and copies both ways) cleared to `clear` and left in `GENERAL`
+    /// layout: `layers` array layers seen through an array view (Some), or a single layer and
+    /// a plain view (None).
+    fn cleared_general(
         gpu: &Arc<Gpu>,
         name: &str,
         format: vk::Format,
         (width, height): (u32, u32),
-        layers: Option<u32>,
+        (layers, usage): (Option<u32>, vk::ImageUsageFlags),
+        clear: vk::ClearColorValue,
     ) -> GpuResult<Image> {
-        let usage = vk::ImageUsageFlags::STORAGE
-            | vk::ImageUsageFlags::TRANSFER_DST
-            | vk::ImageUsageFlags::TRANSFER_SRC;
+        let usage = usage | vk::ImageUsageFlags::TRANSFER_DST | vk::ImageUsageFlags::TRANSFER_SRC;
         let to = (vk::PipelineStageFlags2::CLEAR, vk::ImageLayout::GENERAL);
         let info = ImageInfo {
             layers: layers.unwrap_or(1).max(1),
@@ -510,7 +528,7 @@ impl Image {
                     cmd,
                     image.raw,
                     vk::ImageLayout::GENERAL,
-                    &vk::ClearColorValue { float32: [0.0; 4] },
+                    &clear,
                     &[image.range()],
                 );
                 let done = [vk::MemoryBarrier2::default()

@@ -422,11 +422,16 @@ mod tests {
 
     #[test]
     fn every_shader_reflects() {
+        // The light-entry image's fragment shader reads only what the vertex shader passes
+        // it; every other shader has bindings or push constants.
         for (name, spv) in shaders::ALL {
             let i = reflect(spv).unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert!(
+            assert_eq!(
                 !i.bindings.is_empty() || i.push_bytes > 0,
-                "{name} declares nothing"
+                *name != "shadow.frag",
+                "{name}: bindings {:?}, push constants of {} bytes",
+                i.bindings,
+                i.push_bytes
             );
         }
     }

@@ -47,6 +47,10 @@ pub enum Access {
     TexelWrite(Stage),
     /// Colour attachment, written (cleared or overwritten).
     ColorAttachment,
+    /// Colour attachment in the GENERAL layout, written: for an image that compute passes
+    /// read as storage in that same layout, so that a frame may skip the pass that draws it
+    /// without a layout change going missing.
+    ColorAttachmentGeneral,
     /// Depth attachment, tested and written.
     DepthAttachment,
     /// Source of a copy.
@@ -107,6 +111,12 @@ impl Access {
                 L::COLOR_ATTACHMENT_OPTIMAL,
                 true,
             ),
+            Access::ColorAttachmentGeneral => (
+                S::COLOR_ATTACHMENT_OUTPUT,
+                A::COLOR_ATTACHMENT_READ | A::COLOR_ATTACHMENT_WRITE,
+                L::GENERAL,
+                true,
+            ),
             Access::DepthAttachment => (
                 S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
                 A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
@@ -138,7 +148,7 @@ impl Access {
             Access::StorageRead(_) | Access::StorageWrite(_) | Access::StorageReadWrite(_) => {
                 U::STORAGE
             }
-            Access::ColorAttachment => U::COLOR_ATTACHMENT,
+            Access::ColorAttachment | Access::ColorAttachmentGeneral => U::COLOR_ATTACHMENT,
             Access::DepthAttachment => U::DEPTH_STENCIL_ATTACHMENT,
             Access::TransferRead => U::TRANSFER_SRC,
             Access::TransferWrite => U::TRANSFER_DST,
@@ -181,7 +191,10 @@ impl Access {
     pub fn valid_for_buffer(self) -> bool {
         !matches!(
             self,
-            Access::Sampled(_) | Access::ColorAttachment | Access::DepthAttachment
+            Access::Sampled(_)
+                | Access::ColorAttachment
+                | Access::ColorAttachmentGeneral
+                | Access::DepthAttachment
         )
     }
 }

@@ -180,6 +180,8 @@ pub fn add(
         Ok(Box::new(move |rec| {
             let target = DrawTarget {
                 color: &color,
+                color_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                clear: vk::ClearColorValue::default(),
                 resolve: &resolve,
                 depth: Some((depth, vk::AttachmentStoreOp::DONT_CARE)),
                 extent,

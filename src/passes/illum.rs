@@ -89,6 +89,8 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[map.view],
+                    color_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                    clear: vk::ClearColorValue::default(),
                     resolve: &[],
                     depth: None,
                     extent: map.info.extent,

@@ -35,8 +35,6 @@ pub enum PassName {
     Gather,
     /// Global response.
     Global,
-    /// Light-entry depths without the shadow bias (models with a single-scattering pass).
-    Entry,
     /// Back-face depth from the camera (the same models).
     Thickness,
     /// The surface the camera sees: position and normals (the same models).
@@ -57,9 +55,8 @@ pub enum PassName {
 
 impl PassName {
     /// Every pass.
-    pub const ALL: [PassName; 15] = [
+    pub const ALL: [PassName; 14] = [
         PassName::Shadow,
-        PassName::Entry,
         PassName::Illum,
         PassName::Dilate,
         PassName::Local,
@@ -81,7 +78,6 @@ impl PassName {
         matches!(
             self,
             PassName::Shadow
-                | PassName::Entry
                 | PassName::Illum
                 | PassName::Dilate
                 | PassName::Local
@@ -99,7 +95,6 @@ impl PassName {
             PassName::Local => "local",
             PassName::Gather => "gather",
             PassName::Global => "global",
-            PassName::Entry => "entry",
             PassName::Thickness => "thickness",
             PassName::Front => "front",
             PassName::Single => "single",
@@ -147,6 +142,11 @@ pub const MAX_COLOR_ATTACHMENTS: usize = 3;
 pub struct DrawTarget<'a> {
     /// Colour attachment views, in the order of the fragment shader's outputs.
     pub color: &'a [vk::ImageView],
+    /// The layout the colour attachments are in ([`crate::graph::Access::ColorAttachment`]'s
+    /// or [`crate::graph::Access::ColorAttachmentGeneral`]'s).
+    pub color_layout: vk::ImageLayout,
+    /// What the colour attachments are cleared to before the draw.
+    pub clear: vk::ClearColorValue,
     /// Where the colour attachments are multisampled: one single-sampled image per attachment
     /// that gets the mean of its samples (the multisampled ones are then discarded). Empty
     /// otherwise.
@@ -207,11 +207,11 @@ pub fn draw_mesh(
     for (k, (a, &view)) in color.iter_mut().zip(target.color).enumerate() {
         *a = vk::RenderingAttachmentInfo::default()
             .image_view(view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .image_layout(target.color_layout)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::STORE)
             .clear_value(vk::ClearValue {
-                color: vk::ClearColorValue { float32: [0.0; 4] },
+                color: target.clear,
             });
         if let Some(&resolve) = target.resolve.get(k) {
             *a = a
@@ -267,6 +267,6 @@ mod tests {
             assert_eq!(PassName::parse(p.as_str()), Some(p));
         }
         assert_eq!(PassName::parse("tonemap"), None);
-        assert_eq!(PassName::ALL.iter().filter(|p| p.is_light()).count(), 7);
+        assert_eq!(PassName::ALL.iter().filter(|p| p.is_light()).count(), 6);
     }
 }

@@ -1,7 +1,7 @@
 //! Single scattering along the view ray, for the models whose profile holds the higher orders
 //! only (`Model::HalfspaceSingle`):
-//! - `entry` (with the light passes): the shadow maps' depths without their slope-scaled
-//!   bias, where each light's ray enters the object (glsl/entry.comp);
+//! - the light-entry image, drawn by the `shadow` pass beside its maps: where each light's ray
+//!   enters the object, and the slopes of the surface there (glsl/shadow.frag);
 //! - `thickness`: the depth of the nearest face turned away from the camera, where each view
 //!   ray leaves the object;
 //! - `front`: the surface the camera sees, its position and normals, and its depth;
@@ -29,40 +29,6 @@ pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 
 /// Intervals along each view ray (equal optical depth in the least extinguishing channel).
 pub const STEPS: u32 = 16;
-
-/// Format of the light-entry depth maps.
-pub const ENTRY_FORMAT: vk::Format = Item::EntryDepth.format();
-
-/// Declares `entry`: the shadow maps' depths without the slope-scaled bias into `entry`
-/// (layered like them).
-pub fn entry(graph: &mut RenderGraph, shadow_maps: ResourceId, entry: ResourceId) {
-    graph
-        .pass(PassName::Entry.as_str())
-        .access(shadow_maps, Access::Sampled(Stage::Compute))
-        .access(entry, Access::StorageWrite(Stage::Compute))
-        .setup(move |gpu, res| {
-            let set = res
-                .bind()
-                .sampled(0, shadow_maps, Sampler::nearest(gpu)?)
-                .storage_image(1, entry)
-                .finish()?;
-            let pipeline =
-                Pipeline::compute::<f32>(gpu, PassName::Entry.as_str(), shaders::ENTRY_COMP, set)?;
-            let info = res.image(entry).info;
-            Ok(Box::new(move |rec| {
-                pipeline.bind(rec.cmd);
-                pipeline.push(rec.cmd, &super::shadow::DEPTH_BIAS_SLOPE);
-                unsafe {
-                    rec.gpu.device.cmd_dispatch(
-                        rec.cmd,
-                        info.extent.width.div_ceil(8),
-                        info.extent.height.div_ceil(8),
-                        info.layers,
-                    )
-                };
-            }))
-        });
-}
 
 /// The mesh both passes draw and the frame uniforms.
 #[derive(Clone, Copy)]
@@ -139,6 +105,8 @@ fn camera_pass(
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &color,
+                    color_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                    clear: vk::ClearColorValue::default(),
                     resolve: &[],
                     depth: Some((depth.view, vk::AttachmentStoreOp::STORE)),
                     extent: depth.info.extent,
@@ -178,7 +146,7 @@ pub fn front(graph: &mut RenderGraph, m: MeshInputs, f: FrontImages) {
 pub struct SingleInputs {
     /// Frame uniforms.
     pub frame: ResourceId,
-    /// Light-entry depths (from `entry`).
+    /// The light-entry image (drawn by `shadow`).
     pub entry: ResourceId,
     /// Back-face depth from `thickness`.
     pub back: ResourceId,

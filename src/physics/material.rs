@@ -165,7 +165,8 @@ impl Model {
 /// The properties of a model ([`Model::traits`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ModelTraits {
-    /// Single scattering is its own pass (`entry`, `thickness`, `front`, `single`).
+    /// Single scattering is its own pass (`thickness`, `front`, `single`, and the light-entry
+    /// image `shadow` draws).
     pub single_pass: bool,
     /// F is the half-space profile of orders >= 2 (single scattering apart).
     pub halfspace_orders: bool,

@@ -211,8 +211,44 @@ impl<'a> Assembly<'a> {
         self.transient.shadow_size
     }
 
-    /// Adds the `shadow` pass and the `illum` pass that lights the atlas through its maps.
-    pub(super) fn add_shadow_and_illumination(&self, g: &mut RenderGraph) {
+    /// Makes the light-entry image for a model with a single-scattering pass (`single_pass`)
+    /// and imports it into `g`: layered like the shadow maps, drawn by `shadow` and read by
+    /// `single`. Kept across frames and imported in the layout both use, so that a frame under
+    /// the same lights can skip `shadow`.
+    pub(super) fn add_entry_image(
+        &self,
+        g: &mut RenderGraph,
+        single_pass: bool,
+    ) -> Result<Option<ResourceId>> {
+        if !single_pass {
+            return Ok(None);
+        }
+        let Transients {
+            layers,
+            shadow_size: s,
+            ..
+        } = self.transient;
+        let entry = Image::cleared_attachment_layers(
+            self.gpu,
+            Item::EntryDepth.name(),
+            passes::shadow::ENTRY_FORMAT,
+            (s, s),
+            layers,
+            passes::shadow::ENTRY_CLEAR,
+        )?;
+        Ok(Some(g.import_image(
+            Arc::new(entry),
+            Access::StorageRead(Stage::Compute),
+        )))
+    }
+
+    /// Adds the `shadow` pass (writing the light-entry image `entry` where there is one) and
+    /// the `illum` pass that lights the atlas through its maps.
+    pub(super) fn add_shadow_and_illumination(
+        &self,
+        g: &mut RenderGraph,
+        entry: Option<ResourceId>,
+    ) {
         let (scene, data) = (self.scene, self.data);
         let Imported {
             frame,
@@ -236,6 +272,7 @@ impl<'a> Assembly<'a> {
                 indices,
                 index_count: data.index_count,
                 layers,
+                entry,
             },
             shadow_maps,
         );
@@ -314,15 +351,16 @@ impl<'a> Assembly<'a> {
         );
     }
 
-    /// Adds the single-scattering passes (`entry`, `thickness`, `front`, `single`) when
-    /// `single_pass`,
-    /// at one sample per `scene::single::downsample` pixels along each side, and returns
-    /// what the composite reads of them (a black pixel without the pass) and the light-entry
-    /// image (with the pass).
+    /// Adds the single-scattering passes (`thickness`, `front`, `single`, which reads the
+    /// light-entry image `entry` that `shadow` draws) when `single_pass`, at one sample per
+    /// `scene::single::downsample` pixels along each side, and returns what the composite
+    /// reads of them (a black pixel without the pass) and the light-entry image (with the
+    /// pass).
     pub(super) fn add_single_scattering(
         &self,
         g: &mut RenderGraph,
         single_pass: bool,
+        entry: Option<ResourceId>,
     ) -> Result<(passes::composite::SingleImages, Option<ResourceId>)> {
         let (w, h) = crate::scene::single::size(self.scene);
         let Imported {
@@ -331,12 +369,6 @@ impl<'a> Assembly<'a> {
             indices,
             ..
         } = self.imported;
-        let Transients {
-            layers,
-            shadow_size: s,
-            shadow_maps,
-            ..
-        } = self.transient;
         let single = if single_pass {
             let mesh = passes::single::MeshInputs {
                 frame,
@@ -347,17 +379,7 @@ impl<'a> Assembly<'a> {
             let image = |g: &mut RenderGraph, item: Item| {
                 g.image(item.name(), ImageDesc::new(item.format(), w, h))
             };
-            // Kept across frames and imported in the layout `entry` writes and `single` reads
-            // it in, so that a frame under the same lights can skip `entry`.
-            let entry = Image::zeroed_storage_layers(
-                self.gpu,
-                Item::EntryDepth.name(),
-                passes::single::ENTRY_FORMAT,
-                (s, s),
-                Some(layers),
-            )?;
-            let entry = g.import_image(Arc::new(entry), Access::StorageRead(Stage::Compute));
-            passes::single::entry(g, shadow_maps, entry);
+            let entry = entry.expect("a single-scattering pass has a light-entry image");
             let back = image(g, Item::BackDepth);
             let single = image(g, Item::SingleScattering);
             let front = passes::single::FrontImages {
@@ -584,7 +606,7 @@ impl<'a> Assembly<'a> {
             entry: entry
                 .map(|_| {
                     let s = self.transient.shadow_size as u64;
-                    host_buffer(gpu, "capture light entry", s * s * 16)
+                    host_buffer(gpu, "capture light entry", s * s * Item::EntryDepth.bytes())
                 })
                 .transpose()?,
         };
