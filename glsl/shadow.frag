@@ -7,16 +7,18 @@
 // `single` pass reads it to measure how far light travels inside and places the surface
 // within the texel by the slopes, since light grazing a face crosses many times the medium's
 // free path in depth over one texel: f32 throughout, for faces of a kilometre lit at a
-// grazing angle. The nearest face wins the depth test; where the map sees nothing the image
-// keeps its clear value, depth 1 and nothing known.
+// grazing angle. The face nearest after the maps' bias wins the depth test; where the map sees
+// nothing the image keeps its clear value, depth 1 and nothing known.
 
-layout(location = 0) noperspective in float depth;
+layout(location = 0) in vec2 clip_zw;
 
 layout(location = 0) out vec4 entry;
 
 void main() {
-    // Exact on the face: the depth is linear across a triangle, and the derivatives are taken
-    // within it (helper texels beyond its edges extend the same plane).
+    // Exact on the face up to f32 rounding: the depth is linear across a triangle in screen
+    // space, and the derivatives are taken within it (helper texels beyond its edges extend
+    // the same plane).
+    float depth = clip_zw.x / clip_zw.y;
     vec2 slopes = vec2(dFdx(depth), dFdy(depth));
     bvec2 known = lessThan(abs(slopes), vec2(1.0));
     entry = vec4(

@@ -114,8 +114,8 @@ float light_depth(Light l, vec3 p, vec3 travel) {
 
 // The unit normal, facing the light (against `travel`), of the surface the shadow map sees at
 // `entry` (in `layer`, with the entry texel's slopes): from the surface one texel over
-// in u and in v along those slopes; -travel where either slope is unknown (the texel's
-// neighbours on both sides fall off the object).
+// in u and in v along those slopes; -travel where either slope is unknown (the face is seen
+// so nearly edge-on that its depth changes by a unit or more over a texel).
 vec3 entry_normal(vec3 entry, uint layer, vec3 slopes, vec3 travel) {
     uint known = uint(slopes.z);
     if (known != 3u) {

@@ -193,6 +193,7 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
     let (read, written) = match pass {
         PassName::Shadow => (
             mesh * c.shadow_layers,
+            // An item a scene lacks still counts one element, as it is allocated.
             b(I::ShadowMaps) + if c.single { b(I::EntryDepth) } else { 0 },
         ),
         // With an environment, each rasterised texel reads its transfer.

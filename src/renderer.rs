@@ -343,7 +343,7 @@ impl Renderer {
         let entry = assembly.add_entry_image(&mut g, single_pass)?;
         assembly.add_shadow_and_illumination(&mut g, entry);
         assembly.add_responses(&mut g, global_variant);
-        let (single, entry) = assembly.add_single_scattering(&mut g, single_pass, entry)?;
+        let single = assembly.add_single_scattering(&mut g, entry)?;
         assembly.add_composite(&mut g, single);
         let window = assembly.add_window(&mut g, options.window.as_ref())?;
         assembly.add_readback(&mut g);

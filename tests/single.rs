@@ -250,6 +250,31 @@ fn the_light_entry_image_holds_each_texels_slopes() {
     );
 }
 
+/// A point light just off a face, inside the object's bounding sphere: its cube faces' near
+/// plane cuts the triangles beside it, and the light-entry depth stays exact through that
+/// clipping (interpolated as clip-space z and w, not as z / w of a vertex behind the light), so
+/// every single-scattering sample is finite and the face the light almost touches is lit.
+#[test]
+fn a_point_light_beside_a_face_clips_the_entry_depth_cleanly() {
+    let scene = common::scene(
+        "[mesh]\nbuiltin = \"box\"\nsize = [50.0, 30.0, 40.0]\nsegments = 4\n\
+         [[lights]]\nkind = \"point\"\nposition = [27.0, 2.0, 3.0]\nintensity = 2000.0\n\
+         [material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n\
+         [output]\nwidth = 64\nheight = 64\n",
+    );
+    let (center, radius) = scene.bounds();
+    assert!((glam::Vec3::new(27.0, 2.0, 3.0) - center).length() < radius);
+    let (out, c) = render_captured(&scene);
+    assert!(c.entry.iter().flatten().all(|v| v.is_finite()));
+    let lit = c.single.iter().filter(|p| p[0] > 0.0).count();
+    assert!(
+        c.single.iter().flatten().all(|v| v.is_finite()),
+        "a single-scattering sample is not finite"
+    );
+    assert!(lit > 0, "no sample is lit by the point light");
+    assert!(out.radiance.iter().all(|v| v.is_finite()));
+}
+
 /// The single-scattering image of the 50 mm box scaled by `scale` (`[transform] scale`) seen
 /// and lit at an angle, 64x64 under `halfspace-single`: the central 16x16 pixels (on the face
 /// in front), their mean per channel and the largest relative difference of a pixel from the

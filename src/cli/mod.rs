@@ -66,8 +66,9 @@ pub enum Command {
     Bench(BenchArgs),
     /// Brute-force reference: B = integral of E R_d over the whole surface (no atlas, no F).
     Reference(ReferenceArgs),
-    /// Volumetric truth: a Monte Carlo path tracer of the medium inside the mesh (index-matched
-    /// boundary); writes truth.exr, noise.exr (per-pixel standard deviation) and truth.json.
+    /// Volumetric truth: a Monte Carlo path tracer of the medium inside the mesh, behind an
+    /// index-matched or a smooth dielectric boundary; writes truth.exr, noise.exr (per-pixel
+    /// standard deviation) and truth.json (and truth_surface.exr behind a dielectric).
     Truth(TruthArgs),
     /// Error of a render against a reference: figures, error image (EXR) and false colour (PNG).
     Compare(CompareArgs),

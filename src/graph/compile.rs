@@ -812,6 +812,45 @@ mod tests {
         assert_eq!(b.src_access, A::SHADER_STORAGE_WRITE);
     }
 
+    /// An image kept across frames in GENERAL, drawn as a colour attachment in that layout and
+    /// read as storage: a colour barrier without a layout change, and the drawing pass may be
+    /// skipped; drawn in COLOR_ATTACHMENT_OPTIMAL instead, skipping it is refused.
+    #[test]
+    fn a_colour_attachment_in_general_layout_can_be_skipped() {
+        let kept = |name: &str| ResourceDecl {
+            imported: true,
+            initial_layout: L::GENERAL,
+            ..image(name)
+        };
+        let res = [kept("entry")];
+        let names = ["shadow", "single"];
+        let passes = |draw: Access| {
+            [
+                pass("shadow", &[(0, draw)]),
+                pass("single", &[(0, Access::StorageRead(Stage::Compute))]),
+            ]
+        };
+        let s = compile(&res, &passes(Access::ColorAttachmentGeneral)).unwrap();
+        assert!(s.barriers[0].is_empty(), "{:?}", s.barriers[0]);
+        let b = s.barriers[1][0];
+        assert_eq!(
+            (b.src_stages, b.dst_stages, b.dst_access),
+            (
+                S::COLOR_ATTACHMENT_OUTPUT,
+                S::COMPUTE_SHADER,
+                A::SHADER_STORAGE_READ
+            )
+        );
+        assert!(b.src_access.contains(A::COLOR_ATTACHMENT_WRITE));
+        assert_eq!((b.old_layout, b.new_layout), (L::GENERAL, L::GENERAL));
+        check_skip(&res, &names, &s, &[false, true]).unwrap();
+        let s = compile(&res, &passes(Access::ColorAttachment)).unwrap();
+        assert!(matches!(
+            check_skip(&res, &names, &s, &[false, true]),
+            Err(GraphError::UnsafeSkip { .. })
+        ));
+    }
+
     #[test]
     fn skipping_a_pass_that_changes_a_layout_a_later_pass_expects_is_refused() {
         let res = [image("display")];

@@ -136,8 +136,8 @@ pub fn set_viewport(gpu: &Gpu, cmd: vk::CommandBuffer, extent: vk::Extent2D) {
 /// least four).
 pub const MAX_COLOR_ATTACHMENTS: usize = 3;
 
-/// Where a mesh pass draws: up to [`MAX_COLOR_ATTACHMENTS`] colour attachments (cleared to zero)
-/// and an optional depth attachment (cleared to 1, stored or discarded), all of `extent`.
+/// Where a mesh pass draws: up to [`MAX_COLOR_ATTACHMENTS`] colour attachments (cleared to
+/// `clear`) and an optional depth attachment (cleared to 1, stored or discarded), all of `extent`.
 /// Multisampled colour attachments are averaged into single-sampled images at the end.
 pub struct DrawTarget<'a> {
     /// Colour attachment views, in the order of the fragment shader's outputs.

@@ -352,16 +352,14 @@ impl<'a> Assembly<'a> {
     }
 
     /// Adds the single-scattering passes (`thickness`, `front`, `single`, which reads the
-    /// light-entry image `entry` that `shadow` draws) when `single_pass`, at one sample per
-    /// `scene::single::downsample` pixels along each side, and returns what the composite
-    /// reads of them (a black pixel without the pass) and the light-entry image (with the
-    /// pass).
+    /// light-entry image `entry` that `shadow` draws) for a model that has them (`entry`
+    /// given), at one sample per `scene::single::downsample` pixels along each side, and
+    /// returns what the composite reads of them (a black pixel without the passes).
     pub(super) fn add_single_scattering(
         &self,
         g: &mut RenderGraph,
-        single_pass: bool,
         entry: Option<ResourceId>,
-    ) -> Result<(passes::composite::SingleImages, Option<ResourceId>)> {
+    ) -> Result<passes::composite::SingleImages> {
         let (w, h) = crate::scene::single::size(self.scene);
         let Imported {
             frame,
@@ -369,7 +367,7 @@ impl<'a> Assembly<'a> {
             indices,
             ..
         } = self.imported;
-        let single = if single_pass {
+        let single = if let Some(entry) = entry {
             let mesh = passes::single::MeshInputs {
                 frame,
                 vertices,
@@ -379,7 +377,6 @@ impl<'a> Assembly<'a> {
             let image = |g: &mut RenderGraph, item: Item| {
                 g.image(item.name(), ImageDesc::new(item.format(), w, h))
             };
-            let entry = entry.expect("a single-scattering pass has a light-entry image");
             let back = image(g, Item::BackDepth);
             let single = image(g, Item::SingleScattering);
             let front = passes::single::FrontImages {
@@ -401,7 +398,7 @@ impl<'a> Assembly<'a> {
                 },
                 single,
             );
-            let images = passes::composite::SingleImages {
+            passes::composite::SingleImages {
                 radiance: single,
                 depth: front.depth,
                 pass: true,
@@ -409,8 +406,7 @@ impl<'a> Assembly<'a> {
                     self.scene.width as f32 / w as f32,
                     self.scene.height as f32 / h as f32,
                 ],
-            };
-            (images, Some(entry))
+            }
         } else {
             let black = Image::from_pixels(
                 self.gpu,
@@ -421,13 +417,12 @@ impl<'a> Assembly<'a> {
                 &[0; 16],
             )?;
             let black = g.import_image(Arc::new(black), Access::Sampled(Stage::Fragment));
-            let images = passes::composite::SingleImages {
+            passes::composite::SingleImages {
                 radiance: black,
                 depth: black,
                 pass: false,
                 ratio: [1.0; 2],
-            };
-            (images, None)
+            }
         };
         Ok(single)
     }
