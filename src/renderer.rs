@@ -55,8 +55,9 @@ struct CaptureBuffers {
     /// Single-scattered radiance per sample (models with the pass), sized for the `single`
     /// pass's image as the graph was built.
     single: Option<Arc<Buffer>>,
-    /// The light-entry image's first layer (models with the pass).
+    /// The light-entry image, every layer (models with the pass), and its number of layers.
     entry: Option<Arc<Buffer>>,
+    entry_layers: usize,
 }
 
 /// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
@@ -73,10 +74,13 @@ pub struct Captured {
     /// Single-scattered radiance, RGBA per sample of the `single` pass (row by row over its
     /// image, `scene::single::size` as the renderer was built; empty without the pass).
     pub single: Vec<[f32; 4]>,
-    /// The light-entry image's first layer (drawn by the `shadow` pass: the depth at which the
-    /// first light's rays enter, the slopes along u and v per texel, which slopes are known),
-    /// row by row over the shadow map; empty without the single-scattering pass.
+    /// The light-entry image (drawn by the `shadow` pass: the depth at which each light's rays
+    /// enter, the slopes along u and v per texel, which slopes are known), layer after layer
+    /// (one per light, six per point light, as the shadow maps), row by row over each;
+    /// empty without the single-scattering pass.
     pub entry: Vec<[f32; 4]>,
+    /// The light-entry image's layers.
+    pub entry_layers: usize,
 }
 
 /// How to render.
@@ -556,6 +560,7 @@ impl Renderer {
             node_radiosity: read_back(&b.node_radiosity, nodes)?,
             single: read_back_whole(b.single.as_deref())?,
             entry: read_back_whole(b.entry.as_deref())?,
+            entry_layers: b.entry_layers,
         }))
     }
 

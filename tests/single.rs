@@ -192,6 +192,7 @@ fn the_light_entry_image_holds_each_texels_slopes() {
          [output]\nwidth = 64\nheight = 64\n",
     );
     let (_, c) = render_captured(&scene);
+    assert_eq!(c.entry_layers, 1, "one directional light");
     let s = (c.entry.len() as f64).sqrt() as usize;
     assert!(s > 16 && s * s == c.entry.len(), "{} texels", c.entry.len());
     let at = |x: usize, y: usize| c.entry[y * s + x];
@@ -251,27 +252,71 @@ fn the_light_entry_image_holds_each_texels_slopes() {
 }
 
 /// A point light just off a face, inside the object's bounding sphere: its cube faces' near
-/// plane cuts the triangles beside it, and the light-entry depth stays exact through that
-/// clipping (interpolated as clip-space z and w, not as z / w of a vertex behind the light), so
-/// every single-scattering sample is finite and the face the light almost touches is lit.
+/// plane cuts the triangles of that face, which span the light's position. Every texel of
+/// every layer of the light-entry image that sees the box unprojects onto the box's surface
+/// (the depth interpolated as clip-space z and w and divided per texel, exact through that
+/// clipping), and every single-scattering sample is finite.
 #[test]
 fn a_point_light_beside_a_face_clips_the_entry_depth_cleanly() {
-    let scene = common::scene(
+    let light = glam::Vec3::new(27.0, 2.0, 3.0);
+    let half = glam::Vec3::new(25.0, 15.0, 20.0);
+    let scene = common::scene(&format!(
         "[mesh]\nbuiltin = \"box\"\nsize = [50.0, 30.0, 40.0]\nsegments = 4\n\
-         [[lights]]\nkind = \"point\"\nposition = [27.0, 2.0, 3.0]\nintensity = 2000.0\n\
+         [[lights]]\nkind = \"point\"\nposition = [{}, {}, {}]\nintensity = 2000.0\n\
          [material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n\
          [output]\nwidth = 64\nheight = 64\n",
-    );
+        light.x, light.y, light.z
+    ));
     let (center, radius) = scene.bounds();
-    assert!((glam::Vec3::new(27.0, 2.0, 3.0) - center).length() < radius);
+    assert!((light - center).length() < radius);
     let (out, c) = render_captured(&scene);
-    assert!(c.entry.iter().flatten().all(|v| v.is_finite()));
-    let lit = c.single.iter().filter(|p| p[0] > 0.0).count();
+    assert_eq!(c.entry_layers, 6, "six cube faces");
+    let s = ((c.entry.len() / 6) as f64).sqrt() as usize;
+    assert_eq!(s * s * 6, c.entry.len());
+    let faces =
+        translucent::scene::shadow::shadow_projections(&scene.lights[0], center, radius, s as u32);
+    let (mut seen, mut layers_seeing, mut worst) = (0usize, 0usize, 0.0f32);
+    for (layer, face) in faces.iter().enumerate() {
+        let inverse = face.view_proj.inverse();
+        let before = seen;
+        for row in 0..s {
+            for col in 0..s {
+                let [z, ..] = c.entry[(layer * s + row) * s + col];
+                assert!(
+                    z.is_finite(),
+                    "layer {layer} texel ({col}, {row}): depth {z}"
+                );
+                if z >= 1.0 {
+                    continue;
+                }
+                let ndc = |i: usize| 2.0 * (i as f32 + 0.5) / s as f32 - 1.0;
+                let p = inverse.project_point3(glam::Vec3::new(ndc(col), ndc(row), z)) - center;
+                // How far off the box's surface, as a share of the half size along the face's
+                // axis: 0 on a face.
+                let off = ((p / half).abs().max_element() - 1.0).abs();
+                worst = worst.max(off);
+                seen += 1;
+            }
+        }
+        layers_seeing += (seen > before) as usize;
+    }
+    println!("{seen} texels in {layers_seeing} layers see the box, at most {worst:.2e} of its half size off its faces");
+    assert!(
+        layers_seeing >= 4 && seen > 1000,
+        "{seen} texels in {layers_seeing} layers"
+    );
+    assert!(
+        worst < 1e-3,
+        "an entry depth lies {worst} of the half size off the box"
+    );
     assert!(
         c.single.iter().flatten().all(|v| v.is_finite()),
         "a single-scattering sample is not finite"
     );
-    assert!(lit > 0, "no sample is lit by the point light");
+    assert!(
+        c.single.iter().any(|p| p[0] > 0.0),
+        "no sample is lit by the point light"
+    );
     assert!(out.radiance.iter().all(|v| v.is_finite()));
 }
 

@@ -234,9 +234,9 @@ fn small_and_thin_behind_a_boundary_with_walks() {
 
 /// The bunnies behind a boundary of eta 1.3 under `volume`, the walks reflected and refracted
 /// at the surface, with fewer walks than derived (1024 per node and channel; the bounds about
-/// 20 % above the figures at that count). At 64x64 the texels and nodes are coarse: at
-/// 128x128 with the derived counts both bunnies are within 5 % (docs/results/truth.md, against
-/// `tests/truth-data/bunny-*-eta1.3-128`).
+/// 20 % above the figures at that count). At 64x64 the texels and nodes are coarse;
+/// docs/results/truth.md measures the derived counts at 128x128 against
+/// `tests/truth-data/bunny-*-eta1.3-128`.
 #[test]
 fn bunnies_behind_a_boundary_with_walks() {
     refractive(

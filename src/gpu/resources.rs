@@ -212,12 +212,18 @@ impl ImageInfo {
 /// The copy region of a whole single-layer colour image of `extent` from or to a tightly packed
 /// buffer at offset 0.
 pub fn whole_image_copy(extent: vk::Extent2D) -> vk::BufferImageCopy {
+    whole_layers_copy(extent, 1)
+}
+
+/// The copy region of all `layers` layers of a colour image of `extent`, one after another in
+/// a tightly packed buffer at offset 0.
+pub fn whole_layers_copy(extent: vk::Extent2D, layers: u32) -> vk::BufferImageCopy {
     vk::BufferImageCopy::default()
         .image_subresource(vk::ImageSubresourceLayers {
             aspect_mask: vk::ImageAspectFlags::COLOR,
             mip_level: 0,
             base_array_layer: 0,
-            layer_count: 1,
+            layer_count: layers,
         })
         .image_extent(vk::Extent3D {
             width: extent.width,

@@ -22,7 +22,10 @@ pub fn add(graph: &mut RenderGraph, name: &str, pairs: Vec<(ResourceId, Resource
             for (source, buffer) in &copies {
                 match source {
                     Physical::Image(image) => {
-                        let region = [crate::gpu::resources::whole_image_copy(image.info.extent)];
+                        let region = [crate::gpu::resources::whole_layers_copy(
+                            image.info.extent,
+                            image.info.layers.max(1),
+                        )];
                         unsafe {
                             rec.gpu.device.cmd_copy_image_to_buffer(
                                 rec.cmd,

@@ -569,7 +569,7 @@ impl<'a> Assembly<'a> {
 
     /// Makes the host buffers of [`super::Options::capture`] and adds the `capture` pass that
     /// copies the intermediate results into them (the single scattering in `single` when
-    /// `single_pass`, and the first layer of the light-entry image `entry`).
+    /// `single_pass`, and every layer of the light-entry image `entry`).
     pub(super) fn add_capture(
         &self,
         g: &mut RenderGraph,
@@ -601,9 +601,15 @@ impl<'a> Assembly<'a> {
             entry: entry
                 .map(|_| {
                     let s = self.transient.shadow_size as u64;
-                    host_buffer(gpu, "capture light entry", s * s * Item::EntryDepth.bytes())
+                    let texels = s * s * self.transient.layers as u64;
+                    host_buffer(
+                        gpu,
+                        "capture light entry",
+                        texels * Item::EntryDepth.bytes(),
+                    )
                 })
                 .transpose()?,
+            entry_layers: entry.map_or(0, |_| self.transient.layers as usize),
         };
         let mut to_host =
             |buffer: &Arc<Buffer>| g.import_buffer(buffer.clone(), Some(Access::HostRead));
