@@ -193,7 +193,8 @@ pub fn traffic(pass: PassName, scene: &Scene, pre: &Preprocessed, mode: Blend) -
     let (read, written) = match pass {
         PassName::Shadow => (
             mesh * c.shadow_layers,
-            // An item a scene lacks still counts one element, as it is allocated.
+            // Counts give an item a scene lacks one element (its placeholder); without a
+            // single-scattering pass the shadow pass writes no light-entry image at all.
             b(I::ShadowMaps) + if c.single { b(I::EntryDepth) } else { 0 },
         ),
         // With an environment, each rasterised texel reads its transfer.

@@ -55,9 +55,8 @@ struct CaptureBuffers {
     /// Single-scattered radiance per sample (models with the pass), sized for the `single`
     /// pass's image as the graph was built.
     single: Option<Arc<Buffer>>,
-    /// The light-entry image, every layer (models with the pass), and its number of layers.
+    /// The light-entry image, every layer (models with the pass).
     entry: Option<Arc<Buffer>>,
-    entry_layers: usize,
 }
 
 /// Intermediate results of the last frame, read back for tests (see [`Options::capture`]).
@@ -553,14 +552,15 @@ impl Renderer {
         let Some(b) = &self.capture else {
             return Ok(None);
         };
+        let entry: Vec<[f32; 4]> = read_back_whole(b.entry.as_deref())?;
         Ok(Some(Captured {
             irradiance: read_back(&b.irradiance, atlas_texels)?,
             local: read_back(&b.local, atlas_texels)?,
             node_irradiance: read_back(&b.node_irradiance, nodes)?,
             node_radiosity: read_back(&b.node_radiosity, nodes)?,
             single: read_back_whole(b.single.as_deref())?,
-            entry: read_back_whole(b.entry.as_deref())?,
-            entry_layers: b.entry_layers,
+            entry_layers: entry.len() / (self.shadow_map_size as usize).pow(2).max(1),
+            entry,
         }))
     }
 

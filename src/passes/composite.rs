@@ -180,7 +180,7 @@ pub fn add(
         Ok(Box::new(move |rec| {
             let target = DrawTarget {
                 color: &color,
-                color_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                color_access: Access::ColorAttachment,
                 clear: vk::ClearColorValue::default(),
                 resolve: &resolve,
                 depth: Some((depth, vk::AttachmentStoreOp::DONT_CARE)),

@@ -30,6 +30,21 @@ fn dispatch<P: bytemuck::Pod>(
     unsafe { rec.gpu.device.cmd_dispatch(rec.cmd, groups(count), 1, 1) };
 }
 
+/// Binds `pipeline`, pushes `push` and dispatches one invocation per texel of `extent` in
+/// square workgroups of `group` x `group`.
+pub(super) fn dispatch_2d<P: bytemuck::Pod>(
+    rec: &crate::graph::RecordContext<'_>,
+    pipeline: &Pipeline,
+    push: &P,
+    extent: ash::vk::Extent2D,
+    group: u32,
+) {
+    pipeline.bind(rec.cmd);
+    pipeline.push(rec.cmd, push);
+    let (x, y) = (extent.width.div_ceil(group), extent.height.div_ceil(group));
+    unsafe { rec.gpu.device.cmd_dispatch(rec.cmd, x, y, 1) };
+}
+
 /// Workgroups of [`GROUP`] invocations for `count` invocations (at least one).
 fn groups(count: u32) -> u32 {
     count.div_ceil(GROUP).max(1)

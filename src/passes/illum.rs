@@ -89,7 +89,7 @@ pub fn add(graph: &mut RenderGraph, inputs: IllumInputs, map: ResourceId) {
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &[map.view],
-                    color_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                    color_access: Access::ColorAttachment,
                     clear: vk::ClearColorValue::default(),
                     resolve: &[],
                     depth: None,

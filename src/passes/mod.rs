@@ -142,9 +142,10 @@ pub const MAX_COLOR_ATTACHMENTS: usize = 3;
 pub struct DrawTarget<'a> {
     /// Colour attachment views, in the order of the fragment shader's outputs.
     pub color: &'a [vk::ImageView],
-    /// The layout the colour attachments are in ([`crate::graph::Access::ColorAttachment`]'s
-    /// or [`crate::graph::Access::ColorAttachmentGeneral`]'s).
-    pub color_layout: vk::ImageLayout,
+    /// The access the pass declared for its colour attachments
+    /// ([`crate::graph::Access::ColorAttachment`] or
+    /// [`crate::graph::Access::ColorAttachmentGeneral`]), whose layout they are drawn in.
+    pub color_access: crate::graph::Access,
     /// What the colour attachments are cleared to before the draw.
     pub clear: vk::ClearColorValue,
     /// Where the colour attachments are multisampled: one single-sampled image per attachment
@@ -207,7 +208,7 @@ pub fn draw_mesh(
     for (k, (a, &view)) in color.iter_mut().zip(target.color).enumerate() {
         *a = vk::RenderingAttachmentInfo::default()
             .image_view(view)
-            .image_layout(target.color_layout)
+            .image_layout(target.color_access.info().layout)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::STORE)
             .clear_value(vk::ClearValue {

@@ -86,7 +86,7 @@ pub fn add(graph: &mut RenderGraph, inputs: ShadowInputs, maps: ResourceId) {
                     let color = entry.as_ref().map(|e| [e.layer_views[layer as usize]]);
                     let target = DrawTarget {
                         color: color.as_ref().map_or(&[], |c| c.as_slice()),
-                        color_layout: vk::ImageLayout::GENERAL,
+                        color_access: Access::ColorAttachmentGeneral,
                         clear: ENTRY_CLEAR,
                         resolve: &[],
                         depth: Some((

@@ -105,7 +105,7 @@ fn camera_pass(
             Ok(Box::new(move |rec| {
                 let target = DrawTarget {
                     color: &color,
-                    color_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                    color_access: Access::ColorAttachment,
                     clear: vk::ClearColorValue::default(),
                     resolve: &[],
                     depth: Some((depth.view, vk::AttachmentStoreOp::STORE)),
@@ -189,16 +189,7 @@ pub fn single(graph: &mut RenderGraph, i: SingleInputs, out: ResourceId) {
             )?;
             let extent = res.image(out).info.extent;
             Ok(Box::new(move |rec| {
-                pipeline.bind(rec.cmd);
-                pipeline.push(rec.cmd, &STEPS);
-                unsafe {
-                    rec.gpu.device.cmd_dispatch(
-                        rec.cmd,
-                        extent.width.div_ceil(8),
-                        extent.height.div_ceil(8),
-                        1,
-                    )
-                };
+                super::compute::dispatch_2d(rec, &pipeline, &STEPS, extent, 8)
             }))
         });
 }

@@ -79,16 +79,7 @@ pub fn add(
             )?;
             let extent = out.info.extent;
             Ok(Box::new(move |rec| {
-                pipeline.bind(rec.cmd);
-                pipeline.push(rec.cmd, &push);
-                unsafe {
-                    rec.gpu.device.cmd_dispatch(
-                        rec.cmd,
-                        extent.width.div_ceil(GROUP),
-                        extent.height.div_ceil(GROUP),
-                        1,
-                    )
-                };
+                super::compute::dispatch_2d(rec, &pipeline, &push, extent, GROUP)
             }))
         });
 }

@@ -596,7 +596,13 @@ impl<'a> Assembly<'a> {
             node_radiosity: host_buffer(gpu, "capture node radiosity", node_bytes)?,
             single: single
                 .pass
-                .then(|| host_buffer(gpu, "capture single scattering", samples * 16))
+                .then(|| {
+                    host_buffer(
+                        gpu,
+                        "capture single scattering",
+                        samples * Item::SingleScattering.bytes(),
+                    )
+                })
                 .transpose()?,
             entry: entry
                 .map(|_| {
@@ -609,7 +615,6 @@ impl<'a> Assembly<'a> {
                     )
                 })
                 .transpose()?,
-            entry_layers: entry.map_or(0, |_| self.transient.layers as usize),
         };
         let mut to_host =
             |buffer: &Arc<Buffer>| g.import_buffer(buffer.clone(), Some(Access::HostRead));
