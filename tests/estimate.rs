@@ -84,6 +84,12 @@ fn estimate_bounds_the_walks() {
             sphere("skimmilk", 1.3, sky),
             "skim-milk sphere under the sky behind a boundary, F from walks",
         ),
+        (
+            std::fs::read_to_string("assets/scenes/truth/slab-backlit.toml")
+                .unwrap()
+                .replace("eta = 1.0", "eta = 1.3\nmodel = \"volume\""),
+            "skim-milk slab 2 mm thick behind a boundary, F from walks",
+        ),
     ];
     let failures = check(&cases);
     assert!(failures.is_empty(), "{}", failures.join("\n"));

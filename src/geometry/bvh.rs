@@ -144,8 +144,9 @@ impl Bvh {
         Some(t0)
     }
 
-    /// Möller-Trumbore intersection; two-sided.
-    fn triangle(&self, t: u32, o: DVec3, d: DVec3) -> Option<(f64, f64, f64)> {
+    /// Möller-Trumbore intersection of the ray `o + t d` with triangle `t`, two-sided: the
+    /// distance and the barycentrics u and v of the second and third corner.
+    pub(crate) fn triangle(&self, t: u32, o: DVec3, d: DVec3) -> Option<(f64, f64, f64)> {
         let [a, b, c] = self.tris[t as usize];
         let (e1, e2) = (b - a, c - a);
         let p = d.cross(e2);

@@ -12,7 +12,12 @@
 //! 3. A point of cell i and a surface point (in some marked cell j) lie within half a cell
 //!    diagonal of their cells' centres, so they are at least (D_i - sqrt 3) h apart: that,
 //!    rounded down, is the cell's bound.
+//!
+//! The marked cells keep their triangles, so that a short flight near the surface finds its
+//! hit by stepping through the few cells it crosses (Amanatides and Woo's traversal) instead
+//! of descending the BVH from its root: the same hit, found with the BVH's own triangle test.
 
+use super::bvh::{Bvh, Hit};
 use glam::{DVec3, Vec3};
 
 /// Cells whose boxes the triangles' bounding boxes cover, at most, per cell of the grid: a
@@ -28,7 +33,7 @@ const COARSEN: f64 = 1.25;
 const MARGIN: f64 = 1e-6;
 
 /// Per cell of a regular grid around a mesh, a distance that every point of the cell has at
-/// least to the mesh's surface (0 or less near it).
+/// least to the mesh's surface (0 or less near it), and the triangles that may touch it.
 pub struct Clearance {
     /// The corner of cell (0, 0, 0).
     lo: DVec3,
@@ -36,6 +41,10 @@ pub struct Clearance {
     h: f64,
     dims: [usize; 3],
     bound: Vec<f32>,
+    /// Cell i's triangles (indices of the mesh's triangles) are
+    /// `triangles[first[i]..first[i + 1]]`.
+    first: Vec<u32>,
+    triangles: Vec<u32>,
 }
 
 impl Clearance {
@@ -44,13 +53,15 @@ impl Clearance {
     /// [`MARKING_PER_CELL`] times theirs) would be needed, the smallest coarser size that
     /// fits. One empty cell pads the mesh's box on every side.
     pub fn new(positions: &[Vec3], indices: &[u32], cell: f64, max_cells: usize) -> Clearance {
-        let tris: Vec<[DVec3; 3]> = indices
+        let tris: Vec<(u32, [DVec3; 3])> = indices
             .chunks_exact(3)
             .map(|t| [t[0], t[1], t[2]].map(|i| positions[i as usize].as_dvec3()))
-            .filter(|t| t.iter().all(|v| v.is_finite()))
+            .enumerate()
+            .filter(|(_, t)| t.iter().all(|v| v.is_finite()))
+            .map(|(i, t)| (i as u32, t))
             .collect();
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        for v in tris.iter().flatten() {
+        for v in tris.iter().flat_map(|t| &t.1) {
             lo = lo.min(*v);
             hi = hi.max(*v);
         }
@@ -60,6 +71,8 @@ impl Clearance {
                 h: 1.0,
                 dims: [0; 3],
                 bound: Vec::new(),
+                first: vec![0],
+                triangles: Vec::new(),
             };
         }
         let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
@@ -75,7 +88,7 @@ impl Clearance {
             let fits = cells <= max_cells
                 && tris
                     .iter()
-                    .map(|t| {
+                    .map(|(_, t)| {
                         let (a, b) = cell_range(lo - h, h, t, dims);
                         (0..3).map(|k| (b[k] + 1 - a[k]) as u64).product::<u64>()
                     })
@@ -88,31 +101,56 @@ impl Clearance {
         }
     }
 
-    fn build(tris: &[[DVec3; 3]], lo: DVec3, h: f64, dims: [usize; 3]) -> Clearance {
+    fn build(tris: &[(u32, [DVec3; 3])], lo: DVec3, h: f64, dims: [usize; 3]) -> Clearance {
         let index = |i: usize, j: usize, k: usize| (k * dims[1] + j) * dims[0] + i;
-        let mut squared = vec![f64::INFINITY; dims.iter().product()];
-        for t in tris {
-            let (a, b) = cell_range(lo, h, t, dims);
-            let n = (t[1] - t[0]).cross(t[2] - t[0]);
-            let n = if n.length() > 0.0 && n.is_finite() {
-                n.normalize()
-            } else {
-                DVec3::ZERO
-            };
-            // The plane meets a cell's box where the centre is within the box's half extent
-            // along the normal (any centre for a degenerate triangle, whose normal is zero).
-            let reach = 0.5 * h * n.abs().element_sum() * (1.0 + MARGIN) + MARGIN * h;
-            for k in a[2]..=b[2] {
-                for j in a[1]..=b[1] {
-                    for i in a[0]..=b[0] {
-                        let centre = lo + (DVec3::new(i as f64, j as f64, k as f64) + 0.5) * h;
-                        if n.dot(centre - t[0]).abs() <= reach {
-                            squared[index(i, j, k)] = 0.0;
+        let cells: usize = dims.iter().product();
+        // Per triangle, the cells it may touch: counted, then listed.
+        let mut count = vec![0u32; cells + 1];
+        let marked = |visit: &mut dyn FnMut(usize, u32)| {
+            for (id, t) in tris {
+                let (a, b) = cell_range(lo, h, t, dims);
+                let n = (t[1] - t[0]).cross(t[2] - t[0]);
+                let n = if n.length() > 0.0 && n.is_finite() {
+                    n.normalize()
+                } else {
+                    DVec3::ZERO
+                };
+                // The plane meets a cell's box where the centre is within the box's half
+                // extent along the normal (any centre for a degenerate triangle, whose normal
+                // is zero).
+                let reach = 0.5 * h * n.abs().element_sum() * (1.0 + MARGIN) + MARGIN * h;
+                for k in a[2]..=b[2] {
+                    for j in a[1]..=b[1] {
+                        for i in a[0]..=b[0] {
+                            let centre = lo + (DVec3::new(i as f64, j as f64, k as f64) + 0.5) * h;
+                            if n.dot(centre - t[0]).abs() <= reach {
+                                visit(index(i, j, k), *id);
+                            }
                         }
                     }
                 }
             }
+        };
+        marked(&mut |cell, _| count[cell + 1] += 1);
+        for i in 0..cells {
+            count[i + 1] += count[i];
         }
+        let first = count;
+        let mut triangles = vec![0u32; first[cells] as usize];
+        let mut next: Vec<u32> = first[..cells].to_vec();
+        marked(&mut |cell, id| {
+            triangles[next[cell] as usize] = id;
+            next[cell] += 1;
+        });
+        let mut squared: Vec<f64> = (0..cells)
+            .map(|i| {
+                if first[i + 1] > first[i] {
+                    0.0
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
         // The squared distance transform, one axis at a time.
         let mut line = Vec::new();
         let mut out = Vec::new();
@@ -145,20 +183,95 @@ impl Clearance {
                 (d * (1.0 - MARGIN) - MARGIN * h).min(f32::MAX as f64) as f32
             })
             .collect();
-        Clearance { lo, h, dims, bound }
+        Clearance {
+            lo,
+            h,
+            dims,
+            bound,
+            first,
+            triangles,
+        }
+    }
+
+    /// The cell holding `p`, None outside the grid.
+    fn cell(&self, p: DVec3) -> Option<[usize; 3]> {
+        let c = (p - self.lo) / self.h;
+        if !(c.cmpge(DVec3::ZERO).all()) {
+            return None;
+        }
+        let cell = [c.x as usize, c.y as usize, c.z as usize];
+        (0..3).all(|a| cell[a] < self.dims[a]).then_some(cell)
+    }
+
+    fn index(&self, [i, j, k]: [usize; 3]) -> usize {
+        (k * self.dims[1] + j) * self.dims[0] + i
     }
 
     /// A distance that `p` has at least to the surface: 0 outside the grid.
     pub fn at(&self, p: DVec3) -> f64 {
-        let c = (p - self.lo) / self.h;
-        if !(c.cmpge(DVec3::ZERO).all()) {
-            return 0.0;
+        match self.cell(p) {
+            Some(c) => self.bound[self.index(c)].max(0.0) as f64,
+            None => 0.0,
         }
-        let (i, j, k) = (c.x as usize, c.y as usize, c.z as usize);
-        if i >= self.dims[0] || j >= self.dims[1] || k >= self.dims[2] {
-            return 0.0;
+    }
+
+    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`) on the mesh that `bvh`
+    /// was built from (the same triangles as this grid's, in the same order), as
+    /// [`Bvh::intersect`] finds it, by stepping through the cells the ray crosses: for short
+    /// rays near the surface. Of hits at exactly the same distance, the lowest triangle.
+    pub fn intersect(&self, bvh: &Bvh, o: DVec3, d: DVec3, t_max: f64) -> Option<Hit> {
+        let Some(mut cell) = self.cell(o) else {
+            return bvh.intersect(o, d, t_max);
+        };
+        let c = (o - self.lo) / self.h;
+        // Per axis: the step, the ray distance to the next cell boundary and between two.
+        let mut step = [0isize; 3];
+        let mut next = [f64::INFINITY; 3];
+        let mut delta = [f64::INFINITY; 3];
+        for a in 0..3 {
+            if d[a] > 0.0 {
+                step[a] = 1;
+                next[a] = ((cell[a] + 1) as f64 - c[a]) * self.h / d[a];
+                delta[a] = self.h / d[a];
+            } else if d[a] < 0.0 {
+                step[a] = -1;
+                next[a] = (c[a] - cell[a] as f64) * self.h / -d[a];
+                delta[a] = self.h / -d[a];
+            }
         }
-        self.bound[(k * self.dims[1] + j) * self.dims[0] + i].max(0.0) as f64
+        let mut best: Option<Hit> = None;
+        loop {
+            let i = self.index(cell);
+            for &t in &self.triangles[self.first[i] as usize..self.first[i + 1] as usize] {
+                if let Some((dist, u, v)) = bvh.triangle(t, o, d) {
+                    let nearer = match best {
+                        Some(b) => dist < b.t || (dist == b.t && t < b.triangle),
+                        None => dist < t_max,
+                    };
+                    if nearer {
+                        best = Some(Hit {
+                            t: dist,
+                            triangle: t,
+                            bary: [1.0 - u - v, u, v],
+                        });
+                    }
+                }
+            }
+            let a = (0..3)
+                .min_by(|&x, &y| next[x].total_cmp(&next[y]))
+                .expect("three axes");
+            let exit = next[a];
+            // A hit before the ray leaves this cell lies in a cell already visited.
+            if best.is_some_and(|b| b.t <= exit) || exit >= t_max {
+                return best;
+            }
+            let moved = cell[a] as isize + step[a];
+            if moved < 0 || moved as usize >= self.dims[a] {
+                return best;
+            }
+            cell[a] = moved as usize;
+            next[a] += delta[a];
+        }
     }
 
     /// The cells' size.

@@ -129,9 +129,10 @@ pub struct Work {
 /// entries and fit products (parallel), triangles (a serial and a parallel share), and what
 /// every run pays whatever its size (thread start-up, allocation; once, not per thread); walks
 /// (a start, a shadow ray and the ray casts at both ends) and their collisions (a scattering
-/// event each, and a ray cast through the BVH for the flights that leave the ball around the
-/// last search free of the surface), fitted together on ketchup and skim-milk spheres with and
-/// without a refractive boundary (few collisions per walk and many).
+/// event each, a lookup in the clearance grid, and for the flights near the surface a ray
+/// cast through the grid's cells), fitted together on ketchup and skim-milk spheres with and
+/// without a refractive boundary (few collisions per walk and many) and checked on the
+/// default scene's bunny.
 mod cost {
     pub const KERNEL_TAP: f64 = 1.7e-6;
     pub const DENSE_ENTRY: f64 = 8.0e-7;
@@ -139,26 +140,39 @@ mod cost {
     pub const TRIANGLE_SERIAL: f64 = 2.0e-6;
     pub const TRIANGLE_PARALLEL: f64 = 3.0e-6;
     pub const FIXED: f64 = 0.1;
-    pub const WALK: f64 = 2.3e-6;
-    pub const WALK_COLLISION: f64 = 0.6e-6;
+    pub const WALK: f64 = 0.8e-6;
+    pub const WALK_COLLISION: f64 = 0.16e-6;
 }
+
+/// Threads of the machine the per-unit costs ([`Work::seconds`]) were measured on: 2 cores.
+pub const REFERENCE_THREADS: usize = 2;
 
 impl Work {
     /// Seconds of this work at the calibrated per-unit costs on `threads` threads, scaled by
     /// this machine's speed now relative to the one they were measured on
     /// ([`crate::numeric::speed::factor`]).
     pub fn seconds(&self, threads: usize) -> f64 {
+        crate::numeric::speed::factor() * self.unscaled_seconds(threads)
+    }
+
+    /// Seconds of this work on the machine the costs were measured on, idle, with its
+    /// [`REFERENCE_THREADS`] threads: a function of the counts alone, the same whatever the
+    /// machine that asks and its load (what a default may be decided by).
+    pub fn reference_seconds(&self) -> f64 {
+        self.unscaled_seconds(REFERENCE_THREADS)
+    }
+
+    fn unscaled_seconds(&self, threads: usize) -> f64 {
         let threads = threads.max(1) as f64;
-        crate::numeric::speed::factor()
-            * ((cost::KERNEL_TAP * self.kernel_taps as f64
-                + cost::DENSE_ENTRY * self.dense_entries as f64
-                + cost::FIT_PRODUCT * self.fit_products
-                + cost::TRIANGLE_PARALLEL * self.triangles as f64
-                + cost::WALK * self.walks
-                + cost::WALK_COLLISION * self.walk_collisions)
-                / threads
-                + cost::TRIANGLE_SERIAL * self.triangles as f64
-                + cost::FIXED)
+        (cost::KERNEL_TAP * self.kernel_taps as f64
+            + cost::DENSE_ENTRY * self.dense_entries as f64
+            + cost::FIT_PRODUCT * self.fit_products
+            + cost::TRIANGLE_PARALLEL * self.triangles as f64
+            + cost::WALK * self.walks
+            + cost::WALK_COLLISION * self.walk_collisions)
+            / threads
+            + cost::TRIANGLE_SERIAL * self.triangles as f64
+            + cost::FIXED
     }
 }
 
@@ -226,7 +240,13 @@ pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
         fit_products: nodes as f64 * (near_texels * near_nodes.min(16.0) + near_nodes.powi(3)),
         triangles: mesh.triangle_count() as u64,
         walks: nodes as f64 * s.walk_paths as f64 * entering.iter().sum::<f64>(),
-        walk_collisions: walk_collisions(material, nodes, s.walk_paths, entering),
+        walk_collisions: walk_collisions(
+            material,
+            mean_chord_mm(mesh),
+            nodes,
+            s.walk_paths,
+            entering,
+        ),
     };
     Estimate {
         texels,
@@ -243,15 +263,23 @@ pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
     }
 }
 
+/// Collisions of a walk per free path of the object's mean chord, where the chord bounds them
+/// ([`walk_collisions`]): fitted on a thin slab and on spheres (`tests/estimate.rs`).
+pub const CHORD_COLLISIONS: f64 = 1.25;
+
 /// Collisions of the walks that fill F (`model = "volume"`; 0 otherwise): nodes x walks x
-/// collisions per walk. A walk from the surface of a half-space of albedo a collides about
-/// 1 / sqrt(1 - a) times; thin objects end their walks sooner, so this lies mostly above the
-/// count there. Behind a refractive boundary the walks reflected back inside collide longer, by
-/// the ratio of the light absorbed in a half-space with the boundary and without it (the
-/// dipole's 1 - R_total for each). Each channel's walks times `entering`, the share of starts
-/// that walk ([`walk::entry_fraction`]).
+/// collisions per walk. A walk from the surface survives n collisions without leaving with
+/// probability about 1 / sqrt(pi n) (a random walk's first return), so in a half-space of
+/// albedo a it collides about 1 / sqrt(1 - a) times. In an object whose mean chord 4 V / S
+/// (`chord_mm`) is tau free paths the sum stops once a walk could have crossed it: the count
+/// grows with tau instead, [`CHORD_COLLISIONS`] tau; the smaller of the two. Behind a
+/// refractive boundary the walks reflected back inside collide longer, by the ratio of the
+/// light absorbed in a half-space with the boundary and without it (the dipole's
+/// 1 - R_total for each). Each channel's walks times `entering`, the share of starts that walk
+/// ([`walk::entry_fraction`]).
 pub fn walk_collisions(
     material: &Material,
+    chord_mm: f64,
     nodes: u64,
     walk_paths: u32,
     entering: [f64; 3],
@@ -269,10 +297,23 @@ pub fn walk_collisions(
             let albedo = s / (s + a).max(1e-300);
             let boundary = (1.0 - behind[c].total_reflectance())
                 / (1.0 - matched[c].total_reflectance()).max(1e-6);
-            (1.0 / (1.0 - albedo).max(1e-6).sqrt()).min(1e3) * boundary.max(1.0) * entering[c]
+            let half_space = 1.0 / (1.0 - albedo).max(1e-6).sqrt();
+            let crossing = CHORD_COLLISIONS * (s + a) * chord_mm;
+            half_space.min(crossing.max(1.0)).min(1e3) * boundary.max(1.0) * entering[c]
         })
         .sum();
     nodes as f64 * walk_paths as f64 * per_walk
+}
+
+/// The mean chord of a closed mesh, 4 V / S (Cauchy's formula for a convex body): the length
+/// a walk can cross.
+pub fn mean_chord_mm(mesh: &Mesh) -> f64 {
+    let area = mesh.surface_area();
+    if area > 0.0 {
+        4.0 * mesh.signed_volume().abs() / area
+    } else {
+        0.0
+    }
 }
 
 impl Estimate {

@@ -574,7 +574,12 @@ const PILOT_MIN_PATHS: u32 = 8;
 /// Cells of the clearance grid ([`Clearance`]) per mean free path of the densest channel: a
 /// flight's bound loses about a cell to the grid, so a walk a few free paths deep needs no ray
 /// cast.
-const CLEARANCE_CELLS_PER_FREE_PATH: f64 = 2.0;
+const CLEARANCE_CELLS_PER_FREE_PATH: f64 = 1.0;
+
+/// Flights shorter than this many cells of the clearance grid find their hit through its cells
+/// rather than the BVH (a cell holds a few triangles; the BVH's descent costs a few dozen box
+/// tests whatever the ray's length).
+const CLEARANCE_CAST_CELLS: f64 = 16.0;
 
 /// The clearance grid's largest size in cells (16 MiB of bounds): a larger object gets coarser
 /// cells.
@@ -789,7 +794,15 @@ impl Walker<'_> {
                 .clearance
                 .as_ref()
                 .is_some_and(|grid| s < grid.at(x) - eps);
-            if let Some(hit) = (!inside).then(|| bvh.intersect(x, d, s)).flatten() {
+            // Otherwise a short flight steps through the grid's cells, a long one descends
+            // the BVH: the same hit either way.
+            let cast = || match &self.clearance {
+                Some(grid) if s < CLEARANCE_CAST_CELLS * grid.cell_size() => {
+                    grid.intersect(bvh, x, d, s)
+                }
+                _ => bvh.intersect(x, d, s),
+            };
+            if let Some(hit) = (!inside).then(cast).flatten() {
                 // Behind a refractive boundary: reflected back in with Fresnel's probability
                 // (always beyond the critical angle), a new flight from the surface;
                 // otherwise out, refracted away from the normal.
