@@ -384,6 +384,8 @@ fn bench_writes_per_pass_bounds() {
             "64",
             "--texel-mm",
             "1.5",
+            "--model",
+            "halfspace",
             "--cache",
         ])
         .arg(dir.join("cache"))
@@ -547,7 +549,7 @@ fn chart_runs_on_a_small_scene() {
 fn reference_and_compare_write_their_outputs() {
     let dir = temp_dir("reference");
     let scene = dir.join("scene.toml");
-    std::fs::write(&scene, "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"skin1\"\n[output]\nwidth = 32\nheight = 32\n").unwrap();
+    std::fs::write(&scene, "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 24\n[material]\npreset = \"skin1\"\nmodel = \"halfspace\"\n[output]\nwidth = 32\nheight = 32\n").unwrap();
     let o = bin()
         .args(["reference", "--refine", "--out"])
         .arg(&dir)
@@ -611,7 +613,7 @@ fn borders_reports_every_mode_by_distance() {
     let dir = temp_dir("borders");
     let scene = dir.join("scene.toml");
     // A box: every edge is a chart border.
-    std::fs::write(&scene, "[mesh]\nbuiltin = \"box\"\nsize = [20.0, 20.0, 20.0]\nsegments = 8\n[camera]\nposition = [50.0, 50.0, 60.0]\ntarget = [0.0, 0.0, 0.0]\n[material]\npreset = \"marble\"\n[output]\nwidth = 64\nheight = 64\n").unwrap();
+    std::fs::write(&scene, "[mesh]\nbuiltin = \"box\"\nsize = [20.0, 20.0, 20.0]\nsegments = 8\n[camera]\nposition = [50.0, 50.0, 60.0]\ntarget = [0.0, 0.0, 0.0]\n[material]\npreset = \"marble\"\nmodel = \"halfspace\"\n[output]\nwidth = 64\nheight = 64\n").unwrap();
     let o = bin()
         .args(["borders", "--no-cache", "--texel-mm", "1.0", "--out"])
         .arg(&dir)

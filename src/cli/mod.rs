@@ -384,8 +384,13 @@ fn apply_default_for_reference(scene: &mut Scene, target_error: f64) -> Result<(
             bail!(
                 "render's default model for this scene is {}: {e:#}; or give --model {} for the exact model of the half-space",
                 scene.material.model.name(),
-                // Under an environment the single-scattering pass would miss the map's own.
-                if scene.environment.is_some() { "halfspace" } else { "halfspace-single" }
+                // Under an environment the single-scattering pass would miss the map's own;
+                // behind a refractive boundary the half-space of every order is the one.
+                if scene.environment.is_some() || scene.material.eta != 1.0 {
+                    "halfspace"
+                } else {
+                    "halfspace-single"
+                }
             );
         }
         return Err(e);

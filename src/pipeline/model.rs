@@ -13,11 +13,15 @@
 //!   the half-space's F is several times further from the truth than the walks' on small
 //!   and thin objects and on the bunnies (docs/results/environment.md), so the walks'
 //!   preprocessing is worth its time there.
+//! - **eta != 1, a closed mesh lit by lamps, and a preprocessing within
+//!   [`DEFAULT_PREPROCESS_SECONDS`]: `volume`**: the walks reflected and refracted at the
+//!   boundary are far nearer the truth than the half-space profile on small and thin objects
+//!   (a ketchup sphere, a backlit slab) and nearer on the bunnies. The preprocessing is
+//!   estimated from counts at the per-unit costs stored for the machine they were measured
+//!   on, never timed, so the choice is the same on every machine and under any load.
 //! - **eta != 1 otherwise: `halfspace`**, the half-space profile of every order behind the
 //!   refractive boundary (its own tables, with Fresnel reflection and refraction at every
-//!   crossing). `volume` holds the boundary too, and is nearer the truth on small and thin
-//!   objects lit by lamps, but its walks and its refracting single-scattering pass cost far
-//!   more: a user names it.
+//!   crossing): the reason says what `--model volume` would cost.
 //! - **An environment light on an open mesh: `halfspace`**, whose profile carries every
 //!   order: the per-frame single scattering integrates delta lights along the view rays and
 //!   would see the map's sun alone.
@@ -81,13 +85,26 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
         if let Some(why) = volume_reason(scene) {
             return Some((Model::Volume, why));
         }
-        // Where the walks would apply, the user is told they can be named.
+        // Behind a boundary under lamps the walks are the default where their preprocessing
+        // fits the budget; else the user is told they can be named.
         let walkable = (scene.environment.is_some() || lamps(scene) > 0) && scene.mesh.is_closed();
         if m.eta != 1.0 && walkable {
-            return Some((
-                model,
-                format!("{why}; --model volume walks the mesh behind the boundary: nearer the truth, slower to prepare"),
-            ));
+            return Some(match volume_seconds(scene, target_error) {
+                Some(t) if t <= DEFAULT_PREPROCESS_SECONDS => (
+                    Model::Volume,
+                    format!(
+                        "{}; its preprocessing is about {t:.1} s on the 2-core machine the costs were measured on, within the default's {DEFAULT_PREPROCESS_SECONDS:.0} s (--model halfspace keeps the half-space's F)",
+                        volume_reason_behind(scene)
+                    ),
+                ),
+                Some(t) => (
+                    model,
+                    format!(
+                        "{why}; --model volume walks the mesh behind the boundary, nearer the truth, but its preprocessing is about {t:.0} s on the 2-core machine the costs were measured on, above the default's {DEFAULT_PREPROCESS_SECONDS:.0} s"
+                    ),
+                ),
+                None => (model, why),
+            });
         }
         return Some((model, why));
     }
@@ -132,6 +149,32 @@ fn lamps(scene: &Scene) -> usize {
         .iter()
         .flatten()
         .count()
+}
+
+/// The preprocessing a default model may take: the walks of `volume` behind a refractive
+/// boundary under lamps are the default where the estimate of the whole preprocessing, on the
+/// machine its per-unit costs were measured on ([`crate::preprocess::Work::reference_seconds`],
+/// counts at stored costs, no clock), is at most this many seconds.
+pub const DEFAULT_PREPROCESS_SECONDS: f64 = 20.0;
+
+/// `volume`'s preprocessing of `scene` at `target_error` with the scene's own settings, in
+/// seconds on the machine the costs were measured on; None where it cannot be chosen.
+fn volume_seconds(scene: &Scene, target_error: f64) -> Option<f64> {
+    let mut walked = scene.clone();
+    walked.material = walked.material.with_model(Model::Volume).ok()?;
+    let choice = super::choose(&walked, &Default::default(), target_error).ok()?;
+    let estimate = crate::preprocess::estimate(&walked.mesh, &walked.material, &choice);
+    Some(estimate.work.reference_seconds())
+}
+
+/// Why the walks behind a refractive boundary under lamps are the better model.
+fn volume_reason_behind(scene: &Scene) -> String {
+    let lamps = lamps(scene);
+    format!(
+        "F from random walks inside the mesh along the light of its {lamps} lamp{} (behind the refractive boundary eta = {}, refracted and reflected there as the light is, a closed mesh): the most accurate model",
+        if lamps == 1 { "" } else { "s" },
+        scene.material.eta
+    )
 }
 
 /// Why the default is `volume`: the mesh is closed (the walks need an inside) and an
@@ -247,15 +290,30 @@ mod tests {
         };
         let skim = "[material]\npreset = \"skimmilk\"\n";
         let model = |s: &Scene, target: f64| decide(s, target).map(|(m, _)| m);
-        assert_eq!(model(&scene(skim), 0.02), Some(Model::Halfspace));
+        // Behind the preset's boundary (eta 1.3) under the default lamp: the walks, whose
+        // preprocessing on a 10 mm sphere is within the budget; on the 50 mm bunny it is not.
+        let (small, why) = decide(&scene(skim), 0.02).unwrap();
+        assert_eq!(small, Model::Volume, "{why}");
+        assert!(why.contains("within the default's 20 s"), "{why}");
+        let bunny = Scene::from_desc(
+            crate::scene::desc::SceneDesc::parse(&format!("[mesh]\nbuiltin = \"bunny\"\n{skim}"))
+                .unwrap(),
+            std::path::Path::new(""),
+            &crate::scene::Overrides::default(),
+        )
+        .unwrap();
+        let (large, why) = decide(&bunny, 0.02).unwrap();
+        assert_eq!(large, Model::Halfspace, "{why}");
+        assert!(why.contains("above the default's 20 s"), "{why}");
+        // A coarser target asks for fewer walks: the bunny's fit.
+        assert_eq!(model(&bunny, 0.05), Some(Model::Volume));
         let matched = format!("{skim}eta = 1.0\n");
         assert_eq!(model(&scene(&matched), 0.02), Some(Model::Volume));
         // Single scattering's share below a coarse target: in the profile.
         assert_eq!(model(&scene(&matched), 0.5), Some(Model::Halfspace));
         let sky = format!("[[lights]]\nkind = \"environment\"\n{matched}");
         assert_eq!(model(&scene(&sky), 0.02), Some(Model::Volume));
-        // Under an environment the walks are the default behind a boundary too; under a lamp
-        // the half-space is.
+        // Under an environment the walks are the default behind a boundary too.
         let sky_behind = format!("[[lights]]\nkind = \"environment\"\n{skim}");
         assert_eq!(model(&scene(&sky_behind), 0.02), Some(Model::Volume));
         let why = decide(&scene(&sky_behind), 0.02).unwrap().1;
