@@ -50,8 +50,8 @@ pub struct Clearance {
 impl Clearance {
     /// The grid around the triangles of `positions` indexed by `indices`, with cells of `cell`
     /// or, where more than `max_cells` cells (or a marking of the triangles more than
-    /// [`MARKING_PER_CELL`] times theirs) would be needed, the smallest coarser size that
-    /// fits. One empty cell pads the mesh's box on every side.
+    /// `MARKING_PER_CELL` times theirs) would be needed, the first size that fits as the
+    /// cells grow by `COARSEN` at a time. One empty cell pads the mesh's box on every side.
     pub fn new(positions: &[Vec3], indices: &[u32], cell: f64, max_cells: usize) -> Clearance {
         let tris: Vec<(u32, [DVec3; 3])> = indices
             .chunks_exact(3)

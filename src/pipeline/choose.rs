@@ -63,7 +63,7 @@ pub fn choose(
     let m = &scene.material;
     let why = scene.model_reason.clone().unwrap_or_else(|| {
         let (model, why) = crate::physics::Model::default_for(m.eta, scene.environment.is_some());
-        if super::model::is_default(scene) && m.model == model {
+        if scene.model_is_default() && m.model == model {
             why
         } else {
             "given".to_string()

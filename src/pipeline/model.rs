@@ -65,9 +65,9 @@ pub fn without_single_pass(material: &Material, target_error: f64) -> Option<Str
 }
 
 /// Whether `scene`'s model is the default's to choose: given neither in the scene file nor on
-/// the command line.
+/// the command line ([`Scene::model_is_default`]).
 pub fn is_default(scene: &Scene) -> bool {
-    scene.resolved.material.model.is_none()
+    scene.model_is_default()
 }
 
 /// The default model of `scene` at `target_error` and why, or None where the model is given

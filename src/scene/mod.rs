@@ -166,6 +166,12 @@ pub fn absolute(p: &Path) -> std::path::PathBuf {
 pub const MAX_POSITION_MM: f64 = 1e15;
 
 impl Scene {
+    /// Whether the material's model is the default's to choose: given neither in the scene
+    /// file nor on the command line (`pipeline::model::decide`).
+    pub fn model_is_default(&self) -> bool {
+        self.resolved.material.model.is_none()
+    }
+
     /// Reads a scene file (or the default scene for `None`) and applies `overrides`.
     pub fn load(path: Option<&Path>, overrides: &Overrides) -> Result<Scene> {
         let (desc, base) = match path {
