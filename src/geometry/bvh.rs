@@ -224,7 +224,8 @@ impl Bvh {
         }
     }
 
-    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`), if any.
+    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`), if any; of hits at
+    /// exactly the same distance the lowest triangle.
     pub fn intersect(&self, o: DVec3, d: DVec3, t_max: f64) -> Option<Hit> {
         let ray = Ray::new(o, d);
         let mut best: Option<Hit> = None;
@@ -232,7 +233,10 @@ impl Bvh {
             let mut limit = limit;
             for &t in tris {
                 if let Some((dist, u, v)) = self.triangle(t, o, d) {
-                    if dist < limit {
+                    // Of hits at exactly the same distance (faces two parts share), the
+                    // lowest triangle, whatever the order of the visit.
+                    let tie = best.is_some_and(|b| dist == b.t && t < b.triangle);
+                    if dist < limit || tie {
                         limit = dist;
                         best = Some(Hit {
                             t: dist,

@@ -20,10 +20,15 @@
 use super::bvh::{Bvh, Hit};
 use glam::{DVec3, Vec3};
 
-/// Cells whose boxes the triangles' bounding boxes cover, at most, per cell of the grid: a
-/// mesh of large oblique triangles (each box spanning much of the grid) coarsens the grid
-/// instead of taking time in proportion to the grid's volume per triangle.
-const MARKING_PER_CELL: u64 = 16;
+/// Cells whose boxes the triangles' bounding boxes cover, at most, per cell and triangle of
+/// the grid: a mesh of large oblique triangles (each box spanning much of the grid) coarsens
+/// the grid instead of taking time and memory in proportion to the grid's volume per
+/// triangle, while a dense mesh (many triangles per cell) keeps its cells.
+const MARKING_PER_CELL: u64 = 8;
+
+/// Triangles per marked cell, on average, up to which stepping through the cells finds a hit
+/// faster than the BVH's descent ([`Clearance::lists_are_short`]).
+const SHORT_LISTS: f64 = 16.0;
 
 /// The grid's cell size grows by this factor until the cell and marking budgets hold.
 const COARSEN: f64 = 1.25;
@@ -45,6 +50,8 @@ pub struct Clearance {
     /// `triangles[first[i]..first[i + 1]]`.
     first: Vec<u32>,
     triangles: Vec<u32>,
+    /// [`Clearance::lists_are_short`].
+    short_lists: bool,
 }
 
 impl Clearance {
@@ -73,19 +80,25 @@ impl Clearance {
                 bound: Vec::new(),
                 first: vec![0],
                 triangles: Vec::new(),
+                short_lists: false,
             };
         }
         let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+        let max_cells = max_cells.max(27);
+        // No finer than the cells the budget allows over the box (with its padding).
+        let fewest = ((hi - lo).x.max(0.0) * (hi - lo).y.max(0.0) * (hi - lo).z.max(0.0)
+            / max_cells as f64)
+            .cbrt();
         let mut h = if cell.is_finite() && cell > 0.0 {
-            cell
+            cell.max(fewest)
         } else {
             extent
         };
-        let max_cells = max_cells.max(27);
         loop {
             let dims = dims_for(lo, hi, h);
-            let cells = dims.iter().product::<usize>();
-            let fits = cells <= max_cells
+            // In f64: a fine cell over a large box would overflow an integer product.
+            let cells = dims.iter().map(|&d| d as f64).product::<f64>();
+            let fits = cells <= max_cells as f64
                 && tris
                     .iter()
                     .map(|(_, t)| {
@@ -93,7 +106,7 @@ impl Clearance {
                         (0..3).map(|k| (b[k] + 1 - a[k]) as u64).product::<u64>()
                     })
                     .sum::<u64>()
-                    <= MARKING_PER_CELL * cells as u64;
+                    <= MARKING_PER_CELL * (cells as u64 + tris.len() as u64);
             if fits || dims.iter().all(|&d| d <= 3) {
                 return Clearance::build(&tris, lo - h, h, dims);
             }
@@ -183,6 +196,8 @@ impl Clearance {
                 (d * (1.0 - MARGIN) - MARGIN * h).min(f32::MAX as f64) as f32
             })
             .collect();
+        let marked = first.windows(2).filter(|w| w[1] > w[0]).count();
+        let short_lists = marked > 0 && triangles.len() as f64 <= SHORT_LISTS * marked as f64;
         Clearance {
             lo,
             h,
@@ -190,6 +205,7 @@ impl Clearance {
             bound,
             first,
             triangles,
+            short_lists,
         }
     }
 
@@ -279,16 +295,23 @@ impl Clearance {
         self.h
     }
 
+    /// Whether the marked cells hold few enough triangles, on average, for [`Clearance::intersect`]
+    /// to beat the BVH (a dense mesh on cells its budget coarsened does not).
+    pub fn lists_are_short(&self) -> bool {
+        self.short_lists
+    }
+
     /// Cells along each axis.
     pub fn dims(&self) -> [usize; 3] {
         self.dims
     }
 }
 
-/// Cells along each axis for the box [`lo`, `hi`] with cells of `h`, one more on each side.
+/// Cells along each axis for the box [`lo`, `hi`] with cells of `h`, one more on each side
+/// (saturating: a count beyond memory fails the budget, never wraps).
 fn dims_for(lo: DVec3, hi: DVec3, h: f64) -> [usize; 3] {
     let n = ((hi - lo) / h).ceil();
-    [n.x, n.y, n.z].map(|v| (v.max(1.0) as usize).saturating_add(2))
+    [n.x, n.y, n.z].map(|v| (v.clamp(1.0, 1e15) as usize).saturating_add(2))
 }
 
 /// The first and last cell (inclusive, per axis) of the grid at `lo` with cells of `h` that
@@ -414,6 +437,16 @@ mod tests {
         assert_eq!(grid.at(DVec3::splat(1e3)), 0.0);
         let empty = Clearance::new(&[], &[], 1.0, 1000);
         assert_eq!(empty.at(DVec3::ZERO), 0.0);
+        assert!(!empty.lists_are_short());
+        // A dense mesh keeps its cells (many triangles to a cell are not a reason to coarsen)
+        // and then says its lists are long: its flights descend the BVH.
+        let dense = Mesh::sphere(10.0, 256);
+        let grid = Clearance::new(&dense.positions, &dense.indices, 2.0, 1 << 16);
+        assert!(grid.cell_size() < 2.5, "{}", grid.cell_size());
+        assert!(!grid.lists_are_short());
+        assert!(grid.at(DVec3::ZERO) > 3.0, "{}", grid.at(DVec3::ZERO));
+        let fine = Clearance::new(&sphere.positions, &sphere.indices, 0.5, 1 << 20);
+        assert!(fine.lists_are_short());
     }
 
     /// The 1-D transform against brute force.

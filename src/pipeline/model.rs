@@ -18,7 +18,8 @@
 //!   boundary are far nearer the truth than the half-space profile on small and thin objects
 //!   (a ketchup sphere, a backlit slab) and nearer on the bunnies. The preprocessing is
 //!   estimated from counts at the per-unit costs stored for the machine they were measured
-//!   on, never timed, so the choice is the same on every machine and under any load.
+//!   on, never timed, so the choice is the same on every machine and under any load; and at
+//!   the material's own texel whatever the image size, so the same at every resolution.
 //! - **eta != 1 otherwise: `halfspace`**, the half-space profile of every order behind the
 //!   refractive boundary (its own tables, with Fresnel reflection and refraction at every
 //!   crossing): the reason says what `--model volume` would cost.
@@ -157,12 +158,23 @@ fn lamps(scene: &Scene) -> usize {
 /// counts at stored costs, no clock), is at most this many seconds.
 pub const DEFAULT_PREPROCESS_SECONDS: f64 = 20.0;
 
-/// `volume`'s preprocessing of `scene` at `target_error` with the scene's own settings, in
-/// seconds on the machine the costs were measured on; None where it cannot be chosen.
+/// `volume`'s preprocessing of `scene` at `target_error`, in seconds on the machine the costs
+/// were measured on; None where it cannot be chosen. With the scene file's settings and at
+/// the material's own texel whatever the image size (a pixel coarser than the material's
+/// scale would coarsen the texels and the nodes), so that a small preview renders the model
+/// of the full image, and the viewer's the model of `render`'s.
 fn volume_seconds(scene: &Scene, target_error: f64) -> Option<f64> {
     let mut walked = scene.clone();
     walked.material = walked.material.with_model(Model::Volume).ok()?;
-    let choice = super::choose(&walked, &Default::default(), target_error).ok()?;
+    let mut choice = super::choose(&walked, &Default::default(), target_error).ok()?;
+    let scale = crate::preprocess::settings::ObjectScale {
+        pixel_mm: 0.0,
+        ..super::object_scale(&walked, target_error, crate::preprocess::DEFAULT_MAX_TEXELS)
+    };
+    choice.settings =
+        crate::preprocess::settings::derive(&walked.material, &scale, &walked.settings).settings;
+    choice.settings.walk_lights =
+        crate::preprocess::walk::entry_lights(&walked.lights, walked.environment.as_deref());
     let estimate = crate::preprocess::estimate(&walked.mesh, &walked.material, &choice);
     Some(estimate.work.reference_seconds())
 }

@@ -581,7 +581,8 @@ const CLEARANCE_CELLS_PER_FREE_PATH: f64 = 1.0;
 /// tests whatever the ray's length).
 const CLEARANCE_CAST_CELLS: f64 = 16.0;
 
-/// The clearance grid's largest size in cells (16 MiB of bounds): a larger object gets coarser
+/// The clearance grid's largest size in cells (4 bytes of bound and 4 of list offset each, and
+/// the triangle lists, at most 8 entries per cell and triangle): a larger object gets coarser
 /// cells.
 const CLEARANCE_MAX_CELLS: usize = 1 << 22;
 
@@ -797,7 +798,9 @@ impl Walker<'_> {
             // Otherwise a short flight steps through the grid's cells, a long one descends
             // the BVH: the same hit either way.
             let cast = || match &self.clearance {
-                Some(grid) if s < CLEARANCE_CAST_CELLS * grid.cell_size() => {
+                Some(grid)
+                    if grid.lists_are_short() && s < CLEARANCE_CAST_CELLS * grid.cell_size() =>
+                {
                     grid.intersect(bvh, x, d, s)
                 }
                 _ => bvh.intersect(x, d, s),
