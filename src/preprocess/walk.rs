@@ -471,11 +471,8 @@ impl Surface {
         if self.eta != 1.0 {
             e_c *= fresnel_transmittance(self.eta, cos);
         }
-        let blocked = || {
-            self.bvh
-                .intersect(x + n * self.eps, towards, distance)
-                .is_some()
-        };
+        // Any hit blocks: the BVH's any-hit search stops at the first.
+        let blocked = || self.bvh.occluded(x + n * self.eps, towards, distance);
         if e_c > 0.0 && !(shadows && blocked()) {
             e_c
         } else {
