@@ -377,20 +377,20 @@ fn image_options(mode: Blend) -> Options {
 /// a model the exact reference cannot integrate, so that it never checks another model than
 /// `render` renders.
 fn apply_default_for_reference(scene: &mut Scene, target_error: f64) -> Result<()> {
-    let default = pipeline::model::is_default(scene);
+    let default = scene.model_is_default();
     pipeline::model::apply_default(scene, target_error)?;
     if let Err(e) = crate::reference::Reference::supports(scene.material.model, &scene.mesh) {
         if default {
             bail!(
                 "render's default model for this scene is {}: {e:#}; or give --model {} for the exact model of the half-space",
                 scene.material.model.name(),
-                // Under an environment the single-scattering pass would miss the map's own;
-                // behind a refractive boundary the half-space of every order is the one.
-                if scene.environment.is_some() || scene.material.eta != 1.0 {
-                    "halfspace"
-                } else {
-                    "halfspace-single"
-                }
+                // The half-space model the material and the lights' kind call for.
+                crate::physics::Model::default_for(
+                    scene.material.eta,
+                    scene.environment.is_some()
+                )
+                .0
+                .name()
             );
         }
         return Err(e);

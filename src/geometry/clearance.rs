@@ -18,7 +18,7 @@
 //! of descending the BVH from its root: the same hit, found with the BVH's own triangle test.
 
 use super::bvh::{Bvh, Hit};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 
 /// Cells whose boxes the triangles' bounding boxes cover, at most, per cell and triangle of
 /// the grid: a mesh of large oblique triangles (each box spanning much of the grid) coarsens
@@ -26,8 +26,13 @@ use glam::{DVec3, Vec3};
 /// triangle, while a dense mesh (many triangles per cell) keeps its cells.
 const MARKING_PER_CELL: u64 = 8;
 
+/// Flights shorter than this many cells find their hit through the cells rather than the BVH
+/// ([`Clearance::flight`]): a cell holds a few triangles, the BVH's descent costs a few dozen
+/// box tests whatever the ray's length.
+const CAST_CELLS: f64 = 16.0;
+
 /// Triangles per marked cell, on average, up to which stepping through the cells finds a hit
-/// faster than the BVH's descent ([`Clearance::lists_are_short`]).
+/// faster than the BVH's descent (`short_lists`).
 const SHORT_LISTS: f64 = 16.0;
 
 /// The grid's cell size grows by this factor until the cell and marking budgets hold.
@@ -50,22 +55,23 @@ pub struct Clearance {
     /// `triangles[first[i]..first[i + 1]]`.
     first: Vec<u32>,
     triangles: Vec<u32>,
-    /// [`Clearance::lists_are_short`].
+    /// Whether the marked cells hold at most `SHORT_LISTS` triangles each, on average.
     short_lists: bool,
 }
 
 impl Clearance {
-    /// The grid around the triangles of `positions` indexed by `indices`, with cells of `cell`
-    /// or, where more than `max_cells` cells (or a marking of the triangles more than
-    /// `MARKING_PER_CELL` times theirs) would be needed, the first size that fits as the
-    /// cells grow by `COARSEN` at a time. One empty cell pads the mesh's box on every side.
-    pub fn new(positions: &[Vec3], indices: &[u32], cell: f64, max_cells: usize) -> Clearance {
-        let tris: Vec<(u32, [DVec3; 3])> = indices
-            .chunks_exact(3)
-            .map(|t| [t[0], t[1], t[2]].map(|i| positions[i as usize].as_dvec3()))
+    /// The grid around the triangles of `bvh` (its triangle indices are the grid's), with
+    /// cells of `cell` or, where more than `max_cells` cells (or a marking of the triangles
+    /// more than `MARKING_PER_CELL` times theirs) would be needed, the first size that fits as
+    /// the cells grow by `COARSEN` at a time. One empty cell pads the mesh's box on every
+    /// side.
+    pub fn new(bvh: &Bvh, cell: f64, max_cells: usize) -> Clearance {
+        let tris: Vec<(u32, [DVec3; 3])> = bvh
+            .triangles()
+            .iter()
             .enumerate()
             .filter(|(_, t)| t.iter().all(|v| v.is_finite()))
-            .map(|(i, t)| (i as u32, t))
+            .map(|(i, t)| (i as u32, *t))
             .collect();
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for v in tris.iter().flat_map(|t| &t.1) {
@@ -224,21 +230,44 @@ impl Clearance {
     }
 
     /// A distance that `p` has at least to the surface: 0 outside the grid.
-    pub fn at(&self, p: DVec3) -> f64 {
+    #[cfg(test)]
+    fn at(&self, p: DVec3) -> f64 {
         match self.cell(p) {
             Some(c) => self.bound[self.index(c)].max(0.0) as f64,
             None => 0.0,
         }
     }
 
-    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`) on the mesh that `bvh`
-    /// was built from (the same triangles as this grid's, in the same order), as
-    /// [`Bvh::intersect`] finds it, by stepping through the cells the ray crosses: for short
-    /// rays near the surface. Of hits at exactly the same distance, the lowest triangle.
-    pub fn intersect(&self, bvh: &Bvh, o: DVec3, d: DVec3, t_max: f64) -> Option<Hit> {
-        let Some(mut cell) = self.cell(o) else {
-            return bvh.intersect(o, d, t_max);
+    /// Where a flight from `o` along the unit direction `d` of length `s` first meets the
+    /// surface of `bvh`, the hierarchy this grid was built from: [`Bvh::intersect`]`(o, d, s)`,
+    /// found the cheapest way. None without a search where the cell's bound, less `margin`,
+    /// clears the flight; a short flight steps through the cells it crosses where they hold
+    /// few triangles (`short_lists`); the rest descend the BVH.
+    pub fn flight(&self, bvh: &Bvh, o: DVec3, d: DVec3, s: f64, margin: f64) -> Option<Hit> {
+        let Some(cell) = self.cell(o) else {
+            return bvh.intersect(o, d, s);
         };
+        if s < self.bound[self.index(cell)] as f64 - margin {
+            return None;
+        }
+        if self.short_lists && s < CAST_CELLS * self.h {
+            self.intersect(bvh, cell, o, d, s)
+        } else {
+            bvh.intersect(o, d, s)
+        }
+    }
+
+    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`), `o` in `cell`, as
+    /// [`Bvh::intersect`] finds it, by stepping through the cells the ray crosses (of hits at
+    /// exactly the same distance, the lowest triangle, as there).
+    fn intersect(
+        &self,
+        bvh: &Bvh,
+        mut cell: [usize; 3],
+        o: DVec3,
+        d: DVec3,
+        t_max: f64,
+    ) -> Option<Hit> {
         let c = (o - self.lo) / self.h;
         // Per axis: the step, the ray distance to the next cell boundary and between two.
         let mut step = [0isize; 3];
@@ -291,18 +320,21 @@ impl Clearance {
     }
 
     /// The cells' size.
-    pub fn cell_size(&self) -> f64 {
+    #[cfg(test)]
+    fn cell_size(&self) -> f64 {
         self.h
     }
 
     /// Whether the marked cells hold few enough triangles, on average, for [`Clearance::intersect`]
     /// to beat the BVH (a dense mesh on cells its budget coarsened does not).
-    pub fn lists_are_short(&self) -> bool {
+    #[cfg(test)]
+    fn lists_are_short(&self) -> bool {
         self.short_lists
     }
 
     /// Cells along each axis.
-    pub fn dims(&self) -> [usize; 3] {
+    #[cfg(test)]
+    fn dims(&self) -> [usize; 3] {
         self.dims
     }
 }
@@ -384,11 +416,15 @@ mod tests {
     use crate::numeric::rng::Rng;
     use crate::scene::mesh::Mesh;
 
+    fn grid_of(mesh: &Mesh, cell: f64, max_cells: usize) -> Clearance {
+        Clearance::new(&Bvh::new(&mesh.positions, &mesh.indices), cell, max_cells)
+    }
+
     /// Random points in and around `mesh`: the grid's bound never exceeds the exact distance.
     /// Returns the largest shortfall inside the mesh, in cells.
     fn bounds_the_distance(mesh: &Mesh, cell: f64, max_cells: usize) -> f64 {
-        let grid = Clearance::new(&mesh.positions, &mesh.indices, cell, max_cells);
         let bvh = Bvh::new(&mesh.positions, &mesh.indices);
+        let grid = Clearance::new(&bvh, cell, max_cells);
         let (centre, radius) = mesh.bounding_sphere();
         let mut rng = Rng::new(&[11]);
         let mut worst_gap: f64 = 0.0;
@@ -414,38 +450,42 @@ mod tests {
         let gap = bounds_the_distance(&sphere, 0.5, 1 << 20);
         assert!(gap < 2.0 * 3f64.sqrt(), "gap {gap} cells");
         let bunny = Mesh::parse_obj("bunny", crate::scene::BUNNY_OBJ).expect("the bunny");
-        bounds_the_distance(&bunny, 0.7, 1 << 20);
+        // Its triangles are larger against the cells: the plane test marks more beside them.
+        let gap = bounds_the_distance(&bunny, 0.7, 1 << 20);
+        assert!(gap < 3.0 * 3f64.sqrt(), "gap {gap} cells");
         // A thin box of large oblique triangles, on a grid too fine for its budget.
         let mut slab = Mesh::cuboid(glam::Vec3::new(40.0, 0.5, 30.0), 1);
         let turn = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.7, 0.4, 0.3);
         for p in &mut slab.positions {
             *p = turn * *p;
         }
-        bounds_the_distance(&slab, 0.01, 1 << 18);
+        let gap = bounds_the_distance(&slab, 0.01, 1 << 18);
+        assert!(gap < 2.0 * 3f64.sqrt(), "gap {gap} cells");
     }
 
     /// The budgets coarsen the grid: never more cells than allowed.
     #[test]
     fn the_grid_keeps_within_its_budget() {
         let sphere = Mesh::sphere(10.0, 24);
-        let grid = Clearance::new(&sphere.positions, &sphere.indices, 1e-4, 4096);
+        let grid = grid_of(&sphere, 1e-4, 4096);
         assert!(grid.dims().iter().product::<usize>() <= 4096);
-        assert!(grid.cell_size() > 1e-4);
-        // Deep inside a coarse grid the bound is still positive and below the radius.
+        // Deep inside the coarse grid the bound is within the method's loss (as on the fine
+        // grid above, two cell diagonals) of the centre's distance, over 9.8 for these faces.
         let centre = grid.at(DVec3::ZERO);
-        assert!(centre > 0.0 && centre < 10.0, "{centre}");
+        let loss = 2.0 * 3f64.sqrt() * grid.cell_size();
+        assert!(centre > 9.8 - loss && centre <= 10.0, "{centre}");
         assert_eq!(grid.at(DVec3::splat(1e3)), 0.0);
-        let empty = Clearance::new(&[], &[], 1.0, 1000);
+        let empty = Clearance::new(&Bvh::new(&[], &[]), 1.0, 1000);
         assert_eq!(empty.at(DVec3::ZERO), 0.0);
         assert!(!empty.lists_are_short());
         // A dense mesh keeps its cells (many triangles to a cell are not a reason to coarsen)
         // and then says its lists are long: its flights descend the BVH.
         let dense = Mesh::sphere(10.0, 256);
-        let grid = Clearance::new(&dense.positions, &dense.indices, 2.0, 1 << 16);
+        let grid = grid_of(&dense, 2.0, 1 << 16);
         assert!(grid.cell_size() < 2.5, "{}", grid.cell_size());
         assert!(!grid.lists_are_short());
         assert!(grid.at(DVec3::ZERO) > 3.0, "{}", grid.at(DVec3::ZERO));
-        let fine = Clearance::new(&sphere.positions, &sphere.indices, 0.5, 1 << 20);
+        let fine = grid_of(&sphere, 0.5, 1 << 20);
         assert!(fine.lists_are_short());
     }
 

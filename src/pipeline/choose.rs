@@ -21,6 +21,21 @@ pub fn choose(
     overrides: &SettingsOverrides,
     target_error: f64,
 ) -> anyhow::Result<Choice> {
+    choose_at(
+        scene,
+        overrides,
+        &object_scale(scene, target_error, crate::preprocess::DEFAULT_MAX_TEXELS),
+    )
+}
+
+/// [`choose`] for the object's scales `scale` (the target error among them) instead of the
+/// scene's own.
+pub fn choose_at(
+    scene: &Scene,
+    overrides: &SettingsOverrides,
+    scale: &ObjectScale,
+) -> anyhow::Result<Choice> {
+    let target_error = scale.target_error;
     if !(target_error.is_finite() && target_error > 0.0 && target_error < 1.0) {
         anyhow::bail!(
             "--target-error = {target_error} must lie strictly between 0 and 1 (a fraction: 0.02 is 2 %)"
@@ -40,11 +55,7 @@ pub fn choose(
             scene.material.model.name()
         );
     }
-    let mut choice = crate::preprocess::settings::derive(
-        &scene.material,
-        &object_scale(scene, target_error, crate::preprocess::DEFAULT_MAX_TEXELS),
-        overrides,
-    );
+    let mut choice = crate::preprocess::settings::derive(&scene.material, scale, overrides);
     if scene.material.model.walks() {
         choice.settings.walk_lights =
             crate::preprocess::walk::entry_lights(&scene.lights, scene.environment.as_deref());

@@ -15,7 +15,7 @@ mod choose;
 pub mod model;
 mod reweigh;
 
-pub use choose::{choose, object_scale};
+pub use choose::{choose, choose_at, object_scale};
 pub use reweigh::{same_geometry, KeptReweigher};
 
 use crate::environment::sh;

@@ -65,16 +65,10 @@ pub fn without_single_pass(material: &Material, target_error: f64) -> Option<Str
     })
 }
 
-/// Whether `scene`'s model is the default's to choose: given neither in the scene file nor on
-/// the command line ([`Scene::model_is_default`]).
-pub fn is_default(scene: &Scene) -> bool {
-    scene.model_is_default()
-}
-
 /// The default model of `scene` at `target_error` and why, or None where the model is given
 /// (see the module documentation): the one place the default is decided.
 pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
-    if !is_default(scene) {
+    if !scene.model_is_default() {
         return None;
     }
     let m = &scene.material;
@@ -95,7 +89,7 @@ pub fn decide(scene: &Scene, target_error: f64) -> Option<(Model, String)> {
                     Model::Volume,
                     format!(
                         "{}; its preprocessing is about {t:.1} s on the 2-core machine the costs were measured on, within the default's {DEFAULT_PREPROCESS_SECONDS:.0} s (--model halfspace keeps the half-space's F)",
-                        volume_reason_behind(scene)
+                        walks_description(scene, lamps(scene), false)
                     ),
                 ),
                 Some(t) => (
@@ -166,26 +160,34 @@ pub const DEFAULT_PREPROCESS_SECONDS: f64 = 20.0;
 fn volume_seconds(scene: &Scene, target_error: f64) -> Option<f64> {
     let mut walked = scene.clone();
     walked.material = walked.material.with_model(Model::Volume).ok()?;
-    let mut choice = super::choose(&walked, &Default::default(), target_error).ok()?;
     let scale = crate::preprocess::settings::ObjectScale {
         pixel_mm: 0.0,
         ..super::object_scale(&walked, target_error, crate::preprocess::DEFAULT_MAX_TEXELS)
     };
-    choice.settings =
-        crate::preprocess::settings::derive(&walked.material, &scale, &walked.settings).settings;
-    choice.settings.walk_lights =
-        crate::preprocess::walk::entry_lights(&walked.lights, walked.environment.as_deref());
+    let choice = super::choose_at(&walked, &Default::default(), &scale).ok()?;
     let estimate = crate::preprocess::estimate(&walked.mesh, &walked.material, &choice);
     Some(estimate.work.reference_seconds())
 }
 
-/// Why the walks behind a refractive boundary under lamps are the better model.
-fn volume_reason_behind(scene: &Scene) -> String {
-    let lamps = lamps(scene);
+/// What the walks of `scene` are, entering along its `lamps` lamps or, where `sky`, from its
+/// environment's map: the reasons' common part.
+fn walks_description(scene: &Scene, lamps: usize, sky: bool) -> String {
+    let entering = if sky {
+        "entering from the environment's map and its sun".to_string()
+    } else {
+        format!(
+            "along the light of its {lamps} lamp{}",
+            if lamps == 1 { "" } else { "s" }
+        )
+    };
+    let eta = scene.material.eta;
+    let boundary = if eta == 1.0 {
+        "eta = 1".to_string()
+    } else {
+        format!("behind the refractive boundary eta = {eta}, refracted and reflected there as the light is")
+    };
     format!(
-        "F from random walks inside the mesh along the light of its {lamps} lamp{} (behind the refractive boundary eta = {}, refracted and reflected there as the light is, a closed mesh): the most accurate model",
-        if lamps == 1 { "" } else { "s" },
-        scene.material.eta
+        "F from random walks inside the mesh {entering} ({boundary}, a closed mesh): the most accurate model"
     )
 }
 
@@ -199,26 +201,15 @@ pub fn volume_reason(scene: &Scene) -> Option<String> {
         .environment_light()
         .is_some_and(|(env, light)| crate::preprocess::walk::WalkSky::new(env, light).is_some());
     let eta = scene.material.eta;
-    (is_default(scene) && (sky || (eta == 1.0 && lamps > 0)) && scene.mesh.is_closed())
-        .then(|| {
-            let entering = if sky {
-                "entering from the environment's map and its sun".to_string()
-            } else {
-                format!(
-                    "along the light of its {lamps} lamp{}",
-                    if lamps == 1 { "" } else { "s" }
-                )
-            };
+    (scene.model_is_default() && (sky || (eta == 1.0 && lamps > 0)) && scene.mesh.is_closed()).then(
+        || {
             let other = if sky { "halfspace" } else { "halfspace-single" };
-            let boundary = if eta == 1.0 {
-                "eta = 1".to_string()
-            } else {
-                format!("behind the refractive boundary eta = {eta}, refracted and reflected there as the light is")
-            };
             format!(
-                "F from random walks inside the mesh {entering} ({boundary}, a closed mesh): the most accurate model (--model {other} keeps the half-space's F)"
+                "{} (--model {other} keeps the half-space's F)",
+                walks_description(scene, lamps, sky)
             )
-        })
+        },
+    )
 }
 
 #[cfg(test)]

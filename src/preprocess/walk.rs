@@ -573,11 +573,6 @@ const PILOT_MIN_PATHS: u32 = 8;
 /// cast.
 const CLEARANCE_CELLS_PER_FREE_PATH: f64 = 1.0;
 
-/// Flights shorter than this many cells of the clearance grid find their hit through its cells
-/// rather than the BVH (a cell holds a few triangles; the BVH's descent costs a few dozen box
-/// tests whatever the ray's length).
-const CLEARANCE_CAST_CELLS: f64 = 16.0;
-
 /// The clearance grid's largest size in cells (4 bytes of bound and 4 of list offset each, and
 /// the triangle lists, at most 8 entries per cell and triangle): a larger object gets coarser
 /// cells.
@@ -665,10 +660,10 @@ fn walk(
 ) -> (Walked, WalkReport) {
     let medium = crate::physics::Medium::new(material, 0.0);
     let densest = medium.sigma_t.iter().cloned().fold(0.0, f64::max);
+    let surface = Surface::new(mesh, nodes).behind(material.eta);
     let clearance = clearance.then(|| {
         Clearance::new(
-            &mesh.positions,
-            &mesh.indices,
+            &surface.bvh,
             1.0 / (CLEARANCE_CELLS_PER_FREE_PATH * densest),
             CLEARANCE_MAX_CELLS,
         )
@@ -676,7 +671,7 @@ fn walk(
     let walker = Walker {
         mesh,
         nodes,
-        surface: Surface::new(mesh, nodes).behind(material.eta),
+        surface,
         medium,
         clearance,
         lamps,
@@ -788,21 +783,12 @@ impl Walker<'_> {
             let end = x + d * s;
             // A flight shorter than the grid's bound on the distance to the surface meets no
             // surface and needs no ray cast: this changes no walk, only what a walk costs.
-            let inside = self
-                .clearance
-                .as_ref()
-                .is_some_and(|grid| s < grid.at(x) - eps);
-            // Otherwise a short flight steps through the grid's cells, a long one descends
-            // the BVH: the same hit either way.
-            let cast = || match &self.clearance {
-                Some(grid)
-                    if grid.lists_are_short() && s < CLEARANCE_CAST_CELLS * grid.cell_size() =>
-                {
-                    grid.intersect(bvh, x, d, s)
-                }
-                _ => bvh.intersect(x, d, s),
+            // The same hit either way: the grid only finds it cheaper, or knows there is none.
+            let hit = match &self.clearance {
+                Some(grid) => grid.flight(bvh, x, d, s, eps),
+                None => bvh.intersect(x, d, s),
             };
-            if let Some(hit) = (!inside).then(cast).flatten() {
+            if let Some(hit) = hit {
                 // Behind a refractive boundary: reflected back in with Fresnel's probability
                 // (always beyond the critical angle), a new flight from the surface;
                 // otherwise out, refracted away from the normal.
