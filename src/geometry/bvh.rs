@@ -388,8 +388,7 @@ impl Bvh {
     }
 
     /// The distance from `p` to the nearest point of any triangle, or `limit` if none is
-    /// nearer: the exact value the clearance grid's bound is tested against.
-    #[cfg(test)]
+    /// nearer: what the clearance grid's bounds near the surface are.
     pub fn distance_within(&self, p: DVec3, limit: f64) -> f64 {
         let box_distance2 = |n: &Node| {
             let q = p.clamp(n.lo, n.hi);
@@ -464,7 +463,6 @@ impl Bvh {
     }
 }
 
-#[cfg(test)]
 /// The point of triangle (a, b, c) nearest to `p` (Ericson, Real-Time Collision Detection,
 /// 5.1.5: the Voronoi regions of the corners, edges and face).
 fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {

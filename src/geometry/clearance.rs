@@ -9,9 +9,14 @@
 //! 2. The exact Euclidean distance transform of the marked cells (Felzenszwalb and
 //!    Huttenlocher's lower envelope of parabolas, one axis at a time) gives, per cell, the
 //!    distance D between its centre and the nearest marked cell's centre, in cells.
-//! 3. A point of cell i and a surface point (in some marked cell j) lie within half a cell
-//!    diagonal of their cells' centres, so they are at least (D_i - sqrt 3) h apart: that,
-//!    rounded down, is the cell's bound.
+//! 3. A surface point (in some marked cell j) lies within half a cell diagonal of its cell's
+//!    centre, so cell i's centre is at least B_i = (D_i - sqrt 3 / 2) h from the surface.
+//! 4. Near the surface, where a walk spends most of its flights and a fraction of a cell
+//!    decides whether a flight needs a ray cast, B_i is the exact distance from the centre to
+//!    the surface instead (the BVH's nearest-point search).
+//!
+//! The distance to a surface changes by at most the distance moved, so a point p of cell i
+//! is at least B_i - |p - c_i| from the surface: the bound a lookup returns, rounded down.
 //!
 //! The marked cells keep their triangles, so that a short flight near the surface finds its
 //! hit by stepping through the few cells it crosses (Amanatides and Woo's traversal) instead
@@ -35,6 +40,9 @@ const CAST_CELLS: f64 = 16.0;
 /// faster than the BVH's descent (`short_lists`).
 const SHORT_LISTS: f64 = 16.0;
 
+/// Strides and steps of [`Clearance::ray`] before it leaves the rest to the BVH.
+const MARCH_STEPS: usize = 64;
+
 /// The grid's cell size grows by this factor until the cell and marking budgets hold.
 const COARSEN: f64 = 1.25;
 
@@ -42,8 +50,12 @@ const COARSEN: f64 = 1.25;
 /// and the bounds lowered.
 const MARGIN: f64 = 1e-6;
 
-/// Per cell of a regular grid around a mesh, a distance that every point of the cell has at
-/// least to the mesh's surface (0 or less near it), and the triangles that may touch it.
+/// Cells whose centre the distance transform puts within this many cells of a marked one get
+/// their centre's exact distance to the surface (step 4 of the module's construction).
+const EXACT_CELLS: f64 = 6.0;
+
+/// Per cell of a regular grid around a mesh, a distance that the cell's centre has at least to
+/// the mesh's surface, and the triangles that may touch the cell.
 pub struct Clearance {
     /// The corner of cell (0, 0, 0).
     lo: DVec3,
@@ -114,7 +126,9 @@ impl Clearance {
                     .sum::<u64>()
                     <= MARKING_PER_CELL * (cells as u64 + tris.len() as u64);
             if fits || dims.iter().all(|&d| d <= 3) {
-                return Clearance::build(&tris, lo - h, h, dims);
+                let mut grid = Clearance::build(&tris, lo - h, h, dims);
+                grid.exact_near(bvh);
+                return grid;
             }
             h *= COARSEN;
         }
@@ -138,11 +152,14 @@ impl Clearance {
                 // extent along the normal (any centre for a degenerate triangle, whose normal
                 // is zero).
                 let reach = 0.5 * h * n.abs().element_sum() * (1.0 + MARGIN) + MARGIN * h;
+                let edges = [t[1] - t[0], t[2] - t[1], t[0] - t[2]];
                 for k in a[2]..=b[2] {
                     for j in a[1]..=b[1] {
                         for i in a[0]..=b[0] {
                             let centre = lo + (DVec3::new(i as f64, j as f64, k as f64) + 0.5) * h;
-                            if n.dot(centre - t[0]).abs() <= reach {
+                            if n.dot(centre - t[0]).abs() <= reach
+                                && !edge_separates(t, &edges, centre, 0.5 * h)
+                            {
                                 visit(index(i, j, k), *id);
                             }
                         }
@@ -193,14 +210,10 @@ impl Clearance {
                 }
             }
         }
-        let half_diagonals = 3f64.sqrt();
+        let half_diagonal = 0.5 * 3f64.sqrt();
         let bound = squared
             .iter()
-            .map(|&d2| {
-                let d = (d2.sqrt() - half_diagonals) * h;
-                // Rounded down, into f32 with its own rounding well inside the margin.
-                (d * (1.0 - MARGIN) - MARGIN * h).min(f32::MAX as f64) as f32
-            })
+            .map(|&d2| round_down((d2.sqrt() - half_diagonal) * h, h))
             .collect();
         let marked = first.windows(2).filter(|w| w[1] > w[0]).count();
         let short_lists = marked > 0 && triangles.len() as f64 <= SHORT_LISTS * marked as f64;
@@ -213,6 +226,40 @@ impl Clearance {
             triangles,
             short_lists,
         }
+    }
+
+    /// Step 4 of the construction: the exact distance from the centre to the surface of `bvh`
+    /// for the cells whose bound is under [`EXACT_CELLS`] cells.
+    fn exact_near(&mut self, bvh: &Bvh) {
+        use rayon::prelude::*;
+        let (lo, h, dims) = (self.lo, self.h, self.dims);
+        let limit = EXACT_CELLS * h;
+        self.bound
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(_, b)| (**b as f64) < limit)
+            .for_each(|(i, b)| {
+                let (x, y, z) = (
+                    i % dims[0],
+                    (i / dims[0]) % dims[1],
+                    i / (dims[0] * dims[1]),
+                );
+                let centre = lo + (DVec3::new(x as f64, y as f64, z as f64) + 0.5) * h;
+                // Within the limit and the transform's bound: both hold, take the larger.
+                let far = (*b as f64).max(0.0) + 2.0 * limit;
+                let exact = round_down(bvh.distance_within(centre, far), h);
+                *b = b.max(exact);
+            });
+    }
+
+    /// The centre of cell `[i, j, k]`.
+    fn centre(&self, [i, j, k]: [usize; 3]) -> DVec3 {
+        self.lo + (DVec3::new(i as f64, j as f64, k as f64) + 0.5) * self.h
+    }
+
+    /// The bound at `p` in `cell`: the cell's centre's bound less the distance to it.
+    fn bound_at(&self, cell: [usize; 3], p: DVec3) -> f64 {
+        self.bound[self.index(cell)] as f64 - p.distance(self.centre(cell)) * (1.0 + MARGIN)
     }
 
     /// The cell holding `p`, None outside the grid.
@@ -230,10 +277,9 @@ impl Clearance {
     }
 
     /// A distance that `p` has at least to the surface: 0 outside the grid.
-    #[cfg(test)]
-    fn at(&self, p: DVec3) -> f64 {
+    pub fn at(&self, p: DVec3) -> f64 {
         match self.cell(p) {
-            Some(c) => self.bound[self.index(c)].max(0.0) as f64,
+            Some(c) => self.bound_at(c, p).max(0.0),
             None => 0.0,
         }
     }
@@ -247,28 +293,89 @@ impl Clearance {
         let Some(cell) = self.cell(o) else {
             return bvh.intersect(o, d, s);
         };
-        if s < self.bound[self.index(cell)] as f64 - margin {
+        if s < self.bound_at(cell, o) - margin {
             return None;
         }
         if self.short_lists && s < CAST_CELLS * self.h {
-            self.intersect(bvh, cell, o, d, s)
+            self.intersect(bvh, cell, o, d, (0.0, s))
         } else {
             bvh.intersect(o, d, s)
         }
     }
 
-    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`), `o` in `cell`, as
-    /// [`Bvh::intersect`] finds it, by stepping through the cells the ray crosses (of hits at
-    /// exactly the same distance, the lowest triangle, as there).
+    /// Where the ray `o + t d` (t > 0, `d` a unit direction) first meets the surface of `bvh`:
+    /// [`Bvh::intersect`]`(o, d, infinity)`, found by striding through the free space the
+    /// cells' bounds certify and stepping through the cells near the surface, up to where the
+    /// ray leaves the grid (which holds every triangle); the BVH where the lists are long, from
+    /// outside the grid, or after [`MARCH_STEPS`] strides and steps (a ray grazing a surface).
+    pub fn ray(&self, bvh: &Bvh, o: DVec3, d: DVec3) -> Option<Hit> {
+        if !self.short_lists || self.cell(o).is_none() {
+            return bvh.intersect(o, d, f64::INFINITY);
+        }
+        let mut t = 0.0;
+        for _ in 0..MARCH_STEPS {
+            let p = o + d * t;
+            let Some(cell) = self.cell(p) else {
+                // Out of the grid's box, which the ray (from inside it) does not enter again.
+                return None;
+            };
+            let clear = self.bound_at(cell, p);
+            if clear > self.h {
+                t += clear;
+                continue;
+            }
+            let end = t + CAST_CELLS * self.h;
+            if let Some(hit) = self.intersect(bvh, cell, o, d, (t, end)) {
+                return Some(hit);
+            }
+            t = end;
+        }
+        bvh.intersect(o, d, f64::INFINITY)
+    }
+
+    /// Whether the surface of `bvh` blocks the ray `o + t d` for t in (0, `t_max`):
+    /// [`Bvh::occluded`], found as [`Clearance::ray`] finds its hit.
+    pub fn occluded(&self, bvh: &Bvh, o: DVec3, d: DVec3, t_max: f64) -> bool {
+        if !self.short_lists || self.cell(o).is_none() {
+            return bvh.occluded(o, d, t_max);
+        }
+        let mut t = 0.0;
+        for _ in 0..MARCH_STEPS {
+            if t >= t_max {
+                return false;
+            }
+            let p = o + d * t;
+            let Some(cell) = self.cell(p) else {
+                return false;
+            };
+            let clear = self.bound_at(cell, p);
+            if clear > self.h {
+                t += clear;
+                continue;
+            }
+            let end = (t + CAST_CELLS * self.h).min(t_max);
+            if self.intersect(bvh, cell, o, d, (t, end)).is_some() {
+                return true;
+            }
+            t = end;
+        }
+        bvh.occluded(o, d, t_max)
+    }
+
+    /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`) among the triangles of the
+    /// cells it crosses from `o + t_0 d` (in `cell`) on, as [`Bvh::intersect`] finds it (of
+    /// hits at exactly the same distance, the lowest triangle, as there), each triangle tested
+    /// from `o` as there: where the ray before `t_0` is known to be free of the surface, the
+    /// BVH's hit.
     fn intersect(
         &self,
         bvh: &Bvh,
         mut cell: [usize; 3],
         o: DVec3,
         d: DVec3,
-        t_max: f64,
+        (t_0, t_max): (f64, f64),
     ) -> Option<Hit> {
-        let c = (o - self.lo) / self.h;
+        let c = (o + d * t_0 - self.lo) / self.h;
         // Per axis: the step, the ray distance to the next cell boundary and between two.
         let mut step = [0isize; 3];
         let mut next = [f64::INFINITY; 3];
@@ -276,11 +383,11 @@ impl Clearance {
         for a in 0..3 {
             if d[a] > 0.0 {
                 step[a] = 1;
-                next[a] = ((cell[a] + 1) as f64 - c[a]) * self.h / d[a];
+                next[a] = t_0 + ((cell[a] + 1) as f64 - c[a]) * self.h / d[a];
                 delta[a] = self.h / d[a];
             } else if d[a] < 0.0 {
                 step[a] = -1;
-                next[a] = (c[a] - cell[a] as f64) * self.h / -d[a];
+                next[a] = t_0 + (c[a] - cell[a] as f64) * self.h / -d[a];
                 delta[a] = self.h / -d[a];
             }
         }
@@ -409,6 +516,32 @@ fn lower_envelope(f: &[f64], out: &mut Vec<f64>) {
     }
 }
 
+/// Whether one of the nine axes across an edge of triangle `t` (edges `edges`) and an axis of
+/// the cube of half size `half` at `centre` separates the two (Akenine-Moller's triangle-box
+/// test, whose other four axes are the box's faces and the triangle's plane), with the margin
+/// against rounding: where none does, the triangle may touch the cube.
+fn edge_separates(t: &[DVec3; 3], edges: &[DVec3; 3], centre: DVec3, half: f64) -> bool {
+    let v = [t[0] - centre, t[1] - centre, t[2] - centre];
+    for e in edges {
+        for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
+            let a = e.cross(axis);
+            let p = [a.dot(v[0]), a.dot(v[1]), a.dot(v[2])];
+            let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            let r = half * a.abs().element_sum() * (1.0 + MARGIN) + MARGIN * half * a.length();
+            if lo > r || hi < -r {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// `d` (a distance on a grid of cell `h`) rounded down, into f32 with its own rounding well
+/// inside the margin.
+fn round_down(d: f64, h: f64) -> f32 {
+    (d * (1.0 - MARGIN) - MARGIN * h).min(f32::MAX as f64) as f32
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -420,8 +553,10 @@ mod tests {
         Clearance::new(&Bvh::new(&mesh.positions, &mesh.indices), cell, max_cells)
     }
 
-    /// Random points in and around `mesh`: the grid's bound never exceeds the exact distance.
-    /// Returns the largest shortfall inside the mesh, in cells.
+    /// Random points in and around `mesh`: the grid's bound never exceeds the exact distance,
+    /// and within a few cells of the surface, where the cells' centres hold their exact
+    /// distance, it falls short of it by at most a cell diagonal (twice the distance to the
+    /// centre). Returns the largest shortfall inside the mesh, in cells.
     fn bounds_the_distance(mesh: &Mesh, cell: f64, max_cells: usize) -> f64 {
         let bvh = Bvh::new(&mesh.positions, &mesh.indices);
         let grid = Clearance::new(&bvh, cell, max_cells);
@@ -434,6 +569,13 @@ mod tests {
             let exact = bvh.distance_within(p, f64::INFINITY);
             let bound = grid.at(p);
             assert!(bound <= exact, "{p}: bound {bound} > distance {exact}");
+            let h = grid.cell_size();
+            if bound > 0.0 && exact < 3.0 * h {
+                assert!(
+                    exact - bound <= 3f64.sqrt() * h * (1.0 + 1e-5),
+                    "{p}: bound {bound}, distance {exact}, cells of {h}"
+                );
+            }
             if bvh.contains(p) {
                 worst_gap = worst_gap.max(exact - bound);
             }
@@ -461,6 +603,61 @@ mod tests {
         }
         let gap = bounds_the_distance(&slab, 0.01, 1 << 18);
         assert!(gap < 2.0 * 3f64.sqrt(), "gap {gap} cells");
+    }
+
+    /// A ray to infinity through the grid finds what the BVH finds, bit for bit, and a shadow
+    /// ray is blocked where the BVH's is: from points in and around the bunny and a coarse
+    /// sphere in random directions, and from points on their surfaces outwards (the walks'
+    /// rays through the air and towards the lamps).
+    #[test]
+    fn rays_through_the_grid_meet_what_the_bvh_meets() {
+        let bunny = Mesh::parse_obj("bunny", crate::scene::BUNNY_OBJ).expect("the bunny");
+        for (mesh, cell) in [(bunny, 0.7), (Mesh::sphere(10.0, 12), 0.3)] {
+            let bvh = Bvh::new(&mesh.positions, &mesh.indices);
+            let grid = Clearance::new(&bvh, cell, 1 << 20);
+            assert!(grid.lists_are_short());
+            let (centre, radius) = mesh.bounding_sphere();
+            let mut rng = Rng::new(&[13]);
+            let (mut hits, mut misses) = (0, 0);
+            for i in 0..20_000 {
+                let d = crate::physics::escape::isotropic(&mut rng);
+                let o = if i % 2 == 0 {
+                    let u = DVec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0;
+                    centre.as_dvec3() + u * 1.2 * radius as f64
+                } else {
+                    // Just off a triangle of the surface, leaving it on the side d points to.
+                    let t = (rng.uniform() * mesh.triangle_count() as f64) as usize;
+                    let [a, b, c] = [0, 1, 2]
+                        .map(|k| mesh.positions[mesh.indices[3 * t + k] as usize].as_dvec3());
+                    let (u, v) = (rng.uniform(), rng.uniform());
+                    let (u, v) = if u + v > 1.0 {
+                        (1.0 - u, 1.0 - v)
+                    } else {
+                        (u, v)
+                    };
+                    a + (b - a) * u + (c - a) * v + d * 1e-5
+                };
+                let want = bvh.intersect(o, d, f64::INFINITY);
+                let got = grid.ray(&bvh, o, d);
+                let t_max = rng.uniform() * 2.0 * radius as f64;
+                assert_eq!(
+                    grid.occluded(&bvh, o, d, t_max),
+                    bvh.occluded(o, d, t_max),
+                    "from {o} along {d} up to {t_max}"
+                );
+                assert_eq!(
+                    got.map(|h| (h.t, h.triangle, h.bary)),
+                    want.map(|h| (h.t, h.triangle, h.bary)),
+                    "from {o} along {d}"
+                );
+                if want.is_some() {
+                    hits += 1;
+                } else {
+                    misses += 1;
+                }
+            }
+            assert!(hits > 2000 && misses > 2000, "{hits} hits, {misses} misses");
+        }
     }
 
     /// The budgets coarsen the grid: never more cells than allowed.

@@ -1,6 +1,7 @@
 //! Physics of diffuse subsurface scattering: the dipole profile, Fresnel terms, materials.
 
 pub mod dipole;
+pub mod escape;
 pub mod halfspace;
 pub mod incidence;
 pub mod material;

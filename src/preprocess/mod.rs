@@ -119,8 +119,9 @@ pub struct Work {
     /// first flight and its exit's ray through the air. Under an environment each also casts
     /// a shadow ray towards the sky's block it draws, which the costs do not count.
     pub walks: f64,
-    /// Collisions of those walks.
-    pub walk_collisions: f64,
+    /// Steps of those walks: the collisions simulated one by one near the surface, and the
+    /// jumps through balls deeper inside (each standing for many collisions).
+    pub walk_steps: f64,
 }
 
 /// Seconds per unit of [`Work`] on one thread, calibrated on 2 cores over meshes from a
@@ -128,10 +129,10 @@ pub struct Work {
 /// time against its own count (`tests/estimate.rs` prints the totals): kernel taps, dense
 /// entries and fit products (parallel), triangles (a serial and a parallel share), and what
 /// every run pays whatever its size (thread start-up, allocation; once, not per thread); walks
-/// (a start, a shadow ray and the ray casts at both ends) and their collisions (a scattering
-/// event each, a lookup in the clearance grid, and for the flights near the surface a ray
-/// cast through the grid's cells), fitted together on ketchup and skim-milk spheres with and
-/// without a refractive boundary (few collisions per walk and many) and checked on the
+/// (a start, a shadow ray and the ray casts at both ends) and their steps (a scattering event
+/// or a jump each, a lookup in the clearance grid, and for the flights near the surface a ray
+/// cast through the grid's cells), fitted together on ketchup, skim-milk and marble spheres
+/// with and without a refractive boundary (few steps per walk and many) and checked on the
 /// default scene's bunny.
 mod cost {
     pub const KERNEL_TAP: f64 = 1.7e-6;
@@ -141,7 +142,7 @@ mod cost {
     pub const TRIANGLE_PARALLEL: f64 = 3.0e-6;
     pub const FIXED: f64 = 0.1;
     pub const WALK: f64 = 0.8e-6;
-    pub const WALK_COLLISION: f64 = 0.16e-6;
+    pub const WALK_STEP: f64 = 0.16e-6;
 }
 
 /// Threads of the machine the per-unit costs ([`Work::seconds`]) were measured on: 2 cores.
@@ -169,7 +170,7 @@ impl Work {
             + cost::FIT_PRODUCT * self.fit_products
             + cost::TRIANGLE_PARALLEL * self.triangles as f64
             + cost::WALK * self.walks
-            + cost::WALK_COLLISION * self.walk_collisions)
+            + cost::WALK_STEP * self.walk_steps)
             / threads
             + cost::TRIANGLE_SERIAL * self.triangles as f64
             + cost::FIXED
@@ -240,13 +241,7 @@ pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
         fit_products: nodes as f64 * (near_texels * near_nodes.min(16.0) + near_nodes.powi(3)),
         triangles: mesh.triangle_count() as u64,
         walks: nodes as f64 * s.walk_paths as f64 * entering.iter().sum::<f64>(),
-        walk_collisions: walk_collisions(
-            material,
-            mean_chord_mm(mesh),
-            nodes,
-            s.walk_paths,
-            entering,
-        ),
+        walk_steps: walk_steps(material, mean_chord_mm(mesh), nodes, s.walk_paths, entering),
     };
     Estimate {
         texels,
@@ -264,20 +259,39 @@ pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
 }
 
 /// Collisions of a walk per free path of the object's mean chord, where the chord bounds them
-/// ([`walk_collisions`]): fitted on a thin slab and on spheres (`tests/estimate.rs`).
+/// ([`walk_steps`]): fitted on a thin slab and on spheres (`tests/estimate.rs`).
 pub const CHORD_COLLISIONS: f64 = 1.25;
 
-/// Collisions of the walks that fill F (`model = "volume"`; 0 otherwise): nodes x walks x
-/// collisions per walk. A walk from the surface survives n collisions without leaving with
-/// probability about 1 / sqrt(pi n) (a random walk's first return), so in a half-space of
-/// albedo a it collides about 1 / sqrt(1 - a) times. In an object whose mean chord 4 V / S
-/// (`chord_mm`) is tau free paths the sum stops once a walk could have crossed it: the count
-/// grows with tau instead, [`CHORD_COLLISIONS`] tau; the smaller of the two. Behind a
-/// refractive boundary the walks reflected back inside collide longer, by the ratio of the
-/// light absorbed in a half-space with the boundary and without it (the dipole's
-/// 1 - R_total for each). Each channel's walks times `entering`, the share of starts that walk
-/// ([`walk::entry_fraction`]).
-pub fn walk_collisions(
+/// Collisions a walk from the surface makes per free path of depth of the layer next to it
+/// ([`walk_steps`]): a diffusing walk from about a free path deep visits every depth below
+/// it about equally often, some 3 (z_0 + z_b) times per free path of depth in a half-space.
+/// Fitted on spheres (`tests/estimate.rs`).
+pub const LAYER_COLLISIONS: f64 = 3.0;
+
+/// Jumps a walk makes per e-fold of its collisions beyond those of the layer next to the
+/// surface ([`walk_steps`]): a jump through a ball of the walk's depth covers a share of its
+/// remaining way in, so the jumps grow with the log of the collisions they stand for. Fitted
+/// on spheres (`tests/estimate.rs`).
+pub const JUMPS_PER_E_FOLD: f64 = 1.3;
+
+/// Steps of the walks that fill F (`model = "volume"`; 0 otherwise): nodes x walks x steps per
+/// walk, per channel the collisions simulated one by one near the surface and the jumps
+/// deeper in (`physics::escape`).
+///
+/// A walk from the surface survives n collisions without leaving with probability about
+/// 1 / sqrt(pi n) (a random walk's first return), so in a half-space of albedo a it collides
+/// about C = 1 / sqrt(1 - a) times. In an object whose mean chord 4 V / S (`chord_mm`) is tau
+/// free paths the sum stops once a walk could have crossed it: the count grows with tau
+/// instead, [`CHORD_COLLISIONS`] tau; C is the smaller of the two. Of these, those in the layer
+/// next to the surface where no ball fits (its depth the smallest ball's radius and half a
+/// cell of the clearance grid, in the channel's free paths) are simulated one by one,
+/// [`LAYER_COLLISIONS`] per free path of depth, at most C; the rest take
+/// [`JUMPS_PER_E_FOLD`] jumps per e-fold of C over the layer's. Behind a refractive boundary
+/// the walks reflected back inside collide longer, near the surface as deeper in, by the
+/// ratio of the light absorbed in a half-space with the boundary and without it (the
+/// dipole's 1 - R_total for each). Each channel's walks times `entering`, the share of starts
+/// that walk ([`walk::entry_fraction`]).
+pub fn walk_steps(
     material: &Material,
     chord_mm: f64,
     nodes: u64,
@@ -291,15 +305,28 @@ pub fn walk_collisions(
     let matched = Material::custom(material.sigma_s_prime, material.sigma_a, 1.0)
         .map(|m| m.dipoles())
         .unwrap_or(behind);
+    let densest = (0..3)
+        .map(|c| material.sigma_s_prime[c] + material.sigma_a[c])
+        .fold(0.0, f64::max);
     let per_walk: f64 = (0..3)
         .map(|c| {
             let (s, a) = (material.sigma_s_prime[c], material.sigma_a[c]);
             let albedo = s / (s + a).max(1e-300);
-            let boundary = (1.0 - behind[c].total_reflectance())
-                / (1.0 - matched[c].total_reflectance()).max(1e-6);
+            let boundary = ((1.0 - behind[c].total_reflectance())
+                / (1.0 - matched[c].total_reflectance()).max(1e-6))
+            .max(1.0);
             let half_space = 1.0 / (1.0 - albedo).max(1e-6).sqrt();
             let crossing = CHORD_COLLISIONS * (s + a) * chord_mm;
-            half_space.min(crossing.max(1.0)).min(1e3) * boundary.max(1.0) * entering[c]
+            let collisions = half_space.min(crossing.max(1.0)).min(1e3) * boundary;
+            let depth = crate::physics::escape::SMALLEST_RADIUS
+                + 0.5 * (s + a) / densest.max(1e-300) / walk::CLEARANCE_CELLS_PER_FREE_PATH;
+            let layer = LAYER_COLLISIONS * depth * boundary;
+            let steps = if collisions > layer {
+                layer + JUMPS_PER_E_FOLD * boundary * (collisions / layer).ln()
+            } else {
+                collisions
+            };
+            steps * entering[c]
         })
         .sum();
     nodes as f64 * walk_paths as f64 * per_walk
@@ -455,10 +482,12 @@ impl Preprocessed {
         }
         if let Some(w) = &o.walks {
             lines.push(format!(
-                "walks: {} per node and channel, {} in all, {:.1} collisions each, {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light; {:.1} s{}",
+                "walks: {} per node and channel, {} in all, {:.1} collisions each ({:.1} of them one by one, the rest in {:.2} jumps), {} entered the object again, {} cut; orders left {:.3} / {:.3} / {:.3} of the light; {:.1} s{}",
                 w.paths_per_node,
                 w.paths,
                 w.events as f64 / w.paths.max(1) as f64,
+                (w.events - w.jumped) as f64 / w.paths.max(1) as f64,
+                w.jumps as f64 / w.paths.max(1) as f64,
                 w.reentries,
                 w.truncated,
                 w.left[0],

@@ -253,8 +253,11 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
 /// Walks per node and channel for the volumetric F: under uniform light a node's radiosity of
 /// orders >= 2 gathers about N R_ms exits (R_ms the half-space reflectance of those orders), so
 /// its relative noise is 1 / sqrt(N R_ms), and it weighs R_ms / R_all in the node's light
-/// (single scattering, its own pass, is exact). The noise of the light is then the target
-/// error when N = R_ms / (R_all^2 target^2), worst channel, within [256, 16384].
+/// (single scattering, its own pass, is exact). A point of the surface mixes the three nodes
+/// of its triangle by its barycentric weights b, whose noises are independent: its variance is
+/// the nodes' times the sum of b^2, on average 1/2 over a triangle. The noise of the light at a
+/// point is then the target error when N = R_ms / (2 R_all^2 target^2), worst channel, within
+/// [256, 16384].
 pub fn walk_paths(material: &Material, target_error: f64) -> (u32, String) {
     let multiple = Material {
         model: crate::physics::Model::HalfspaceSingle,
@@ -267,13 +270,13 @@ pub fn walk_paths(material: &Material, target_error: f64) -> (u32, String) {
     }
     .total_reflectance();
     let need = (0..3)
-        .map(|c| multiple[c] / (all[c] * all[c] * target_error * target_error).max(1e-300))
+        .map(|c| multiple[c] / (2.0 * all[c] * all[c] * target_error * target_error).max(1e-300))
         .fold(0.0f64, f64::max);
     let n = need.ceil().clamp(256.0, 16384.0) as u32;
     (
         n,
         format!(
-            "{n} walks per node and channel: orders >= 2 at {:.1} % noise of each node's light under uniform light (the target error)",
+            "{n} walks per node and channel: orders >= 2 at {:.1} % noise of the light at a point of the surface under uniform light (the target error)",
             100.0 * target_error
         ),
     )

@@ -41,6 +41,7 @@
 use crate::geometry::bvh::{Bvh, Hit};
 use crate::geometry::clearance::Clearance;
 use crate::numeric::rng::Rng;
+use crate::physics::escape;
 use crate::physics::surface::{fresnel_reflectance, reflect, refract};
 use crate::physics::{fresnel_transmittance, Material, Rgb};
 use crate::scene::desc::LightKind;
@@ -48,7 +49,6 @@ use crate::scene::mesh::Mesh;
 use crate::scene::{Light, MAX_LIGHTS};
 use glam::DVec3;
 use rayon::prelude::*;
-use std::f64::consts::PI;
 
 use super::nodes::Nodes;
 
@@ -252,8 +252,13 @@ pub struct WalkReport {
     pub paths_per_node: u32,
     /// Paths traced in all.
     pub paths: u64,
-    /// Collisions in all.
+    /// Collisions in all (those inside jumps included).
     pub events: u64,
+    /// Jumps through balls deep inside ([`escape`](crate::physics::escape)).
+    pub jumps: u64,
+    /// The collisions those jumps stood for: the walks simulated `events - jumped` collisions
+    /// one by one.
+    pub jumped: u64,
     /// Paths cut by [`MAX_WALK_EVENTS`].
     pub truncated: u64,
     /// Times a path that left entered the object again.
@@ -368,6 +373,11 @@ pub(super) struct Surface {
     orientation: f64,
     pub(super) eps: f64,
     eta: f64,
+    /// The clearance grid around the mesh, where one was built ([`Surface::with_clearance`]).
+    clearance: Option<Clearance>,
+    /// Whether rays and flights find their hits through the grid (else through the BVH: the
+    /// same hits, slower).
+    grid_rays: bool,
 }
 
 impl Surface {
@@ -383,6 +393,45 @@ impl Surface {
             },
             eps: 1e-6 * (radius as f64).max(1e-3),
             eta: 1.0,
+            clearance: None,
+            grid_rays: false,
+        }
+    }
+
+    /// The same surface with a clearance grid of cells of `cell` (at most `max_cells`), its
+    /// rays and flights through it where `grid_rays`.
+    fn with_clearance(mut self, cell: f64, max_cells: usize, grid_rays: bool) -> Surface {
+        self.clearance = Some(Clearance::new(&self.bvh, cell, max_cells));
+        self.grid_rays = grid_rays;
+        self
+    }
+
+    /// The grid, where rays go through it.
+    fn grid(&self) -> Option<&Clearance> {
+        self.clearance.as_ref().filter(|_| self.grid_rays)
+    }
+
+    /// Whether the surface blocks the segment from `o` along `d` up to `t_max`.
+    fn occluded(&self, o: DVec3, d: DVec3, t_max: f64) -> bool {
+        match self.grid() {
+            Some(grid) => grid.occluded(&self.bvh, o, d, t_max),
+            None => self.bvh.occluded(o, d, t_max),
+        }
+    }
+
+    /// Where a flight from `o` along `d` of length `s` meets the surface.
+    fn flight(&self, o: DVec3, d: DVec3, s: f64) -> Option<Hit> {
+        match self.grid() {
+            Some(grid) => grid.flight(&self.bvh, o, d, s, self.eps),
+            None => self.bvh.intersect(o, d, s),
+        }
+    }
+
+    /// Where the ray from `o` along `d` meets the surface.
+    fn ray(&self, o: DVec3, d: DVec3) -> Option<Hit> {
+        match self.grid() {
+            Some(grid) => grid.ray(&self.bvh, o, d),
+            None => self.bvh.intersect(o, d, f64::INFINITY),
         }
     }
 
@@ -472,7 +521,7 @@ impl Surface {
             e_c *= fresnel_transmittance(self.eta, cos);
         }
         // Any hit blocks: the BVH's any-hit search stops at the first.
-        let blocked = || self.bvh.occluded(x + n * self.eps, towards, distance);
+        let blocked = || self.occluded(x + n * self.eps, towards, distance);
         if e_c > 0.0 && !(shadows && blocked()) {
             e_c
         } else {
@@ -552,9 +601,23 @@ fn deposit_channel(i: usize) -> usize {
     }
 }
 
-/// One source node's walks: (receiver, deposit), the counters (paths, collisions, cut,
-/// re-entries), the flux that left and the source's weight in the exit lobes per channel.
-type Column = (Vec<(u32, Deposit)>, [u64; 4], [f64; 3], [f64; 3]);
+/// One source node's walks: (receiver, deposit), the counters ([`Counter`]), the flux that
+/// left and the source's weight in the exit lobes per channel.
+type Column = (Vec<(u32, Deposit)>, [u64; COUNTERS], [f64; 3], [f64; 3]);
+
+/// What a source's walks count.
+#[derive(Clone, Copy)]
+enum Counter {
+    Paths,
+    /// Collisions, those inside jumps included.
+    Collisions,
+    Cut,
+    Reentries,
+    Jumps,
+    /// Collisions inside jumps.
+    Jumped,
+}
+const COUNTERS: usize = 6;
 
 /// Source nodes walked at a time: their columns are summed into F and the lobes in node
 /// order before the next block starts (the sums do not depend on the threads, and the
@@ -571,7 +634,7 @@ const PILOT_MIN_PATHS: u32 = 8;
 /// Cells of the clearance grid ([`Clearance`]) per mean free path of the densest channel: a
 /// flight's bound loses about a cell to the grid, so a walk a few free paths deep needs no ray
 /// cast.
-const CLEARANCE_CELLS_PER_FREE_PATH: f64 = 1.0;
+pub const CLEARANCE_CELLS_PER_FREE_PATH: f64 = 1.0;
 
 /// The clearance grid's largest size in cells (4 bytes of bound and 4 of list offset each, and
 /// the triangle lists, at most 8 entries per cell and triangle): a larger object gets coarser
@@ -591,12 +654,11 @@ fn scratch(n: usize) -> Scratch {
     )
 }
 
-/// One source's running tallies: the counters (paths, collisions, cut, re-entries) and the
-/// weight that left per channel; per channel the walks' summed entry weights (their count
+/// One source's running tallies: the counters ([`Counter`]) and the weight that left per channel; per channel the walks' summed entry weights (their count
 /// along the normal) and the source's share in the exit lobes, its mean irradiance under the
 /// lamps and the sky (1 without either; 0 where none reaches it: it sends no light).
 struct Tally {
-    counters: [u64; 4],
+    counters: [u64; COUNTERS],
     left: [f64; 3],
     weights: [f64; 3],
     lobe: [f64; 3],
@@ -609,8 +671,8 @@ struct Walker<'a> {
     surface: Surface,
     /// The reduced medium, isotropic: the truth's with g = 0.
     medium: crate::physics::Medium,
-    /// Where flights need no ray cast (None: every flight casts one).
-    clearance: Option<Clearance>,
+    /// Jumps through balls that hold no surface ([`escape`]), where the grid has one.
+    jumps: Option<&'static escape::Escape>,
     lamps: &'a [Light],
     /// An environment's sky, entered from besides the lamps.
     sky: Option<&'a WalkSky>,
@@ -643,12 +705,31 @@ pub fn walk_response(
         (paths, min_order),
         lights,
         progress,
-        true,
+        Flights::default(),
     )
 }
 
-/// [`walk_response`], with a clearance grid where `clearance` (else a ray cast for every
-/// flight: the same walks, slower).
+/// How the walks find their way: what each choice changes is what a walk costs, not what it
+/// does (the grid's flights), or only its random draws (the jumps).
+#[derive(Debug, Clone, Copy)]
+struct Flights {
+    /// Flights find their hits through the clearance grid, else by a ray cast each: the same
+    /// walks, slower.
+    grid: bool,
+    /// Walks deep inside jump through the largest ball around them that holds no surface.
+    jumps: bool,
+}
+
+impl Default for Flights {
+    fn default() -> Flights {
+        Flights {
+            grid: true,
+            jumps: true,
+        }
+    }
+}
+
+/// [`walk_response`], its flights and jumps as `flights` says.
 fn walk(
     mesh: &Mesh,
     nodes: &Nodes,
@@ -656,24 +737,26 @@ fn walk(
     (paths, min_order): (u32, u32),
     (lamps, sky): (&[Light], Option<&WalkSky>),
     progress: super::Progress<'_>,
-    clearance: bool,
+    flights: Flights,
 ) -> (Walked, WalkReport) {
     let medium = crate::physics::Medium::new(material, 0.0);
     let densest = medium.sigma_t.iter().cloned().fold(0.0, f64::max);
     let surface = Surface::new(mesh, nodes).behind(material.eta);
-    let clearance = clearance.then(|| {
-        Clearance::new(
-            &surface.bvh,
+    let surface = if flights.grid || flights.jumps {
+        surface.with_clearance(
             1.0 / (CLEARANCE_CELLS_PER_FREE_PATH * densest),
             CLEARANCE_MAX_CELLS,
+            flights.grid,
         )
-    });
+    } else {
+        surface
+    };
     let walker = Walker {
         mesh,
         nodes,
         surface,
         medium,
-        clearance,
+        jumps: flights.jumps.then(escape::table),
         lamps,
         sky,
         min_order,
@@ -690,7 +773,7 @@ impl Walker<'_> {
     /// Source `p`'s walks, `paths` per channel: its column (receiver, deposit) and tallies.
     fn walk_source(&self, scratch: &mut Scratch, (p, paths): (usize, u32)) -> Column {
         let mut tally = Tally {
-            counters: [0u64; 4],
+            counters: [0u64; COUNTERS],
             left: [0.0; 3],
             weights: [0.0f64; 3],
             lobe: [if self.lamps.is_empty() && self.sky.is_none() {
@@ -744,7 +827,7 @@ impl Walker<'_> {
                 } else {
                     (-normal, 1.0, false)
                 };
-                tally.counters[0] += 1;
+                tally.counters[Counter::Paths as usize] += 1;
                 tally.weights[c] += weight;
                 // The sky's single scattering is the walks': the single-scattering pass
                 // integrates the lamps and the sun.
@@ -770,7 +853,7 @@ impl Walker<'_> {
         tally: &mut Tally,
     ) {
         let (mesh, surface) = (self.mesh, &self.surface);
-        let (bvh, eps) = (&surface.bvh, surface.eps);
+        let eps = surface.eps;
         let (sigma_t, albedo) = (self.medium.sigma_t[c], self.medium.albedo[c]);
         let mut x = at + d * eps;
         let mut order = 0u32;
@@ -784,10 +867,7 @@ impl Walker<'_> {
             // A flight shorter than the grid's bound on the distance to the surface meets no
             // surface and needs no ray cast: this changes no walk, only what a walk costs.
             // The same hit either way: the grid only finds it cheaper, or knows there is none.
-            let hit = match &self.clearance {
-                Some(grid) => grid.flight(bvh, x, d, s, eps),
-                None => bvh.intersect(x, d, s),
-            };
+            let hit = surface.flight(x, d, s);
             if let Some(hit) = hit {
                 // Behind a refractive boundary: reflected back in with Fresnel's probability
                 // (always beyond the critical angle), a new flight from the surface;
@@ -797,7 +877,7 @@ impl Walker<'_> {
                     Err((reflected, normal)) => {
                         reflections += 1;
                         if events + reflections >= MAX_WALK_EVENTS {
-                            tally.counters[2] += 1;
+                            tally.counters[Counter::Cut as usize] += 1;
                             break;
                         }
                         x = x + d * hit.t - normal * eps;
@@ -818,7 +898,7 @@ impl Walker<'_> {
                 } else {
                     x + d * hit.t + d_out * eps
                 };
-                match bvh.intersect(out, d_out, f64::INFINITY) {
+                match surface.ray(out, d_out) {
                     Some(h)
                         if h.t > 10.0 * eps
                             && surface.outward_normal(mesh, h.triangle as usize).dot(d_out)
@@ -834,7 +914,7 @@ impl Walker<'_> {
                             out + d_out * h.t + d_in * eps
                         };
                         d = d_in;
-                        tally.counters[3] += 1;
+                        tally.counters[Counter::Reentries as usize] += 1;
                         continue;
                     }
                     _ => break,
@@ -852,16 +932,52 @@ impl Walker<'_> {
                 break;
             }
             if events >= MAX_WALK_EVENTS {
-                tally.counters[2] += 1;
+                tally.counters[Counter::Cut as usize] += 1;
                 break;
             }
-            let (u1, u2) = (rng.uniform(), rng.uniform());
-            let cos = 1.0 - 2.0 * u1;
-            let sin = (1.0 - cos * cos).max(0.0).sqrt();
-            let phi = 2.0 * PI * u2;
-            d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+            // Deep inside, the walk leaves the largest tabulated ball around x that holds no
+            // surface as every walk from its centre does ([`escape`]): one draw for the
+            // collisions inside, survived with the albedo to their number.
+            if let Some((table, (k, r))) = self.jumps.zip(self.jump_radius(x, sigma_t, eps)) {
+                let exit = table.exit(k, rng.uniform());
+                let n = exit.collisions;
+                let u = rng.uniform();
+                // Absorbed inside at the k-th collision (k <= n) where a^k <= u, the first:
+                // the analog walk's count, for the report.
+                let absorbed = n > 0 && u >= albedo.powi(n.min(i32::MAX as u32) as i32);
+                let k = if absorbed && albedo > 0.0 {
+                    ((u.ln() / albedo.ln()).ceil() as u32).clamp(1, n)
+                } else {
+                    n
+                };
+                tally.counters[Counter::Jumps as usize] += 1;
+                tally.counters[Counter::Jumped as usize] += k as u64;
+                events += k as u64;
+                if absorbed {
+                    break;
+                }
+                order = order.saturating_add(n);
+                if events >= MAX_WALK_EVENTS {
+                    tally.counters[Counter::Cut as usize] += 1;
+                    break;
+                }
+                (x, d) = escape::leave_ball(x, r / sigma_t, exit.mu as f64, rng);
+                continue;
+            }
+            d = escape::isotropic(rng);
         }
-        tally.counters[1] += events;
+        tally.counters[Counter::Collisions as usize] += events;
+    }
+
+    /// The tabulated ball a walk at `x` may jump through, at extinction `sigma_t`: the
+    /// largest radius (index, optical radius) within the grid's bound there, less `margin`.
+    fn jump_radius(&self, x: DVec3, sigma_t: f64, margin: f64) -> Option<(usize, f64)> {
+        let (grid, table) = (self.surface.clearance.as_ref()?, self.jumps?);
+        let clear = grid.at(x) - margin;
+        if clear * sigma_t < escape::SMALLEST_RADIUS {
+            return None;
+        }
+        table.fitting(clear * sigma_t)
     }
 
     /// Adds a walk of channel `c` and weight `weight` that leaves through `hit` along `d` to
@@ -993,10 +1109,12 @@ impl Walker<'_> {
                 .collect();
             for (i, (column, counters, left, lobe)) in block.into_iter().enumerate() {
                 let p = start + i;
-                report.paths += counters[0];
-                report.events += counters[1];
-                report.truncated += counters[2];
-                report.reentries += counters[3];
+                report.paths += counters[Counter::Paths as usize];
+                report.events += counters[Counter::Collisions as usize];
+                report.truncated += counters[Counter::Cut as usize];
+                report.reentries += counters[Counter::Reentries as usize];
+                report.jumps += counters[Counter::Jumps as usize];
+                report.jumped += counters[Counter::Jumped as usize];
                 entered += sources.area(p);
                 for c in 0..3 {
                     report.left[c] += left[c];
@@ -1132,6 +1250,7 @@ pub struct Walked {
 mod tests {
     use super::*;
     use crate::physics::Model;
+    use std::f64::consts::PI;
 
     fn medium_of(preset: &str, absorbing: bool) -> Material {
         let p = Material::preset(preset).unwrap();
@@ -1244,8 +1363,9 @@ mod tests {
         out
     }
 
-    /// The clearance grid changes what a walk costs, not what it does: with it and with a ray
-    /// cast for every flight the walks give the same F, lobes and counts, bit for bit, on
+    /// The clearance grid's flights change what a walk costs, not what it does: with them and
+    /// with a ray cast for every flight the walks (jumps included) give the same F, lobes and
+    /// counts, bit for bit, on
     /// concave meshes (an air gap, the bunny) index-matched and behind a boundary, under a
     /// lamp.
     #[test]
@@ -1274,17 +1394,109 @@ mod tests {
                     (64, 2),
                     (&[lamp], None),
                     &|_, _, _| {},
-                    grid,
+                    Flights { grid, jumps: true },
                 )
             };
             let ((a, ra), (b, rb)) = (run(true), run(false));
             assert!(ra.events > 5 * ra.paths, "walks of many flights: {ra:?}");
+            assert!(ra.jumps > 0, "walks deep enough to jump: {ra:?}");
             assert_eq!(
-                (ra.paths, ra.events, ra.truncated, ra.reentries, ra.left),
-                (rb.paths, rb.events, rb.truncated, rb.reentries, rb.left)
+                ra,
+                WalkReport {
+                    seconds: ra.seconds,
+                    estimated_seconds: ra.estimated_seconds,
+                    ..rb
+                }
             );
             assert!(a.rows == b.rows && a.slopes == b.slopes && a.drifts == b.drifts);
         }
+    }
+
+    /// The jumps change the walks' draws, not their distribution: on a marble sphere lit from
+    /// above, whose walks jump most of their collisions, the light that leaves, the share of
+    /// it that comes out on the unlit half and the lobes there are those of walks that collide
+    /// one by one, within the noise of their million walks each (exit cosines drawn as
+    /// 1 - mu move the unlit half's slopes by 0.35; the survival inside a jump is
+    /// checked against absorbing walks in `physics::escape`).
+    #[test]
+    fn jumps_change_no_distribution() {
+        let mesh = Mesh::sphere(8.0, 16);
+        let nodes = Nodes::build(&mesh, 4.0);
+        let p = medium_of("marble", true);
+        let m = Material::custom(p.sigma_s_prime, p.sigma_a, 1.0)
+            .unwrap()
+            .with_model(Model::Volume)
+            .unwrap();
+        let lamp = Light {
+            kind: LightKind::Directional,
+            position: glam::Vec3::ZERO,
+            direction: glam::Vec3::new(0.0, 0.0, -1.0),
+            radiance: glam::Vec3::ONE,
+            cos_cone: -1.0,
+            rotation: glam::Quat::IDENTITY,
+        };
+        let sources = Sources::new(&mesh, &nodes);
+        let dark: Vec<usize> = (0..nodes.positions.len())
+            .filter(|&q| nodes.positions[q].z < -2.0)
+            .collect();
+        let run = |jumps: bool| {
+            let (walked, report) = walk(
+                &mesh,
+                &nodes,
+                &m,
+                (8000, 2),
+                (&[lamp], None),
+                &|_, _, _| {},
+                Flights { grid: true, jumps },
+            );
+            // Per channel: the flux the unlit half's receivers gather over all that left, and
+            // their mean lobe slope.
+            let flux = |qs: &[usize], c: usize| {
+                qs.iter()
+                    .map(|&q| {
+                        walked.rows[q].iter().map(|(_, v)| v.0[c]).sum::<f64>() * sources.area(q)
+                    })
+                    .sum::<f64>()
+            };
+            let all: Vec<usize> = (0..nodes.positions.len()).collect();
+            let share: [f64; 3] = std::array::from_fn(|c| flux(&dark, c) / flux(&all, c));
+            let slope: [f64; 3] = std::array::from_fn(|c| {
+                dark.iter()
+                    .map(|&q| walked.slopes[q][c] as f64)
+                    .sum::<f64>()
+                    / dark.len() as f64
+            });
+            (report, share, slope)
+        };
+        let ((ra, share_a, slope_a), (rb, share_b, slope_b)) = (run(true), run(false));
+        println!("jumps: {ra:?}, unlit share {share_a:?}, slopes {slope_a:?}");
+        println!("one by one: {rb:?}, unlit share {share_b:?}, slopes {slope_b:?}");
+        assert_eq!(rb.jumps, 0);
+        assert!(
+            ra.jumped as f64 > 0.5 * ra.events as f64,
+            "most collisions jumped: {ra:?}"
+        );
+        for c in 0..3 {
+            assert!(
+                (ra.left[c] / rb.left[c] - 1.0).abs() < 0.01,
+                "channel {c}: left {} with jumps, {} without",
+                ra.left[c],
+                rb.left[c]
+            );
+            assert!(
+                (share_a[c] / share_b[c] - 1.0).abs() < 0.03,
+                "channel {c}: unlit half's share {} with jumps, {} without",
+                share_a[c],
+                share_b[c]
+            );
+        }
+        // A node's slope is 18 times its exits' mean cosine less 2/3: noisy per channel, so
+        // the channels' mean.
+        let mean = |s: [f64; 3]| s.iter().sum::<f64>() / 3.0;
+        assert!(
+            (mean(slope_a) - mean(slope_b)).abs() < 0.15,
+            "unlit half's slopes {slope_a:?} with jumps, {slope_b:?} without"
+        );
     }
 
     /// Two 10 x 10 x 4 mm boxes, one above the other, 1 mm apart.
