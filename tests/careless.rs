@@ -97,8 +97,15 @@ fn careless_values_are_refused_by_name() {
         fails_with(c, "--target-error");
     }
     let mut c = bin();
-    c.args(["reference", "--spacing-mm", "0.0001", "--out"])
-        .arg(dir.join("ref"));
+    c.args([
+        "reference",
+        "--model",
+        "dipole",
+        "--spacing-mm",
+        "0.0001",
+        "--out",
+    ])
+    .arg(dir.join("ref"));
     fails_with(c, "surface samples, more than");
     // The argument parser exits 1 like any other refusal (clap's own code is 2); help exits 0.
     let mut c = bin();

@@ -819,6 +819,8 @@ fn precompute_times_the_material_reweighting() {
             "--validate",
             "precompute",
             "--no-cache",
+            "--model",
+            "halfspace",
             "--texel-mm",
             "1.5",
             "--reweigh",

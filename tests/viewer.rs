@@ -130,15 +130,16 @@ fn scripted_view(x: &Xvfb, script: &str, cache: &Path, out: &Path) -> Command {
     view
 }
 
-/// `translucent --validate render --frames 2 --cache CACHE --out OUT [SCENE]`, which must
+/// `translucent --validate render --frames 2 --cache CACHE --out OUT EXTRA [SCENE]`, which must
 /// succeed.
-fn render_into(cache: &Path, out: &Path, scene: Option<&Path>) {
+fn render_into(cache: &Path, out: &Path, scene: Option<&Path>, extra: &[&str]) {
     let mut render = common::bin();
     render
         .args(["--validate", "render", "--frames", "2", "--cache"])
         .arg(cache)
         .arg("--out")
-        .arg(out);
+        .arg(out)
+        .args(extra);
     if let Some(scene) = scene {
         render.arg(scene);
     }
@@ -172,8 +173,10 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
     let dir = common::temp_dir("viewer");
     let cache = dir.join("cache");
 
-    // The reference image: the same scene through `render` (no window).
-    render_into(&cache, &dir.join("render"), None);
+    // The reference image: the same scene through `render` (no window). The half-space
+    // profile, named: the session re-weights the operators and blends them optimized, which
+    // the default scene's walks do not.
+    render_into(&cache, &dir.join("render"), None, &["--model", "halfspace"]);
 
     let script = "frames 3; screenshot start\n\
                   light 90 0; frames 2; screenshot light\n\
@@ -183,7 +186,8 @@ fn scripted_session_in_a_window_shows_the_lit_object() {
                   mode local; frames 2; screenshot local\n\
                   reset; material ketchup; wait; frames 2; screenshot ketchup\n\
                   quit";
-    let view = scripted_view(&x, script, &cache, &dir);
+    let mut view = scripted_view(&x, script, &cache, &dir);
+    view.args(["--model", "halfspace"]);
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
     for name in ["start", "light", "zoom", "resized", "local", "ketchup"] {
@@ -351,7 +355,16 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     // here so that a new default cannot drop the check): the saved scene's fresh
     // preprocessing checks them. A request is prepared once it has stayed for 3 s, far
     // longer than the frames between the drag's steps on a loaded machine.
-    view.args(["--reweigh", "device", "--settle-ms", "3000"]);
+    // The half-space profile, named: the default scene's walks are made again for an edited
+    // material rather than re-weighted.
+    view.args([
+        "--model",
+        "halfspace",
+        "--reweigh",
+        "device",
+        "--settle-ms",
+        "3000",
+    ]);
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(400));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
     assert!(stdout.contains("save scene: wrote"), "{stdout}");
@@ -467,7 +480,12 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
 
     // The saved scene renders the edited view: the same image to 0.1 %, shown the same way
     // (its exposure and tone curve) within one 8-bit step but on a few silhouette pixels.
-    render_into(&cache, &dir.join("render"), Some(&dir.join("edited.toml")));
+    render_into(
+        &cache,
+        &dir.join("render"),
+        Some(&dir.join("edited.toml")),
+        &[],
+    );
     assert_same_image(
         &dir.join("edited.exr"),
         &dir.join("render/render.exr"),
@@ -677,7 +695,15 @@ fn keys_mouse_and_wheel_drive_the_viewer() {
     let mut viewer = common::bin()
         .env("DISPLAY", &x.display)
         .env_remove("WAYLAND_DISPLAY")
-        .args(["--validate", "view", "--reweigh", "cpu", "--cache"])
+        .args([
+            "--validate",
+            "view",
+            "--model",
+            "halfspace",
+            "--reweigh",
+            "cpu",
+            "--cache",
+        ])
         .arg(dir.join("cache"))
         .arg("--out")
         .arg(&dir)
@@ -929,7 +955,12 @@ fn a_saved_scene_keeps_the_shown_sample_rate() {
         translucent::scene::single::factor(&common::scene(&derived)),
         1
     );
-    render_into(&cache, &dir.join("render"), Some(&dir.join("far.toml")));
+    render_into(
+        &cache,
+        &dir.join("render"),
+        Some(&dir.join("far.toml")),
+        &[],
+    );
     assert_same_image(
         &dir.join("far.exr"),
         &dir.join("render/render.exr"),
@@ -967,7 +998,12 @@ fn moved_lamps_are_walked_for_again() {
         stdout.contains("s after it was asked for (preprocessed)"),
         "the walks were not made again:\n{stdout}"
     );
-    render_into(&cache, &dir.join("render"), Some(&dir.join("moved.toml")));
+    render_into(
+        &cache,
+        &dir.join("render"),
+        Some(&dir.join("moved.toml")),
+        &[],
+    );
     assert_same_image(
         &dir.join("moved.exr"),
         &dir.join("render/render.exr"),

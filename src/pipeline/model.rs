@@ -294,7 +294,8 @@ mod tests {
         let skim = "[material]\npreset = \"skimmilk\"\n";
         let model = |s: &Scene, target: f64| decide(s, target).map(|(m, _)| m);
         // Behind the preset's boundary (eta 1.3) under the default lamp: the walks, whose
-        // preprocessing on a 10 mm sphere is within the budget; on the 50 mm bunny it is not.
+        // preprocessing on a 10 mm sphere and on the 50 mm bunny is within the budget; the
+        // bunny's at a finer target (four times the walks) is not.
         let (small, why) = decide(&scene(skim), 0.02).unwrap();
         assert_eq!(small, Model::Volume, "{why}");
         assert!(why.contains("within the default's 20 s"), "{why}");
@@ -305,11 +306,12 @@ mod tests {
             &crate::scene::Overrides::default(),
         )
         .unwrap();
-        let (large, why) = decide(&bunny, 0.02).unwrap();
-        assert_eq!(large, Model::Halfspace, "{why}");
+        let (walked, why) = decide(&bunny, 0.02).unwrap();
+        assert_eq!(walked, Model::Volume, "{why}");
+        assert!(why.contains("within the default's 20 s"), "{why}");
+        let (fine, why) = decide(&bunny, 0.01).unwrap();
+        assert_eq!(fine, Model::Halfspace, "{why}");
         assert!(why.contains("above the default's 20 s"), "{why}");
-        // A coarser target asks for fewer walks: the bunny's fit.
-        assert_eq!(model(&bunny, 0.05), Some(Model::Volume));
         let matched = format!("{skim}eta = 1.0\n");
         assert_eq!(model(&scene(&matched), 0.02), Some(Model::Volume));
         // Single scattering's share below a coarse target: in the profile.

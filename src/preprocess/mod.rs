@@ -124,25 +124,26 @@ pub struct Work {
     pub walk_steps: f64,
 }
 
-/// Seconds per unit of [`Work`] on one thread, calibrated on 2 cores over meshes from a
-/// 704-triangle box to a 235 000-triangle bunny, long-triangle meshes included, each stage's
-/// time against its own count (`tests/estimate.rs` prints the totals): kernel taps, dense
-/// entries and fit products (parallel), triangles (a serial and a parallel share), and what
-/// every run pays whatever its size (thread start-up, allocation; once, not per thread); walks
-/// (a start, a shadow ray and the ray casts at both ends) and their steps (a scattering event
-/// or a jump each, a lookup in the clearance grid, and for the flights near the surface a ray
-/// cast through the grid's cells), fitted together on ketchup, skim-milk and marble spheres
-/// with and without a refractive boundary (few steps per walk and many) and checked on the
-/// default scene's bunny.
+/// Seconds per unit of [`Work`] on one thread on the reference machine (a 2-core AMD EPYC of
+/// the kind CI runs on, whose [`crate::numeric::speed`] probe takes 12.3 ms), calibrated on 2
+/// cores over meshes from a 704-triangle box to a 235 000-triangle bunny, long-triangle meshes
+/// included, each stage's time against its own count (`tests/estimate.rs` prints the totals):
+/// kernel taps, dense entries and fit products (parallel), triangles (a serial and a parallel
+/// share), and what every run pays whatever its size (thread start-up, allocation; once, not
+/// per thread); walks (a start, a shadow ray and the rays through the air at the exits) and
+/// their steps (a scattering event or a jump each, a lookup in the clearance grid, and for the
+/// flights near the surface a ray cast through the grid's cells), fitted together on ketchup,
+/// skin, skim-milk and marble spheres, a 2 mm slab and the bunnies in skim milk and marble
+/// behind a refractive boundary (few steps per walk and many).
 mod cost {
-    pub const KERNEL_TAP: f64 = 1.7e-6;
-    pub const DENSE_ENTRY: f64 = 8.0e-7;
-    pub const FIT_PRODUCT: f64 = 2.0e-8;
-    pub const TRIANGLE_SERIAL: f64 = 2.0e-6;
-    pub const TRIANGLE_PARALLEL: f64 = 3.0e-6;
-    pub const FIXED: f64 = 0.1;
-    pub const WALK: f64 = 0.8e-6;
-    pub const WALK_STEP: f64 = 0.16e-6;
+    pub const KERNEL_TAP: f64 = 1.31e-6;
+    pub const DENSE_ENTRY: f64 = 6.2e-7;
+    pub const FIT_PRODUCT: f64 = 1.54e-8;
+    pub const TRIANGLE_SERIAL: f64 = 1.54e-6;
+    pub const TRIANGLE_PARALLEL: f64 = 2.3e-6;
+    pub const FIXED: f64 = 0.077;
+    pub const WALK: f64 = 0.3e-6;
+    pub const WALK_STEP: f64 = 0.21e-6;
 }
 
 /// Threads of the machine the per-unit costs ([`Work::seconds`]) were measured on: 2 cores.
@@ -266,7 +267,7 @@ pub const CHORD_COLLISIONS: f64 = 1.25;
 /// ([`walk_steps`]): a diffusing walk from about a free path deep visits every depth below
 /// it about equally often, some 3 (z_0 + z_b) times per free path of depth in a half-space.
 /// Fitted on spheres (`tests/estimate.rs`).
-pub const LAYER_COLLISIONS: f64 = 3.0;
+pub const LAYER_COLLISIONS: f64 = 3.5;
 
 /// Jumps a walk makes per e-fold of its collisions beyond those of the layer next to the
 /// surface ([`walk_steps`]): a jump through a ball of the walk's depth covers a share of its
