@@ -329,7 +329,10 @@ fn a_scene_files_settings_are_used_and_flags_win() {
         let path = dir.join("scene.toml");
         std::fs::write(
             &path,
-            format!("[material]\npreset = \"ketchup\"\n\n[settings]\n{settings}"),
+            // The half-space profile, named: the settings are the subject, not the walks.
+            format!(
+                "[material]\npreset = \"ketchup\"\nmodel = \"halfspace\"\n\n[settings]\n{settings}"
+            ),
         )
         .unwrap();
         path
@@ -739,10 +742,13 @@ fn truth_writes_image_noise_and_figures_and_compare_removes_its_noise() {
 #[test]
 fn the_bare_command_renders_like_render() {
     let (a, b) = (temp_dir("bare"), temp_dir("bare-render"));
+    // One cache: the second run finds the first's preprocessing only where its settings, and
+    // so its cache key, are the same.
+    let cache = a.join("cache");
     let run = |dir: &Path, args: &[&str]| {
         let o = bin()
             .current_dir(dir)
-            .env("XDG_CACHE_HOME", dir.join("cache"))
+            .env("XDG_CACHE_HOME", &cache)
             .args(args)
             .output()
             .unwrap();

@@ -53,10 +53,11 @@ impl PrtSettings {
     }
 }
 
-/// Seconds per ray and thread of the transfer (`preprocess::transfer::transfer`), calibrated on
-/// 2 cores on the bunny as shipped and subdivided (the BVH's depth barely shows), at a few
-/// image sizes (docs/results/estimates.md).
-const SECONDS_PER_RAY: f64 = 9.0e-7;
+/// Seconds per ray and thread of the transfer (`preprocess::transfer::transfer`) on the
+/// reference machine of [`crate::numeric::speed`], calibrated on 2 cores on the bunny as
+/// shipped and subdivided (the BVH's depth barely shows), at a few image sizes
+/// (docs/results/estimates.md).
+const SECONDS_PER_RAY: f64 = 6.9e-7;
 
 /// Estimated seconds of the transfer (`preprocess::transfer::transfer`) over `texels` texels on this machine's threads: its work,
 /// `texels x settings.rays` shadow rays, at the calibrated cost per ray.

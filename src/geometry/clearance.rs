@@ -307,7 +307,7 @@ impl Clearance {
     /// [`Bvh::intersect`]`(o, d, infinity)`, found by striding through the free space the
     /// cells' bounds certify and stepping through the cells near the surface, up to where the
     /// ray leaves the grid (which holds every triangle); the BVH where the lists are long, from
-    /// outside the grid, or after [`MARCH_STEPS`] strides and steps (a ray grazing a surface).
+    /// outside the grid, or after 64 strides and steps (a ray grazing a surface).
     pub fn ray(&self, bvh: &Bvh, o: DVec3, d: DVec3) -> Option<Hit> {
         if !self.short_lists || self.cell(o).is_none() {
             return bvh.intersect(o, d, f64::INFINITY);

@@ -144,6 +144,11 @@ mod cost {
     pub const FIXED: f64 = 0.077;
     pub const WALK: f64 = 0.3e-6;
     pub const WALK_STEP: f64 = 0.21e-6;
+    /// What a walked run pays whatever its walks: the table of exits from balls
+    /// (`physics::escape`, 17 radii of 32 768 walks) and the clearance grid's exact distances
+    /// near the surface (measured with `perf` on the default scene: about half a second on 2
+    /// cores).
+    pub const WALK_TABLES: f64 = 1.1;
 }
 
 /// Threads of the machine the per-unit costs ([`Work::seconds`]) were measured on: 2 cores.
@@ -171,7 +176,12 @@ impl Work {
             + cost::FIT_PRODUCT * self.fit_products
             + cost::TRIANGLE_PARALLEL * self.triangles as f64
             + cost::WALK * self.walks
-            + cost::WALK_STEP * self.walk_steps)
+            + cost::WALK_STEP * self.walk_steps
+            + if self.walks > 0.0 {
+                cost::WALK_TABLES
+            } else {
+                0.0
+            })
             / threads
             + cost::TRIANGLE_SERIAL * self.triangles as f64
             + cost::FIXED

@@ -254,11 +254,16 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
 /// orders >= 2 gathers about N R_ms exits (R_ms the half-space reflectance of those orders), so
 /// its relative noise is 1 / sqrt(N R_ms), and it weighs R_ms / R_all in the node's light
 /// (single scattering, its own pass, is exact). A point of the surface mixes the three nodes
-/// of its triangle by its barycentric weights b, whose noises are independent: its variance is
-/// the nodes' times the sum of b^2, on average 1/2 over a triangle. The noise of the light at a
-/// point is then the target error when N = R_ms / (2 R_all^2 target^2), worst channel, within
-/// [256, 16384].
+/// of its triangle by its barycentric weights b: its variance is a node's times
+/// sum b_i^2 + rho sum_(i != j) b_i b_j, where rho is the correlation of two neighbours'
+/// noises (an exit adds to every node of its triangle by the hat functions phi, so rho is
+/// the integral of phi_i phi_j over that of phi_i^2: 1/6 on a regular mesh); over a triangle
+/// sum b_i^2 averages 1/2, so the factor averages (1 + rho) / 2 = 7/12. The noise of the
+/// light at a point is then the target error when N = (7/12) R_ms / (R_all^2 target^2),
+/// worst channel, within [256, 16384].
 pub fn walk_paths(material: &Material, target_error: f64) -> (u32, String) {
+    // A point's variance over its nodes' (above): (1 + 1/6) / 2.
+    const POINT_VARIANCE: f64 = 7.0 / 12.0;
     let multiple = Material {
         model: crate::physics::Model::HalfspaceSingle,
         ..*material
@@ -270,7 +275,10 @@ pub fn walk_paths(material: &Material, target_error: f64) -> (u32, String) {
     }
     .total_reflectance();
     let need = (0..3)
-        .map(|c| multiple[c] / (2.0 * all[c] * all[c] * target_error * target_error).max(1e-300))
+        .map(|c| {
+            POINT_VARIANCE * multiple[c]
+                / (all[c] * all[c] * target_error * target_error).max(1e-300)
+        })
         .fold(0.0f64, f64::max);
     let n = need.ceil().clamp(256.0, 16384.0) as u32;
     (

@@ -254,7 +254,7 @@ pub struct WalkReport {
     pub paths: u64,
     /// Collisions in all (those inside jumps included).
     pub events: u64,
-    /// Jumps through balls deep inside ([`escape`](crate::physics::escape)).
+    /// Jumps through balls deep inside ([`escape`]).
     pub jumps: u64,
     /// The collisions those jumps stood for: the walks simulated `events - jumped` collisions
     /// one by one.
@@ -1415,9 +1415,10 @@ mod tests {
     /// The jumps change the walks' draws, not their distribution: on a marble sphere lit from
     /// above, whose walks jump most of their collisions, the light that leaves, the share of
     /// it that comes out on the unlit half and the lobes there are those of walks that collide
-    /// one by one, within the noise of their million walks each (exit cosines drawn as
-    /// 1 - mu move the unlit half's slopes by 0.35; the survival inside a jump is
-    /// checked against absorbing walks in `physics::escape`).
+    /// one by one, within the noise of their million walks each, and so is the light that
+    /// leaves counted from the first scattering event on (exit cosines drawn as 1 - mu move
+    /// the unlit half's slopes by 0.35; the survival inside a jump is checked against
+    /// absorbing walks in `physics::escape`).
     #[test]
     fn jumps_change_no_distribution() {
         let mesh = Mesh::sphere(8.0, 16);
@@ -1497,6 +1498,30 @@ mod tests {
             (mean(slope_a) - mean(slope_b)).abs() < 0.15,
             "unlit half's slopes {slope_a:?} with jumps, {slope_b:?} without"
         );
+        // Counted from the first scattering event on (as walks from a sky are), that event
+        // survived with the albedo as a weight: the light that leaves, with and without jumps.
+        let left = |jumps: bool| {
+            walk(
+                &mesh,
+                &nodes,
+                &m,
+                (4000, 1),
+                (&[lamp], None),
+                &|_, _, _| {},
+                Flights { grid: true, jumps },
+            )
+            .1
+            .left
+        };
+        let (la, lb) = (left(true), left(false));
+        for c in 0..3 {
+            assert!(
+                (la[c] / lb[c] - 1.0).abs() < 0.01,
+                "orders >= 1, channel {c}: left {} with jumps, {} without",
+                la[c],
+                lb[c]
+            );
+        }
     }
 
     /// Two 10 x 10 x 4 mm boxes, one above the other, 1 mm apart.
