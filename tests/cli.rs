@@ -755,11 +755,14 @@ fn the_bare_command_renders_like_render() {
         assert!(o.status.success(), "{args:?}: {}", stderr(&o));
         let text = String::from_utf8_lossy(&o.stdout).into_owned();
         // The scene and the derived settings: everything before the timings, but the time
-        // estimate (it scales by the machine's speed as each run finds it).
+        // estimate (it scales by the machine's speed as each run finds it) and where the
+        // second run found the first's preprocessing.
         let settings: Vec<String> = text
             .lines()
             .take_while(|l| !l.starts_with("device:"))
-            .filter(|l| !l.starts_with("# estimate:"))
+            .filter(|l| {
+                !l.starts_with("# estimate:") && !l.starts_with("# preprocessing loaded from")
+            })
             .map(str::to_owned)
             .collect();
         (
