@@ -304,49 +304,41 @@ impl Clearance {
     }
 
     /// Where the ray `o + t d` (t > 0, `d` a unit direction) first meets the surface of `bvh`:
-    /// [`Bvh::intersect`]`(o, d, infinity)`, found by striding through the free space the
-    /// cells' bounds certify and stepping through the cells near the surface, up to where the
-    /// ray leaves the grid (which holds every triangle); the BVH where the lists are long, from
-    /// outside the grid, or after 64 strides and steps (a ray grazing a surface).
+    /// [`Bvh::intersect`]`(o, d, infinity)`, through the cells where they can find it (`march`),
+    /// else by the BVH.
     pub fn ray(&self, bvh: &Bvh, o: DVec3, d: DVec3) -> Option<Hit> {
-        if !self.short_lists || self.cell(o).is_none() {
-            return bvh.intersect(o, d, f64::INFINITY);
-        }
-        let mut t = 0.0;
-        for _ in 0..MARCH_STEPS {
-            let p = o + d * t;
-            let Some(cell) = self.cell(p) else {
-                // Out of the grid's box, which the ray (from inside it) does not enter again.
-                return None;
-            };
-            let clear = self.bound_at(cell, p);
-            if clear > self.h {
-                t += clear;
-                continue;
-            }
-            let end = t + CAST_CELLS * self.h;
-            if let Some(hit) = self.intersect(bvh, cell, o, d, (t, end)) {
-                return Some(hit);
-            }
-            t = end;
-        }
-        bvh.intersect(o, d, f64::INFINITY)
+        self.march(bvh, o, d, f64::INFINITY)
+            .unwrap_or_else(|| bvh.intersect(o, d, f64::INFINITY))
     }
 
     /// Whether the surface of `bvh` blocks the ray `o + t d` for t in (0, `t_max`):
-    /// [`Bvh::occluded`], found as [`Clearance::ray`] finds its hit.
+    /// [`Bvh::occluded`], through the cells where they can find it (`march`), else by the BVH.
     pub fn occluded(&self, bvh: &Bvh, o: DVec3, d: DVec3, t_max: f64) -> bool {
-        if !self.short_lists || self.cell(o).is_none() {
-            return bvh.occluded(o, d, t_max);
+        match self.march(bvh, o, d, t_max) {
+            Some(hit) => hit.is_some(),
+            None => bvh.occluded(o, d, t_max),
         }
+    }
+
+    /// The nearest hit of the ray `o + t d` with t in (0, `t_max`), as the BVH finds it: by
+    /// striding through the free space the cells' bounds certify and stepping through the
+    /// cells near the surface, up to `t_max` or where the ray leaves the grid (which holds
+    /// every triangle). None (the search left to the BVH) where the lists are long, from
+    /// outside the grid, or after [`MARCH_STEPS`] strides and steps (a ray grazing a surface).
+    fn march(&self, bvh: &Bvh, o: DVec3, d: DVec3, t_max: f64) -> Option<Option<Hit>> {
+        if !self.short_lists {
+            return None;
+        }
+        self.cell(o)?;
         let mut t = 0.0;
         for _ in 0..MARCH_STEPS {
             if t >= t_max {
-                return false;
+                return Some(None);
             }
             let p = o + d * t;
             let Some(cell) = self.cell(p) else {
-                return false;
+                // Out of the grid's box, which the ray (from inside it) does not enter again.
+                return Some(None);
             };
             let clear = self.bound_at(cell, p);
             if clear > self.h {
@@ -354,12 +346,12 @@ impl Clearance {
                 continue;
             }
             let end = (t + CAST_CELLS * self.h).min(t_max);
-            if self.intersect(bvh, cell, o, d, (t, end)).is_some() {
-                return true;
+            if let Some(hit) = self.intersect(bvh, cell, o, d, (t, end)) {
+                return Some(Some(hit));
             }
             t = end;
         }
-        bvh.occluded(o, d, t_max)
+        None
     }
 
     /// The nearest hit of the ray `o + t d` with `t` in (0, `t_max`) among the triangles of the

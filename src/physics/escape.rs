@@ -169,13 +169,7 @@ impl Escape {
 /// sphere, and the direction at `mu` to its normal, its azimuth drawn uniformly.
 pub fn leave_ball(x: DVec3, r: f64, mu: f64, rng: &mut Rng) -> (DVec3, DVec3) {
     let normal = isotropic(rng);
-    let a = if normal.x.abs() < 0.9 {
-        DVec3::X
-    } else {
-        DVec3::Y
-    };
-    let t = normal.cross(a).normalize();
-    let b = normal.cross(t);
+    let (t, b) = crate::numeric::frame(normal);
     // The azimuth's cosine and sine from a point of the disc.
     let (u, v, s) = in_disc(rng);
     let scale = (1.0 - mu * mu).max(0.0).sqrt() / s.sqrt().max(1e-300);

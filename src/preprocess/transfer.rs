@@ -16,6 +16,7 @@
 use crate::environment::prt::PrtSettings;
 use crate::environment::sh;
 use crate::geometry::bvh::Bvh;
+use crate::numeric::frame;
 use crate::numeric::rng::Rng;
 use crate::physics::dipole::fresnel_transmittance;
 use crate::preprocess::atlas::Atlas;
@@ -50,13 +51,6 @@ pub fn texel_point(atlas: &Atlas, t: usize) -> (DVec3, DVec3) {
         texel.position.as_dvec3() + n * LIFT_TEXELS * atlas.texel_mm,
         n,
     )
-}
-
-/// An orthonormal frame (t, b) around unit `n`.
-pub fn frame(n: DVec3) -> (DVec3, DVec3) {
-    let a = if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
-    let t = n.cross(a).normalize();
-    (t, n.cross(t))
 }
 
 /// Computes the transfer of every covered texel of `atlas` on `mesh` for relative index `eta`.

@@ -1252,6 +1252,18 @@ mod tests {
     use crate::physics::Model;
     use std::f64::consts::PI;
 
+    /// A white directional lamp of unit radiance shining along `direction`.
+    fn directional(direction: glam::Vec3) -> Light {
+        Light {
+            kind: LightKind::Directional,
+            position: glam::Vec3::ZERO,
+            direction,
+            radiance: glam::Vec3::ONE,
+            cos_cone: -1.0,
+            rotation: glam::Quat::IDENTITY,
+        }
+    }
+
     fn medium_of(preset: &str, absorbing: bool) -> Material {
         let p = Material::preset(preset).unwrap();
         let sigma_a = if absorbing { p.sigma_a } else { [0.0; 3] };
@@ -1370,14 +1382,7 @@ mod tests {
     /// lamp.
     #[test]
     fn the_clearance_grid_changes_no_walk() {
-        let lamp = Light {
-            kind: LightKind::Directional,
-            position: glam::Vec3::ZERO,
-            direction: glam::Vec3::new(0.3, -0.5, -0.8).normalize(),
-            radiance: glam::Vec3::ONE,
-            cos_cone: -1.0,
-            rotation: glam::Quat::IDENTITY,
-        };
+        let lamp = directional(glam::Vec3::new(0.3, -0.5, -0.8).normalize());
         let bunny = Mesh::parse_obj("bunny", crate::scene::BUNNY_OBJ).unwrap();
         for (mesh, spacing, eta) in [(two_boxes(4), 2.5, 1.0), (bunny, 12.0, 1.3)] {
             let nodes = Nodes::build(&mesh, spacing);
@@ -1428,14 +1433,7 @@ mod tests {
             .unwrap()
             .with_model(Model::Volume)
             .unwrap();
-        let lamp = Light {
-            kind: LightKind::Directional,
-            position: glam::Vec3::ZERO,
-            direction: glam::Vec3::new(0.0, 0.0, -1.0),
-            radiance: glam::Vec3::ONE,
-            cos_cone: -1.0,
-            rotation: glam::Quat::IDENTITY,
-        };
+        let lamp = directional(glam::Vec3::new(0.0, 0.0, -1.0));
         let sources = Sources::new(&mesh, &nodes);
         let dark: Vec<usize> = (0..nodes.positions.len())
             .filter(|&q| nodes.positions[q].z < -2.0)
@@ -1558,14 +1556,7 @@ mod tests {
         };
         let (top, bottom) = (find(500.0), find(-500.0));
         let angle = 60f32.to_radians();
-        let lamp = Light {
-            kind: LightKind::Directional,
-            position: glam::Vec3::ZERO,
-            direction: glam::Vec3::new(angle.sin(), 0.0, -angle.cos()),
-            radiance: glam::Vec3::ONE,
-            cos_cone: -1.0,
-            rotation: glam::Quat::IDENTITY,
-        };
+        let lamp = directional(glam::Vec3::new(angle.sin(), 0.0, -angle.cos()));
         let (walked, report) =
             walk_response(&mesh, &nodes, &m, 40_000, 2, (&[lamp], None), &|_, _, _| {});
         assert_eq!(report.reentries, 0);
@@ -1869,14 +1860,7 @@ mod tests {
         let mesh = Mesh::cuboid(glam::Vec3::splat(20.0), 4);
         let nodes = Nodes::build(&mesh, 5.0);
         let m = medium_of("skimmilk", true);
-        let lamp = Light {
-            kind: LightKind::Directional,
-            position: glam::Vec3::ZERO,
-            direction: glam::Vec3::new(0.0, 0.0, -1.0),
-            radiance: glam::Vec3::ONE,
-            cos_cone: -1.0,
-            rotation: glam::Quat::IDENTITY,
-        };
+        let lamp = directional(glam::Vec3::new(0.0, 0.0, -1.0));
         let (walked, _) = walk_response(&mesh, &nodes, &m, 4000, 2, (&[lamp], None), &|_, _, _| {});
         let mut sides = Vec::new();
         for (p, x) in nodes.positions.iter().enumerate() {

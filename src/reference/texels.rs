@@ -136,7 +136,7 @@ pub fn cpu_estimate(
             if let Some(sun) = &env.sun {
                 let (x, n) = texel_point(atlas, t);
                 let axis = -light.direction.as_dvec3().normalize();
-                let (tu, tv) = crate::preprocess::transfer::frame(axis);
+                let (tu, tv) = crate::numeric::frame(axis);
                 let side = (SUN_RAYS as f64).sqrt() as u32;
                 let cos_max = sun.angular_radius.cos();
                 let mut rng = Rng::new(&[0x73756e, t as u64]);
