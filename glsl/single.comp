@@ -17,11 +17,15 @@
 // (radiance leaving a medium of index eta).
 // A compute pass over the samples the `front` pass drew (shading the triangles themselves,
 // lavapipe pays for whole blocks of pixels on triangles a few pixels wide).
-// Alpha holds the length of the ray inside (to the nearest back face; 0 where the pass found
+// Alpha holds the length of the ray inside (to the nearest back face; behind a refractive
+// boundary at most DEPTH_CAP free paths, where the chord factor is 1; 0 where the pass found
 // none, as in a pixel it did not draw), for the composite's chord factor of the higher orders.
-// The ray is cut into STEPS intervals of equal optical depth in the least extinguishing
-// channel; over each, s + d_l(s) is taken as linear between its ends (d_l looked up at both),
-// so the exponential integrates exactly per channel.
+// The ray is cut into `steps` intervals (twice as many where the channels' extinctions
+// differ more than SPREAD times) that carry equal shares of the least and the most
+// extinguishing channels' mean attenuation (`schedule`); over each, s + d_l(s) is taken as linear between its ends (d_l
+// looked up at both), so the exponential integrates exactly per channel. The ray is followed
+// to at most DEPTH_CAP free paths of the least extinguishing channel: what lies beyond is
+// attenuated below e^-DEPTH_CAP on the view ray alone.
 #include "frame.glsl"
 #include "shadow.glsl"
 #define VIEW_NORMAL_WITHOUT_DERIVATIVES
@@ -292,35 +296,79 @@ float light_inside(Light l, vec3 p, vec3 travel, float eta, Anchor a, vec3 insid
     return d;
 }
 
+// Free paths of the least extinguishing channel beyond which the view ray is not followed.
+const float DEPTH_CAP = 12.0;
+
 // Bisection steps that find where the refracted view ray leaves the object.
 const uint EXIT_STEPS = 8u;
 
-// Length of the refracted view ray inside, from x along `inside`: where it meets the nearest
-// back face `thickness` drew at the pixel each of its points falls on (bisection over
-// [0, longest]; the refracted chord of a curved object is longer than the straight one near
-// its rim, and `longest` bounds it).
+// Whether the point x + inside s lies in front of the nearest back face `thickness` drew at
+// the pixel it falls on.
+bool within_object(vec3 x, vec3 inside, float s, vec2 size) {
+    vec4 clip = frame.view_proj * vec4(x + inside * s, 1.0);
+    if (clip.w <= 0.0) {
+        return false;
+    }
+    vec3 q = clip.xyz / clip.w;
+    ivec2 pixel = ivec2((q.xy * 0.5 + 0.5) * size);
+    if (any(lessThan(pixel, ivec2(0))) || any(greaterThanEqual(pixel, ivec2(size)))) {
+        return false;
+    }
+    float zq = texelFetch(back_depth, pixel, 0).r;
+    return zq < 1.0 && q.z < zq;
+}
+
+// Length of the refracted view ray inside, from x along `inside`, up to `longest`: where it
+// meets the nearest back face `thickness` drew at the pixel each of its points falls on
+// (bisection over [0, longest]; the refracted chord of a curved object is longer than the
+// straight one near its rim, and `longest` bounds it). A ray still inside at `longest` (the
+// depth cap, on all but thin parts and rims) keeps that length without the bisection.
 float refracted_exit(vec3 x, vec3 inside, float longest, vec2 size) {
+    if (within_object(x, inside, longest, size)) {
+        return longest;
+    }
     float lo = 0.0;
     float hi = longest;
     for (uint k = 0u; k < EXIT_STEPS; ++k) {
         float mid = 0.5 * (lo + hi);
-        vec4 clip = frame.view_proj * vec4(x + inside * mid, 1.0);
-        bool within = false;
-        if (clip.w > 0.0) {
-            vec3 q = clip.xyz / clip.w;
-            ivec2 pixel = ivec2((q.xy * 0.5 + 0.5) * size);
-            if (all(greaterThanEqual(pixel, ivec2(0))) && all(lessThan(pixel, ivec2(size)))) {
-                float zq = texelFetch(back_depth, pixel, 0).r;
-                within = zq < 1.0 && q.z < zq;
-            }
-        }
-        if (within) {
+        if (within_object(x, inside, mid, size)) {
             lo = mid;
         } else {
             hi = mid;
         }
     }
     return lo;
+}
+
+// The ratio of the most to the least extinguishing channel's extinction above which the ray
+// takes twice the intervals: one schedule then serves channels whose light comes from depths
+// that far apart only with half of its points in each one's range.
+const float SPREAD = 3.0;
+
+// Newton steps per point of the schedule.
+const uint SCHEDULE_NEWTON = 3u;
+
+// The end of the k-th of n intervals over [0, s_exit]: where the mean of the least and the
+// most extinguishing channels' attenuation 1 - e^(-sigma s), each over its whole ray, reaches
+// k / n (from the previous end `from`, below it: Newton's steps on this increasing concave
+// function stay below the root and approach it). In one channel this is equal optical depth
+// per interval; where the channels differ (ketchup's red and blue by six times) each end of
+// the range gets half of the intervals over the depths its light comes from. Any increasing
+// points are a valid cut: the schedule only sets where the quadrature is fine.
+float schedule(uint k, uint n, float s_exit, float from, vec2 sigma) {
+    if (k >= n || s_exit <= 0.0) {
+        return s_exit;
+    }
+    vec2 whole = 1.0 - exp(-sigma * s_exit);
+    float target = float(k) / float(n);
+    float s = from;
+    for (uint j = 0u; j < SCHEDULE_NEWTON; ++j) {
+        vec2 left = exp(-sigma * s);
+        float f = 0.5 * dot((1.0 - left) / whole, vec2(1.0)) - target;
+        float slope = 0.5 * dot(sigma * left / whole, vec2(1.0));
+        s = min(s - f / max(slope, 1e-30), s_exit);
+    }
+    return s;
 }
 
 void main() {
@@ -347,18 +395,21 @@ void main() {
     if (dot(inside, inside) == 0.0) {
         inside = d;
     }
+    vec3 sigma_t = frame.sigma_t.rgb;
+    float cap = DEPTH_CAP / min(sigma_t.r, min(sigma_t.g, sigma_t.b));
     float zb = texelFetch(back_depth, pixel, 0).r;
     vec2 ndc = (vec2(pixel) + 0.5) / size * 2.0 - 1.0;
     float s_exit = zb < 1.0 ? max(dot(unproject(frame.inverse_view_proj, ndc, zb) - x, d), 0.0) : 0.0;
     if (REFRACTS && s_exit > 0.0) {
-        s_exit = refracted_exit(x, inside, s_exit / max(cos_o, 0.05), size);
+        s_exit = refracted_exit(x, inside, min(s_exit / max(cos_o, 0.05), cap), size);
     }
+    // The ray's length inside, for the alpha: the whole chord where the back face gives it.
+    float chord = s_exit;
+    s_exit = min(s_exit, cap);
 
-    vec3 sigma_t = frame.sigma_t.rgb;
-    float ref = min(sigma_t.r, min(sigma_t.g, sigma_t.b));
-    // Transmittance of the whole ray in the reference channel.
-    float t_exit = 1.0 - exp(-ref * s_exit);
-    uint n = max(push.steps, 1u);
+    vec2 extremes = vec2(min(sigma_t.r, min(sigma_t.g, sigma_t.b)), max(sigma_t.r, max(sigma_t.g, sigma_t.b)));
+    // Where the channels' extinctions differ widely, each end of the range gets its own.
+    uint n = max(push.steps, 1u) * (extremes.y > SPREAD * extremes.x ? 2u : 1u);
     uint lights = frame.counts.x;
     vec3 sum = vec3(0.0);
     // Light by light (locals, not arrays indexed by the light: a compiler that cannot keep those
@@ -374,7 +425,7 @@ void main() {
         float d0 = light_inside(l, x, -wi, eta, a, inside, 0.0, e0);
         float s0 = 0.0;
         for (uint k = 0u; k < n; ++k) {
-            float s1 = k + 1u == n ? s_exit : -log(1.0 - float(k + 1u) / float(n) * t_exit) / ref;
+            float s1 = schedule(k + 1u, n, s_exit, s0, extremes);
             float ds = s1 - s0;
             vec3 p = x + inside * s1;
             vec3 e1;
@@ -393,5 +444,5 @@ void main() {
     }
     // Leaving: the Fresnel transmittance of the view's exit and radiance over eta^2.
     float leave = REFRACTS ? fresnel_transmittance(eta, cos_o) / (eta * eta) : 1.0;
-    imageStore(out_single, pixel, vec4(frame.sigma_s.rgb / (4.0 * PI) * sum * leave, s_exit));
+    imageStore(out_single, pixel, vec4(frame.sigma_s.rgb / (4.0 * PI) * sum * leave, chord));
 }

@@ -72,10 +72,11 @@ fn single_error(name: &str, truth_dir: &str) -> [f64; 3] {
 
 #[test]
 fn single_scattering_of_the_ketchup_sphere_matches_the_truth() {
-    // The error grows towards blue (figures in docs/results/tests.md): the shadow map's texels
-    // (0.1 mm here) against blue's 0.7 mm mean free path, and 16 intervals per ray.
+    // Figures in docs/results/models.md. Red, whose light comes from across the sphere, has
+    // half of the ray's intervals; blue's 0.7 mm mean free path meets the shadow map's texels
+    // (0.1 mm here). Bounds about a fifth above the figures.
     let e = single_error("sphere-ketchup", "sphere-ketchup-single");
-    for (c, (e, bound)) in e.into_iter().zip([0.02, 0.05, 0.065]).enumerate() {
+    for (c, (e, bound)) in e.into_iter().zip([0.027, 0.02, 0.025]).enumerate() {
         assert!(
             e < bound,
             "channel {c}: {:.1} %, bound {:.1} %",

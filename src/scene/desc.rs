@@ -249,8 +249,8 @@ pub struct OutputDesc {
     pub shadow_map: Option<u32>,
     /// Image pixels per single-scattering sample along each side (1: every pixel; 2: one
     /// sample per 2 x 2 pixels, brought back to every pixel by an upsample that follows the
-    /// depth). By default 2 where the object spans at least `single::MIN_SAMPLES_ACROSS`
-    /// samples at that rate, else 1 (`single::downsample`).
+    /// depth). By default the largest factor at which the object still spans
+    /// `single::MIN_SAMPLES_ACROSS` samples, else 1 (`single::downsample`).
     pub single_downsample: Option<u32>,
     /// Whether the image holds the surface's own reflection (eta != 1): the environment in
     /// the mirror direction and the lamps' highlights, with Fresnel's weight. On by default;

@@ -1,20 +1,22 @@
 //! How many single-scattering samples a frame takes: the `front`, `thickness` and `single`
 //! passes' image size against the output's.
 
+use super::build::MAX_SINGLE_DOWNSAMPLE;
 use super::Scene;
 
 /// Single-scattering samples across the object (its bounding sphere's diameter on screen)
-/// above which the default takes one sample per 2x2 pixels.
+/// that the derived sample rate keeps at least.
 pub const MIN_SAMPLES_ACROSS: f64 = 96.0;
 
 /// Image pixels per single-scattering sample along each side for `scene`, and why: the
-/// scene's `[output] single_downsample` when set; else 2 where the object spans at least
-/// [`MIN_SAMPLES_ACROSS`] samples at that rate, 1 (a sample per pixel) where it is smaller.
+/// scene's `[output] single_downsample` when set; else the largest factor (at most
+/// [`MAX_SINGLE_DOWNSAMPLE`]) at which the object still spans [`MIN_SAMPLES_ACROSS`] samples,
+/// 1 (a sample per pixel) where it spans fewer pixels than that.
 /// Single scattering is smooth over the surface but at its edges and near the light's
 /// terminator, where it steps from one pixel to the next; the composite's upsample follows the
 /// depth, so that another surface's samples (at a silhouette, or an ear in front of the head)
-/// do not mix in, and what fewer samples blur is a few pixels along those steps: on an object
-/// that spans many samples, a small share of it. Below that size every pixel is sampled.
+/// do not mix in, and what fewer samples blur is a sample's width along those steps: at a
+/// fixed number of samples across the object, the same small share of it at any resolution.
 pub fn downsample(scene: &Scene) -> (u32, String) {
     if let Some(k) = scene.single_downsample {
         return (
@@ -23,12 +25,13 @@ pub fn downsample(scene: &Scene) -> (u32, String) {
         );
     }
     let across = pixels_across(scene);
-    if across >= 2.0 * MIN_SAMPLES_ACROSS {
+    let k = ((across / MIN_SAMPLES_ACROSS).floor() as u32).clamp(1, MAX_SINGLE_DOWNSAMPLE);
+    if k > 1 {
         (
-            2,
+            k,
             format!(
-                "single scattering at one sample per 2x2 pixels: the object spans {across:.0} pixels, {:.0} samples (at least {MIN_SAMPLES_ACROSS:.0}; [output] single_downsample = 1 samples every pixel)",
-                across / 2.0
+                "single scattering at one sample per {k}x{k} pixels: the object spans {across:.0} pixels, {:.0} samples (at least {MIN_SAMPLES_ACROSS:.0}; [output] single_downsample = 1 samples every pixel)",
+                across / k as f64
             ),
         )
     } else {
@@ -91,32 +94,37 @@ mod tests {
     }
 
     /// Derived: a sample per pixel on a small object, one per 2x2 pixels from
-    /// MIN_SAMPLES_ACROSS samples across, at the image height where the object's span crosses
-    /// that; the span follows the height.
+    /// MIN_SAMPLES_ACROSS samples across at that rate, one per 3x3 from as many at that rate,
+    /// at the image heights where the object's span crosses those; the span follows the
+    /// height, and the factor stops at the largest a scene may give.
     #[test]
     fn the_derived_downsample_follows_the_objects_size_on_screen() {
         let at = |h: u32| scene(&format!("[output]\nwidth = {h}\nheight = {h}\n"));
         let small = at(64);
         let per_pixel = pixels_across(&small) / 64.0;
         assert!((pixels_across(&at(640)) / 640.0 - per_pixel).abs() < 1e-9 * per_pixel);
-        let threshold = (2.0 * MIN_SAMPLES_ACROSS / per_pixel).ceil() as u32;
-        assert_eq!(
-            factor(&at(threshold - 1)),
-            1,
-            "{}",
-            downsample(&at(threshold - 1)).1
-        );
-        assert_eq!(
-            factor(&at(threshold)),
-            2,
-            "{}",
-            downsample(&at(threshold)).1
-        );
-        assert!(downsample(&at(threshold)).1.contains("2x2"));
-        assert_eq!(
-            size(&at(threshold + 1)),
-            downsampled(threshold + 1, threshold + 1, 2)
-        );
+        for k in 2..=3u32 {
+            let threshold = (k as f64 * MIN_SAMPLES_ACROSS / per_pixel).ceil() as u32;
+            assert_eq!(
+                factor(&at(threshold - 1)),
+                k - 1,
+                "{}",
+                downsample(&at(threshold - 1)).1
+            );
+            assert_eq!(
+                factor(&at(threshold)),
+                k,
+                "{}",
+                downsample(&at(threshold)).1
+            );
+            assert!(downsample(&at(threshold)).1.contains(&format!("{k}x{k}")));
+            assert_eq!(
+                size(&at(threshold + 1)),
+                downsampled(threshold + 1, threshold + 1, k)
+            );
+        }
+        let huge = ((MAX_SINGLE_DOWNSAMPLE + 2) as f64 * MIN_SAMPLES_ACROSS / per_pixel) as u32;
+        assert_eq!(factor(&at(huge)), MAX_SINGLE_DOWNSAMPLE);
         // Seen from close by, the bounding sphere spans more than the image: the object spans
         // the image, too few pixels for fewer samples.
         let close = scene(
