@@ -20,12 +20,11 @@
 // Alpha holds the length of the ray inside (to the nearest back face; behind a refractive
 // boundary at most DEPTH_CAP free paths, where the chord factor is 1; 0 where the pass found
 // none, as in a pixel it did not draw), for the composite's chord factor of the higher orders.
-// The ray is cut into `steps` intervals (twice as many where the channels' extinctions
-// differ more than SPREAD times) that carry equal shares of the least and the most
-// extinguishing channels' mean attenuation (`schedule`); over each, s + d_l(s) is taken as linear between its ends (d_l
-// looked up at both), so the exponential integrates exactly per channel. The ray is followed
-// to at most DEPTH_CAP free paths of the least extinguishing channel: what lies beyond is
-// attenuated below e^-DEPTH_CAP on the view ray alone.
+// The ray is cut into `steps` intervals of equal attenuation in the least extinguishing
+// channel, merged with as many in the most extinguishing one where their extinctions differ
+// more than SPREAD times; over each, s + d_l(s) is taken as linear between its ends (d_l
+// looked up at both), so the exponential integrates exactly per channel. The ray is followed to at most DEPTH_CAP free paths of the least extinguishing
+// channel: what lies beyond is attenuated below e^-DEPTH_CAP on the view ray alone.
 #include "frame.glsl"
 #include "shadow.glsl"
 #define VIEW_NORMAL_WITHOUT_DERIVATIVES
@@ -321,10 +320,12 @@ bool within_object(vec3 x, vec3 inside, float s, vec2 size) {
 // Length of the refracted view ray inside, from x along `inside`, up to `longest`: where it
 // meets the nearest back face `thickness` drew at the pixel each of its points falls on
 // (bisection over [0, longest]; the refracted chord of a curved object is longer than the
-// straight one near its rim, and `longest` bounds it). A ray still inside at `longest` (the
-// depth cap, on all but thin parts and rims) keeps that length without the bisection.
-float refracted_exit(vec3 x, vec3 inside, float longest, vec2 size) {
-    if (within_object(x, inside, longest, size)) {
+// straight one near its rim, and `longest` bounds it). Where the straight chord at the pixel
+// already reaches the depth cap (`deep`: longest is the cap) and the ray is still inside
+// there, it keeps that length without the bisection; a rim or a thin part, whose ray may leave
+// and meet another part of the object farther on, is bisected.
+float refracted_exit(vec3 x, vec3 inside, float longest, bool deep, vec2 size) {
+    if (deep && within_object(x, inside, longest, size)) {
         return longest;
     }
     float lo = 0.0;
@@ -341,34 +342,26 @@ float refracted_exit(vec3 x, vec3 inside, float longest, vec2 size) {
 }
 
 // The ratio of the most to the least extinguishing channel's extinction above which the ray
-// takes twice the intervals: one schedule then serves channels whose light comes from depths
-// that far apart only with half of its points in each one's range.
+// takes twice the intervals, those of equal attenuation in each of the two: where their light
+// comes from depths that far apart, the least extinguishing channel's intervals alone are
+// too long for the other.
 const float SPREAD = 3.0;
 
-// Newton steps per point of the schedule.
-const uint SCHEDULE_NEWTON = 3u;
+// The optical depth at which the attenuation 1 - e^(-tau) reaches y (0 <= y < 1), also where
+// y is below f32's resolution of 1 - y (a channel that hardly extinguishes over a short ray).
+float depth_at(float y) {
+    return y < 1e-3 ? y * (1.0 + 0.5 * y) : -log(1.0 - y);
+}
 
-// The end of the k-th of n intervals over [0, s_exit]: where the mean of the least and the
-// most extinguishing channels' attenuation 1 - e^(-sigma s), each over its whole ray, reaches
-// k / n (from the previous end `from`, below it: Newton's steps on this increasing concave
-// function stay below the root and approach it). In one channel this is equal optical depth
-// per interval; where the channels differ (ketchup's red and blue by six times) each end of
-// the range gets half of the intervals over the depths its light comes from. Any increasing
-// points are a valid cut: the schedule only sets where the quadrature is fine.
-float schedule(uint k, uint n, float s_exit, float from, vec2 sigma) {
-    if (k >= n || s_exit <= 0.0) {
-        return s_exit;
-    }
-    vec2 whole = 1.0 - exp(-sigma * s_exit);
-    float target = float(k) / float(n);
-    float s = from;
-    for (uint j = 0u; j < SCHEDULE_NEWTON; ++j) {
-        vec2 left = exp(-sigma * s);
-        float f = 0.5 * dot((1.0 - left) / whole, vec2(1.0)) - target;
-        float slope = 0.5 * dot(sigma * left / whole, vec2(1.0));
-        s = min(s - f / max(slope, 1e-30), s_exit);
-    }
-    return s;
+// 1 - e^(-x), also where it rounds to 0 in f32.
+float attenuation(float x) {
+    return x < 1e-3 ? x * (1.0 - 0.5 * x) : 1.0 - exp(-x);
+}
+
+// The end of the k-th of m intervals of equal attenuation in a channel of extinction sigma
+// over [0, s_exit] (`whole`: its attenuation over the whole ray).
+float equal_share(uint k, uint m, float s_exit, float sigma, float whole) {
+    return k >= m ? s_exit : depth_at(float(k) / float(m) * whole) / sigma;
 }
 
 void main() {
@@ -401,15 +394,21 @@ void main() {
     vec2 ndc = (vec2(pixel) + 0.5) / size * 2.0 - 1.0;
     float s_exit = zb < 1.0 ? max(dot(unproject(frame.inverse_view_proj, ndc, zb) - x, d), 0.0) : 0.0;
     if (REFRACTS && s_exit > 0.0) {
-        s_exit = refracted_exit(x, inside, min(s_exit / max(cos_o, 0.05), cap), size);
+        float longest = s_exit / max(cos_o, 0.05);
+        s_exit = refracted_exit(x, inside, min(longest, cap), s_exit >= cap, size);
     }
     // The ray's length inside, for the alpha: the whole chord where the back face gives it.
     float chord = s_exit;
     s_exit = min(s_exit, cap);
 
     vec2 extremes = vec2(min(sigma_t.r, min(sigma_t.g, sigma_t.b)), max(sigma_t.r, max(sigma_t.g, sigma_t.b)));
-    // Where the channels' extinctions differ widely, each end of the range gets its own.
-    uint n = max(push.steps, 1u) * (extremes.y > SPREAD * extremes.x ? 2u : 1u);
+    // The intervals: `m` of equal attenuation in the least extinguishing channel, and where the
+    // channels' extinctions differ widely as many in the most extinguishing one, merged in
+    // order along the ray (two equal ends make an empty interval, skipped).
+    uint m = max(push.steps, 1u);
+    bool both = extremes.y > SPREAD * extremes.x;
+    uint n = both ? 2u * m : m;
+    vec2 whole = vec2(attenuation(extremes.x * s_exit), attenuation(extremes.y * s_exit));
     uint lights = frame.counts.x;
     vec3 sum = vec3(0.0);
     // Light by light (locals, not arrays indexed by the light: a compiler that cannot keep those
@@ -424,8 +423,22 @@ void main() {
         Anchor a = anchor_at(l, x, normal, facet, -wi);
         float d0 = light_inside(l, x, -wi, eta, a, inside, 0.0, e0);
         float s0 = 0.0;
+        // The next end of each channel's intervals, and how many of them are taken.
+        uint taken_least = 0u;
+        uint taken_most = both ? 0u : m;
+        float next_least = equal_share(1u, m, s_exit, extremes.x, whole.x);
+        float next_most = equal_share(1u, m, s_exit, extremes.y, whole.y);
         for (uint k = 0u; k < n; ++k) {
-            float s1 = schedule(k + 1u, n, s_exit, s0, extremes);
+            float s1;
+            if (taken_most >= m || (taken_least < m && next_least <= next_most)) {
+                s1 = next_least;
+                taken_least += 1u;
+                next_least = equal_share(taken_least + 1u, m, s_exit, extremes.x, whole.x);
+            } else {
+                s1 = next_most;
+                taken_most += 1u;
+                next_most = equal_share(taken_most + 1u, m, s_exit, extremes.y, whole.y);
+            }
             float ds = s1 - s0;
             vec3 p = x + inside * s1;
             vec3 e1;

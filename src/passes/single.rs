@@ -27,12 +27,12 @@ pub const FRONT_FORMAT: vk::Format = Item::FrontPosition.format();
 /// Format of the back-face depth and of the front surface's depth.
 pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 
-/// Intervals along each view ray where the channels' extinctions are alike; twice as many
-/// where they differ more (`glsl/single.comp`: each end of the range then gets this many). The
-/// intervals carry equal shares of the least and the most extinguishing channels' mean
-/// attenuation; over each the light's path inside is taken as linear and the exponential
-/// integrated exactly, so what fewer intervals miss is the path's bend. docs/results/models.md
-/// has the error against many more intervals.
+/// Intervals along each view ray, of equal attenuation in the least extinguishing channel;
+/// where the most extinguishing one's extinction is more than a few times larger, as many
+/// again of equal attenuation in that one, merged along the ray (`glsl/single.comp`). Over
+/// each the light's path inside is taken as linear and the exponential integrated exactly,
+/// so what fewer intervals miss is the path's bend (`tests/single.rs` holds the pass to the
+/// truth of single scattering on the ketchup sphere).
 pub const STEPS: u32 = 8;
 
 /// The mesh both passes draw and the frame uniforms.

@@ -10,8 +10,9 @@ pub const MIN_SAMPLES_ACROSS: f64 = 96.0;
 
 /// Image pixels per single-scattering sample along each side for `scene`, and why: the
 /// scene's `[output] single_downsample` when set; else the largest factor (at most
-/// `MAX_SINGLE_DOWNSAMPLE`, the most a scene may give) at which the object still spans [`MIN_SAMPLES_ACROSS`] samples,
-/// 1 (a sample per pixel) where it spans fewer pixels than that.
+/// `MAX_SINGLE_DOWNSAMPLE`, the most a scene may give) at which the object still spans
+/// [`MIN_SAMPLES_ACROSS`] samples: 1 (a sample per pixel) where it spans fewer than twice
+/// that many pixels.
 /// Single scattering is smooth over the surface but at its edges and near the light's
 /// terminator, where it steps from one pixel to the next; the composite's upsample follows the
 /// depth, so that another surface's samples (at a silhouette, or an ear in front of the head)
