@@ -7,6 +7,8 @@
 #ifndef PROFILE_GLSL
 #define PROFILE_GLSL
 
+#include "numeric.glsl"
+
 const float PI = 3.14159265358979;
 // Radii of the half-space table (src/physics/profile.rs, table_radii()).
 const int TABLE = 48;
@@ -70,11 +72,6 @@ vec2 dipole_rd_laplacian(vec4 d, float r) {
     sum *= k;
     float lap = r > 0.0 ? sum.z + sum.y / r : 2.0 * sum.z;
     return vec2(sum.x, lap);
-}
-
-// 1 - e^(-x) for x >= 0, without cancellation near 0 (expm1).
-float one_minus_exp(float x) {
-    return x < 1e-2 ? x * (1.0 - 0.5 * x * (1.0 - x / 3.0 * (1.0 - 0.25 * x))) : 1.0 - exp(-x);
 }
 
 // Dipole::cumulative, in its cancellation-free form.

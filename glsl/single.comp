@@ -27,6 +27,7 @@
 // channel: what lies beyond is attenuated below e^-DEPTH_CAP on the view ray alone.
 #include "frame.glsl"
 #include "shadow.glsl"
+#include "numeric.glsl"
 #define VIEW_NORMAL_WITHOUT_DERIVATIVES
 #include "view_normal.glsl"
 
@@ -353,11 +354,6 @@ float depth_at(float y) {
     return y < 1e-3 ? y * (1.0 + 0.5 * y) : -log(1.0 - y);
 }
 
-// 1 - e^(-x), also where it rounds to 0 in f32.
-float attenuation(float x) {
-    return x < 1e-3 ? x * (1.0 - 0.5 * x) : 1.0 - exp(-x);
-}
-
 // The end of the k-th of m intervals of equal attenuation in a channel of extinction sigma
 // over [0, s_exit] (`whole`: its attenuation over the whole ray).
 float equal_share(uint k, uint m, float s_exit, float sigma, float whole) {
@@ -408,7 +404,7 @@ void main() {
     uint m = max(push.steps, 1u);
     bool both = extremes.y > SPREAD * extremes.x;
     uint n = both ? 2u * m : m;
-    vec2 whole = vec2(attenuation(extremes.x * s_exit), attenuation(extremes.y * s_exit));
+    vec2 whole = vec2(one_minus_exp(extremes.x * s_exit), one_minus_exp(extremes.y * s_exit));
     uint lights = frame.counts.x;
     vec3 sum = vec3(0.0);
     // Light by light (locals, not arrays indexed by the light: a compiler that cannot keep those

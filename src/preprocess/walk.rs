@@ -1438,16 +1438,20 @@ mod tests {
         let dark: Vec<usize> = (0..nodes.positions.len())
             .filter(|&q| nodes.positions[q].z < -2.0)
             .collect();
-        let run = |jumps: bool| {
-            let (walked, report) = walk(
+        // Walks along the lamp through the grid, with or without jumps.
+        let walk_with = |setup: (u32, u32), jumps: bool| {
+            walk(
                 &mesh,
                 &nodes,
                 &m,
-                (8000, 2),
+                setup,
                 (&[lamp], None),
                 &|_, _, _| {},
                 Flights { grid: true, jumps },
-            );
+            )
+        };
+        let run = |jumps: bool| {
+            let (walked, report) = walk_with((8000, 2), jumps);
             // Per channel: the flux the unlit half's receivers gather over all that left, and
             // their mean lobe slope.
             let flux = |qs: &[usize], c: usize| {
@@ -1498,19 +1502,7 @@ mod tests {
         );
         // Counted from the first scattering event on (as walks from a sky are), that event
         // survived with the albedo as a weight: the light that leaves, with and without jumps.
-        let left = |jumps: bool| {
-            walk(
-                &mesh,
-                &nodes,
-                &m,
-                (4000, 1),
-                (&[lamp], None),
-                &|_, _, _| {},
-                Flights { grid: true, jumps },
-            )
-            .1
-            .left
-        };
+        let left = |jumps: bool| walk_with((4000, 1), jumps).1.left;
         let (la, lb) = (left(true), left(false));
         for c in 0..3 {
             assert!(
