@@ -385,7 +385,9 @@ void main() {
         inside = d;
     }
     vec3 sigma_t = frame.sigma_t.rgb;
-    float cap = DEPTH_CAP / min(sigma_t.r, min(sigma_t.g, sigma_t.b));
+    // The least and the most extinguishing channels' extinctions.
+    vec2 extremes = vec2(min(sigma_t.r, min(sigma_t.g, sigma_t.b)), max(sigma_t.r, max(sigma_t.g, sigma_t.b)));
+    float cap = DEPTH_CAP / extremes.x;
     float zb = texelFetch(back_depth, pixel, 0).r;
     vec2 ndc = (vec2(pixel) + 0.5) / size * 2.0 - 1.0;
     float s_exit = zb < 1.0 ? max(dot(unproject(frame.inverse_view_proj, ndc, zb) - x, d), 0.0) : 0.0;
@@ -397,14 +399,13 @@ void main() {
     float chord = s_exit;
     s_exit = min(s_exit, cap);
 
-    vec2 extremes = vec2(min(sigma_t.r, min(sigma_t.g, sigma_t.b)), max(sigma_t.r, max(sigma_t.g, sigma_t.b)));
     // The intervals: `m` of equal attenuation in the least extinguishing channel, and where the
     // channels' extinctions differ widely as many in the most extinguishing one, merged in
-    // order along the ray (two equal ends make an empty interval, skipped).
+    // order along the ray: 2m - 1 of them, the two sequences sharing their last end, s_exit.
     uint m = max(push.steps, 1u);
     bool both = extremes.y > SPREAD * extremes.x;
-    uint n = both ? 2u * m : m;
-    vec2 whole = vec2(one_minus_exp(extremes.x * s_exit), one_minus_exp(extremes.y * s_exit));
+    uint n = both ? 2u * m - 1u : m;
+    vec2 whole = vec2(one_minus_exp(extremes.x * s_exit), both ? one_minus_exp(extremes.y * s_exit) : 0.0);
     uint lights = frame.counts.x;
     vec3 sum = vec3(0.0);
     // Light by light (locals, not arrays indexed by the light: a compiler that cannot keep those
@@ -423,7 +424,7 @@ void main() {
         uint taken_least = 0u;
         uint taken_most = both ? 0u : m;
         float next_least = equal_share(1u, m, s_exit, extremes.x, whole.x);
-        float next_most = equal_share(1u, m, s_exit, extremes.y, whole.y);
+        float next_most = both ? equal_share(1u, m, s_exit, extremes.y, whole.y) : s_exit;
         for (uint k = 0u; k < n; ++k) {
             float s1;
             if (taken_most >= m || (taken_least < m && next_least <= next_most)) {

@@ -74,7 +74,7 @@ fn single_error(name: &str, truth_dir: &str) -> [f64; 3] {
 fn single_scattering_of_the_ketchup_sphere_matches_the_truth() {
     // Figures in docs/results/models.md. Red, whose light comes from across the sphere, has
     // half of the ray's intervals; blue's 0.7 mm mean free path meets the shadow map's texels
-    // (0.1 mm here). Bounds about a fifth above the figures.
+    // (0.1 mm here). Bounds 10-20 % above the figures.
     let e = single_error("sphere-ketchup", "sphere-ketchup-single");
     for (c, (e, bound)) in e.into_iter().zip([0.027, 0.02, 0.025]).enumerate() {
         assert!(

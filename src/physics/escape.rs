@@ -76,7 +76,7 @@ pub fn radius(k: usize) -> f64 {
 /// One analog walk from the centre of a non-absorbing ball of optical radius `r`, starting in a
 /// direction drawn uniformly: flights of unit mean, isotropic scattering, until a flight crosses
 /// the sphere.
-pub fn walk_out(r: f64, rng: &mut Rng) -> Exit {
+fn walk_out(r: f64, rng: &mut Rng) -> Exit {
     let mut x = DVec3::ZERO;
     let mut collisions = 0u32;
     loop {
@@ -154,13 +154,9 @@ impl Escape {
     }
 
     /// The tabulated exits of radius `k`.
-    pub fn exits(&self, k: usize) -> &[Exit] {
+    #[cfg(test)]
+    fn exits(&self, k: usize) -> &[Exit] {
         &self.exits[k * SAMPLES..(k + 1) * SAMPLES]
-    }
-
-    /// The largest tabulated radius.
-    pub fn largest(&self) -> f64 {
-        radius(RADII - 1)
     }
 }
 

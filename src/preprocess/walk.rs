@@ -520,7 +520,8 @@ impl Surface {
         if self.eta != 1.0 {
             e_c *= fresnel_transmittance(self.eta, cos);
         }
-        // Any hit blocks: the BVH's any-hit search stops at the first.
+        // Any hit blocks (`Surface::occluded`: the grid's march, which stops in the first cell
+        // that holds a hit, else the BVH's any-hit search).
         let blocked = || self.occluded(x + n * self.eps, towards, distance);
         if e_c > 0.0 && !(shadows && blocked()) {
             e_c
@@ -617,7 +618,7 @@ enum Counter {
     /// Collisions inside jumps.
     Jumped,
 }
-const COUNTERS: usize = 6;
+const COUNTERS: usize = Counter::Jumped as usize + 1;
 
 /// Source nodes walked at a time: their columns are summed into F and the lobes in node
 /// order before the next block starts (the sums do not depend on the threads, and the
