@@ -13,13 +13,20 @@ use translucent::scene::{desc::SceneDesc, mesh::Mesh, Overrides, Scene};
 /// `cases` cases from a fixed seed: the same cases, and the same time, on every run, so that CI
 /// is reproducible; `PROPTEST_RNG_SEED=N` explores others.
 fn config(cases: u32) -> ProptestConfig {
+    config_from(cases, 0)
+}
+
+/// [`config`] with its seed moved on by `offset`: another set of cases for a property that is
+/// split in two.
+fn config_from(cases: u32, offset: u64) -> ProptestConfig {
     let default = ProptestConfig::default();
+    let base = match default.rng_seed {
+        RngSeed::Fixed(n) => n,
+        _ => 1,
+    };
     ProptestConfig {
         cases,
-        rng_seed: match default.rng_seed {
-            RngSeed::Random => RngSeed::Fixed(1),
-            given => given,
-        },
+        rng_seed: RngSeed::Fixed(base.wrapping_add(offset)),
         ..default
     }
 }
@@ -446,10 +453,32 @@ fn check_cli(dir: &Path, scene: &[u8], args: &[(usize, usize)]) {
     }
 }
 
+/// One case of the command-line properties below: seed scene `seed` (mutated by `edits` where
+/// `mutated`) run with the hostile flags `args`, in a folder of its own per property.
+fn command_line_case(
+    property: &str,
+    (seed, mutated, edits, args): (usize, bool, Vec<Edit>, Vec<(usize, usize)>),
+) {
+    let dir = std::env::temp_dir().join(format!(
+        "translucent-fuzz-{property}-{}",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let seeds = seeds("toml");
+    let seed = &seeds[seed % seeds.len()];
+    let scene = if mutated {
+        mutate(seed, &edits)
+    } else {
+        seed.clone()
+    };
+    check_cli(&dir, &scene, &args);
+}
+
+// Each case is a whole run of the binary, so few cases: mutations of the scene seeds that still
+// parse often enough to reach the renderer. Two properties of 12 cases from different seeds
+// rather than one of 24, so that the test harness runs them side by side.
 proptest! {
-    // Each case is a whole run of the binary, so few cases: mutations of the
-    // scene seeds that still parse often enough to reach the renderer.
-    #![proptest_config(config(24))]
+    #![proptest_config(config(12))]
 
     #[test]
     fn command_line_gives_a_clean_image_or_a_message(
@@ -458,11 +487,20 @@ proptest! {
         edits in prop::collection::vec(edit(), 1..3),
         args in prop::collection::vec((0usize..64, 0usize..64), 0..4),
     ) {
-        let dir = std::env::temp_dir().join(format!("translucent-fuzz-cli-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let seeds = seeds("toml");
-        let seed = &seeds[seed % seeds.len()];
-        let scene = if mutated { mutate(seed, &edits) } else { seed.clone() };
-        check_cli(&dir, &scene, &args);
+        command_line_case("cli", (seed, mutated, edits, args));
+    }
+}
+
+proptest! {
+    #![proptest_config(config_from(12, 1))]
+
+    #[test]
+    fn command_line_from_other_seeds_gives_a_clean_image_or_a_message(
+        seed in 0usize..16,
+        mutated in prop::bool::weighted(0.25),
+        edits in prop::collection::vec(edit(), 1..3),
+        args in prop::collection::vec((0usize..64, 0usize..64), 0..4),
+    ) {
+        command_line_case("cli-other", (seed, mutated, edits, args));
     }
 }
