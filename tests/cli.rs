@@ -292,6 +292,10 @@ fn precompute_prints_its_choices_and_uses_the_cache() {
                 "ketchup",
                 "--texel-mm",
                 "1.0",
+                // The default model walks: few walks keep it, and its cache, in the test at
+                // a fraction of the derived count's time (the choices printed are the question).
+                "--walk-paths",
+                "256",
                 "--cache",
             ])
             .arg(dir.join("cache"))
