@@ -17,14 +17,15 @@
 // (radiance leaving a medium of index eta).
 // A compute pass over the samples the `front` pass drew (shading the triangles themselves,
 // lavapipe pays for whole blocks of pixels on triangles a few pixels wide).
-// Alpha holds the length of the ray inside (to the nearest back face; behind a refractive
-// boundary at most DEPTH_CAP free paths, where the chord factor is 1; 0 where the pass found
-// none, as in a pixel it did not draw), for the composite's chord factor of the higher orders.
-// The ray is cut into `steps` intervals of equal attenuation in the least extinguishing
-// channel, merged with as many in the most extinguishing one where their extinctions differ
-// more than SPREAD times; over each, s + d_l(s) is taken as linear between its ends (d_l
-// looked up at both), so the exponential integrates exactly per channel. The ray is followed to at most DEPTH_CAP free paths of the least extinguishing
-// channel: what lies beyond is attenuated below e^-DEPTH_CAP on the view ray alone.
+// Alpha holds the length of the ray inside (to the nearest back face; behind a refractive boundary
+// at most DEPTH_CAP free paths, where the chord factor is within e^-DEPTH_CAP of 1; 0 where the
+// pass found none, as in a pixel it did not draw), for the composite's chord factor of the higher
+// orders. The ray is cut into `steps` intervals of equal attenuation in the least extinguishing
+// channel, merged with `steps` - 1 more of equal attenuation in the most extinguishing one (the two
+// share the last end) where their extinctions differ more than SPREAD times; over each, s + d_l(s)
+// is taken as linear between its ends (d_l looked up at both), so the exponential integrates
+// exactly per channel. The ray is followed to at most DEPTH_CAP free paths of the least
+// extinguishing channel: what lies beyond is attenuated below e^-DEPTH_CAP on the view ray alone.
 #include "frame.glsl"
 #include "shadow.glsl"
 #include "numeric.glsl"
@@ -205,7 +206,7 @@ struct Anchor {
     float fade;
 };
 
-Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
+Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel, vec2 extremes) {
     Anchor a;
     a.lit = false;
     a.n = -travel;
@@ -213,8 +214,7 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
     a.facet_n = facet;
     a.smooth_n = normal;
     a.near = 0.0;
-    vec3 sigma_t = frame.sigma_t.rgb;
-    a.fade = min(sigma_t.r, min(sigma_t.g, sigma_t.b));
+    a.fade = extremes.x;
     vec3 entry;
     uint layer;
     vec2 uv;
@@ -232,7 +232,7 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel) {
     // On the surface the light enters: turned towards the light, and where the map sees it.
     float off = abs(dot(x - entry, travel));
     a.lit = dot(normal, travel) < 0.0 && off <= a.rounding;
-    float near = a.rounding + 0.25 / max(sigma_t.r, max(sigma_t.g, sigma_t.b));
+    float near = a.rounding + 0.25 / extremes.y;
     a.near = dot(normal, travel) < 0.0 ? 1.0 - smoothstep(near, 2.0 * near, off) : 0.0;
     return a;
 }
@@ -386,7 +386,8 @@ void main() {
     }
     vec3 sigma_t = frame.sigma_t.rgb;
     // The least and the most extinguishing channels' extinctions.
-    vec2 extremes = vec2(min(sigma_t.r, min(sigma_t.g, sigma_t.b)), max(sigma_t.r, max(sigma_t.g, sigma_t.b)));
+    vec2 extremes = vec2(min(sigma_t.r, min(sigma_t.g, sigma_t.b)),
+                         max(sigma_t.r, max(sigma_t.g, sigma_t.b)));
     float cap = DEPTH_CAP / extremes.x;
     float zb = texelFetch(back_depth, pixel, 0).r;
     vec2 ndc = (vec2(pixel) + 0.5) / size * 2.0 - 1.0;
@@ -398,6 +399,11 @@ void main() {
     // The ray's length inside, for the alpha: the whole chord where the back face gives it.
     float chord = s_exit;
     s_exit = min(s_exit, cap);
+    if (s_exit == 0.0) {
+        // No way through inside (no back face behind the sample): no light, and no chord.
+        imageStore(out_single, pixel, vec4(0.0));
+        return;
+    }
 
     // The intervals: `m` of equal attenuation in the least extinguishing channel, and where the
     // channels' extinctions differ widely as many in the most extinguishing one, merged in
@@ -405,7 +411,8 @@ void main() {
     uint m = max(push.steps, 1u);
     bool both = extremes.y > SPREAD * extremes.x;
     uint n = both ? 2u * m - 1u : m;
-    vec2 whole = vec2(one_minus_exp(extremes.x * s_exit), both ? one_minus_exp(extremes.y * s_exit) : 0.0);
+    vec2 whole = vec2(one_minus_exp(extremes.x * s_exit),
+                      both ? one_minus_exp(extremes.y * s_exit) : 0.0);
     uint lights = frame.counts.x;
     vec3 sum = vec3(0.0);
     // Light by light (locals, not arrays indexed by the light: a compiler that cannot keep those
@@ -417,7 +424,7 @@ void main() {
         vec3 wi;
         vec3 e0;
         light_at(l, x, wi, e0);
-        Anchor a = anchor_at(l, x, normal, facet, -wi);
+        Anchor a = anchor_at(l, x, normal, facet, -wi, extremes);
         float d0 = light_inside(l, x, -wi, eta, a, inside, 0.0, e0);
         float s0 = 0.0;
         // The next end of each channel's intervals, and how many of them are taken.

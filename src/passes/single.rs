@@ -28,8 +28,9 @@ pub const FRONT_FORMAT: vk::Format = Item::FrontPosition.format();
 pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 
 /// Intervals along each view ray, of equal attenuation in the least extinguishing channel;
-/// where the most extinguishing one's extinction is more than a few times larger, as many
-/// again of equal attenuation in that one, merged along the ray (`glsl/single.comp`). Over
+/// where the most extinguishing one's extinction is more than a few times larger, one fewer
+/// of equal attenuation in that one (the two share the last end), merged along the ray
+/// (`glsl/single.comp`). Over
 /// each the light's path inside is taken as linear and the exponential integrated exactly,
 /// so what fewer intervals miss is the path's bend (`tests/single.rs` holds the pass to the
 /// truth of single scattering on the ketchup sphere).
