@@ -70,10 +70,32 @@ fn single_error(name: &str, truth_dir: &str) -> [f64; 3] {
     e.rel_rms
 }
 
+/// The reference's single scattering of `scene` (its quadrature along each view ray), alpha 1,
+/// at the pixels `keep` (by index) takes whose ray meets the object; 0 elsewhere.
+fn reference_single(scene: &translucent::scene::Scene, keep: impl Fn(usize) -> bool) -> Vec<f32> {
+    let (w, h) = (scene.width, scene.height);
+    let tracer = translucent::truth::Tracer::for_single_scattering(scene).unwrap();
+    let mut scratch = translucent::truth::Scratch::default();
+    let mut image = vec![0.0f32; (4 * w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let (o, d) = translucent::scene::camera_ray(scene, x, y);
+            if !keep(i) || !tracer.covers(o, d) {
+                continue;
+            }
+            let l =
+                tracer.single_scattering(o, d, translucent::reference::SINGLE_STEPS, &mut scratch);
+            image[4 * i..4 * i + 4].copy_from_slice(&[l[0] as f32, l[1] as f32, l[2] as f32, 1.0]);
+        }
+    }
+    image
+}
+
 #[test]
 fn single_scattering_of_the_ketchup_sphere_matches_the_truth() {
     // Figures in docs/results/models.md. Red, whose light comes from across the sphere, has
-    // half of the ray's intervals; blue's 0.7 mm mean free path meets the shadow map's texels
+    // the least extinguishing channel's share of the ray's intervals; blue's 0.7 mm mean free path meets the shadow map's texels
     // (0.1 mm here). Bounds 10-20 % above the figures.
     let e = single_error("sphere-ketchup", "sphere-ketchup-single");
     for (c, (e, bound)) in e.into_iter().zip([0.027, 0.02, 0.025]).enumerate() {
@@ -94,21 +116,7 @@ fn single_scattering_of_the_ketchup_sphere_matches_the_truth() {
 fn the_references_single_scattering_matches_the_truth() {
     let scene = common::truth_scene("sphere-ketchup", Some(64), None);
     let (w, h, truth, noise) = common::committed_truth("sphere-ketchup-single");
-    let tracer = translucent::truth::Tracer::for_single_scattering(&scene).unwrap();
-    let mut scratch = translucent::truth::Scratch::default();
-    let mut image = vec![0.0f32; (4 * w * h) as usize];
-    for y in 0..h {
-        for x in 0..w {
-            let (o, d) = translucent::scene::camera_ray(&scene, x, y);
-            if !tracer.covers(o, d) {
-                continue;
-            }
-            let i = 4 * (y * w + x) as usize;
-            let l =
-                tracer.single_scattering(o, d, translucent::reference::SINGLE_STEPS, &mut scratch);
-            image[i..i + 4].copy_from_slice(&[l[0] as f32, l[1] as f32, l[2] as f32, 1.0]);
-        }
-    }
+    let image = reference_single(&scene, |_| true);
     let e = metrics::compare_binned(&image, &truth, Some(&noise), w, h, 4);
     println!(
         "quadrature against truth --max-order 1: {:.2} / {:.2} / {:.2} %",
@@ -627,29 +635,20 @@ fn a_thick_object_side_lit_matches_the_reference() {
     );
     let (w, h) = (scene.width, scene.height);
     let (out, c) = render_captured(&scene);
-    let tracer = translucent::truth::Tracer::for_single_scattering(&scene).unwrap();
-    let mut scratch = translucent::truth::Scratch::default();
-    let mut reference = vec![0.0f32; (4 * w * h) as usize];
-    let mut pass = vec![0.0f32; (4 * w * h) as usize];
-    for y in 0..h {
-        for x in 0..w {
-            let i = (y * w + x) as usize;
-            let (o, d) = translucent::scene::camera_ray(&scene, x, y);
-            if out.radiance[4 * i + 3] < 1.0 || !tracer.covers(o, d) {
-                continue;
+    // Pixels the render covers whole, as the pass's own samples there.
+    let reference = reference_single(&scene, |i| out.radiance[4 * i + 3] >= 1.0);
+    let pass: Vec<f32> = c
+        .single
+        .iter()
+        .zip(reference.chunks_exact(4))
+        .flat_map(|(s, r)| {
+            if r[3] > 0.0 {
+                [s[0], s[1], s[2], 1.0]
+            } else {
+                [0.0; 4]
             }
-            let l =
-                tracer.single_scattering(o, d, translucent::reference::SINGLE_STEPS, &mut scratch);
-            reference[4 * i..4 * i + 4].copy_from_slice(&[
-                l[0] as f32,
-                l[1] as f32,
-                l[2] as f32,
-                1.0,
-            ]);
-            let s = c.single[i];
-            pass[4 * i..4 * i + 4].copy_from_slice(&[s[0], s[1], s[2], 1.0]);
-        }
-    }
+        })
+        .collect();
     let e = metrics::compare_binned(&pass, &reference, None, w, h, 4);
     println!(
         "thick sphere: single scattering {:.2} / {:.2} / {:.2} % against the reference's quadrature ({} bins)",
