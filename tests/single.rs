@@ -592,8 +592,8 @@ fn fewer_samples_follow_the_depth() {
             100.0 * binned.rel_rms[1],
             100.0 * binned.rel_rms[2],
         );
-        for c in 0..3 {
-            assert!(binned.rel_rms[c] < bounds[c], "{k}: {:?}", binned.rel_rms);
+        for (e, bound) in binned.rel_rms.iter().zip(bounds) {
+            assert!(*e < bound, "{k}: {:?}", binned.rel_rms);
         }
     }
 }
