@@ -1,6 +1,6 @@
 //! The tone curves from linear radiance (times the exposure) to the display's linear values,
 //! before the sRGB encoding: the plain clip, Khronos PBR Neutral and AgX. `glsl/display.glsl`
-//! has the same curves; `tests/render.rs` holds the two to one 8-bit step.
+//! has the same curves; `tests/suite/render.rs` holds the two to one 8-bit step.
 
 use serde::{Deserialize, Serialize};
 

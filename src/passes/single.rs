@@ -32,7 +32,7 @@ pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 /// of equal attenuation in that one (the two share the last end), merged along the ray
 /// (`glsl/single.comp`). Over
 /// each the light's path inside is taken as linear and the exponential integrated exactly,
-/// so what fewer intervals miss is the path's bend (`tests/single.rs` holds the pass to the
+/// so what fewer intervals miss is the path's bend (`tests/suite/single.rs` holds the pass to the
 /// truth of single scattering on the ketchup sphere).
 pub const STEPS: u32 = 8;
 

@@ -127,7 +127,7 @@ pub struct Work {
 /// Seconds per unit of [`Work`] on one thread on the reference machine (a 2-core AMD EPYC of
 /// the kind CI runs on, whose [`crate::numeric::speed`] probe takes 12.3 ms), calibrated on 2
 /// cores over meshes from a 704-triangle box to a 235 000-triangle bunny, long-triangle meshes
-/// included, each stage's time against its own count (`tests/estimate.rs` prints the totals):
+/// included, each stage's time against its own count (`tests/suite/estimate.rs` prints the totals):
 /// kernel taps, dense entries and fit products (parallel), triangles (a serial and a parallel
 /// share), and what every run pays whatever its size (thread start-up, allocation; once, not
 /// per thread); walks (a start, a shadow ray and the rays through the air at the exits) and
@@ -270,19 +270,19 @@ pub fn estimate(mesh: &Mesh, material: &Material, choice: &Choice) -> Estimate {
 }
 
 /// Collisions of a walk per free path of the object's mean chord, where the chord bounds them
-/// ([`walk_steps`]): fitted on a thin slab and on spheres (`tests/estimate.rs`).
+/// ([`walk_steps`]): fitted on a thin slab and on spheres (`tests/suite/estimate.rs`).
 pub const CHORD_COLLISIONS: f64 = 1.25;
 
 /// Collisions a walk from the surface makes per free path of depth of the layer next to it
 /// ([`walk_steps`]): a diffusing walk from about a free path deep visits every depth below
 /// it about equally often, some 3 (z_0 + z_b) times per free path of depth in a half-space.
-/// Fitted on spheres (`tests/estimate.rs`).
+/// Fitted on spheres (`tests/suite/estimate.rs`).
 pub const LAYER_COLLISIONS: f64 = 3.5;
 
 /// Jumps a walk makes per e-fold of its collisions beyond those of the layer next to the
 /// surface ([`walk_steps`]): a jump through a ball of the walk's depth covers a share of its
 /// remaining way in, so the jumps grow with the log of the collisions they stand for. Fitted
-/// on spheres (`tests/estimate.rs`).
+/// on spheres (`tests/suite/estimate.rs`).
 pub const JUMPS_PER_E_FOLD: f64 = 1.3;
 
 /// Steps of the walks that fill F (`model = "volume"`; 0 otherwise): nodes x walks x steps per

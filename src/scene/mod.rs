@@ -140,7 +140,7 @@ pub struct Scene {
 
 /// Edges longer than this many times the mesh's vertex spacing are split
 /// ([`Mesh::refine_long_edges`]): no edge of an even mesh is (the bunny's longest is 2.74x;
-/// builtin spheres and boxes stay below too: `tests/careless.rs` only_long_triangles_are_split).
+/// builtin spheres and boxes stay below too: `tests/suite/careless.rs` only_long_triangles_are_split).
 pub const LONG_EDGE_SPACINGS: f64 = 3.0;
 
 /// Largest radius of the object after units and transform, and largest distance of any of its

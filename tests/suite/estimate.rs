@@ -6,7 +6,7 @@
 //! built and did. The seconds the estimate derives from them are printed beside the measured
 //! time, never asserted: they depend on the machine and its load.
 
-mod common;
+use crate::common;
 
 use translucent::passes::data::Requirements;
 use translucent::preprocess::{operators::Blend, settings::SettingsOverrides, Preprocessed};

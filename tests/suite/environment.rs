@@ -11,7 +11,7 @@
 //! - behind a refractive boundary the surface reflects the map in the mirror direction and
 //!   the lamps through its roughness, as the test's own closed forms on the analytic sphere.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use translucent::environment::Environment;
@@ -191,7 +191,7 @@ fn a_soft_sun_is_lit_as_a_disc_on_both_sides() {
 
 #[test]
 fn the_image_under_the_sky_is_within_the_methods_error_of_the_reference() {
-    // The paper's model, as tests/accuracy.rs measures the default light's.
+    // The paper's model, as tests/suite/accuracy.rs measures the default light's.
     let mut scene = common::scene(SKY);
     scene.material = scene
         .material
@@ -213,7 +213,7 @@ fn the_image_under_the_sky_is_within_the_methods_error_of_the_reference() {
         100.0 * e.channels[2].rel_rms
     );
     assert!(e.pixels > 2000, "{} pixels", e.pixels);
-    // The default light's bound in tests/accuracy.rs is 2 % at 512 x 512; at 128 x 128 the
+    // The default light's bound in tests/suite/accuracy.rs is 2 % at 512 x 512; at 128 x 128 the
     // reference's 64 rays per sample and the coarser pixels add a little.
     assert!(e.rel_rms < 0.03, "{:.2} % RMS", 100.0 * e.rel_rms);
 }

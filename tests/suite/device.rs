@@ -1,6 +1,6 @@
 //! The device layer: embedded shaders are accepted, and validation messages are counted.
 
-mod common;
+use crate::common;
 
 use ash::vk;
 use translucent::gpu::shaders;

@@ -7,7 +7,7 @@
 
 #![allow(clippy::needless_range_loop)]
 
-mod common;
+use crate::common;
 
 use glam::Vec3;
 use translucent::passes::compute::{GlobalLayout, GlobalVariant};
@@ -21,7 +21,7 @@ use translucent::preprocess::{
 use translucent::renderer::{Options, Renderer};
 use translucent::scene::{desc::SceneDesc, Overrides, Scene};
 
-use common::scene;
+use crate::common::scene;
 
 fn coarse(texel_mm: f64) -> SettingsOverrides {
     SettingsOverrides {

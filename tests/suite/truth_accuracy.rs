@@ -7,7 +7,7 @@
 //! each gives (the figures in docs/results/truth.md and docs/results/environment.md), so that
 //! a regression fails.
 
-mod common;
+use crate::common;
 
 use translucent::metrics;
 use translucent::physics::Model;
@@ -290,7 +290,7 @@ fn under_an_environment_behind_a_boundary() {
     // The glint's bins hold many times the object's mean, so a few per cent of a glint bin,
     // where the truth's flat faces and the renderer's interpolated normals part, is several
     // times the mean: green's and blue's peaks are bounded at 3.5 (the glint's whole light is
-    // checked in tests/environment.rs a_glint_takes_the_mean_over_the_pixel); red's keep the
+    // checked in tests/suite/environment.rs a_glint_takes_the_mean_over_the_pixel); red's keep the
     // blotch bound.
     let name = "sphere-ketchup-soft-sun";
     check_peaks(
@@ -424,7 +424,7 @@ fn bunnies_with_walks() {
 
 /// A semi-infinite slab of skim milk seen and lit along its normal (the 400 x 400 x 50 mm box
 /// of `assets/scenes/truth/halfspace-skimmilk.toml`): the default model at eta = 1 within
-/// 1.5 % of the truth's 0.2883 / 0.2887 / 0.2522 per unit irradiance (`tests/truth.rs`,
+/// 1.5 % of the truth's 0.2883 / 0.2887 / 0.2522 per unit irradiance (`tests/suite/truth.rs`,
 /// checked against Mitsuba 3); docs/results/tests.md gives the figures, and the dipole's.
 #[test]
 fn semi_infinite_skim_milk() {

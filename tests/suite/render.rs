@@ -1,7 +1,7 @@
 //! End-to-end renders on the device with validation on: silhouette against an independent CPU
 //! projection, light direction, finiteness, and the timing report.
 
-mod common;
+use crate::common;
 
 use glam::{Vec3, Vec4};
 use std::path::Path;

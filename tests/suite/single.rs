@@ -3,7 +3,7 @@
 //! committed in `tests/truth-data/` (see its README). The truth is independent of the pass:
 //! exact free flights, next-event estimation through the BVH, no shadow map, no ray march.
 
-mod common;
+use crate::common;
 
 use translucent::metrics;
 use translucent::preprocess::settings::SettingsOverrides;

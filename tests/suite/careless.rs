@@ -3,9 +3,9 @@
 //! would be black for a reason the user can fix come with a warning, printed and recorded in
 //! timings.json; outputs never overwrite inputs, and the saved scene re-runs from anywhere.
 
-mod common;
+use crate::common;
 
-use common::{bin, fails_with, render_cmd, stderr, temp_dir};
+use crate::common::{bin, fails_with, render_cmd, stderr, temp_dir};
 use glam::Vec3;
 use std::path::Path;
 use translucent::scene::{mesh::Mesh, LONG_EDGE_SPACINGS};

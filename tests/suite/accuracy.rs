@@ -5,7 +5,7 @@
 //!   every channel;
 //! - near chart borders, texel by texel, optimized blending well below simple blending.
 
-mod common;
+use crate::common;
 
 use translucent::metrics;
 use translucent::preprocess::{self, operators::Blend, settings::SettingsOverrides};

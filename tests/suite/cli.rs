@@ -1,9 +1,9 @@
 //! The command line: the default render works, bad input gives a clear error and a non-zero
 //! exit, never a panic.
 
-mod common;
+use crate::common;
 
-use common::{bin, fails_with, stderr, temp_dir};
+use crate::common::{bin, fails_with, stderr, temp_dir};
 use std::path::Path;
 use std::process::Command;
 

@@ -93,7 +93,7 @@ fn top(p: &Preprocessed, size: [f32; 3]) -> Vec<bool> {
 fn slab_under_uniform_light_reflects_r_total() {
     for name in ["skimmilk", "ketchup"] {
         // The dipole: a tabulated profile's operators take twice as long to build here, and
-        // the whole pipeline checks its R_total (tests/gpu_passes.rs slab_radiance).
+        // the whole pipeline checks its R_total (tests/suite/gpu_passes.rs slab_radiance).
         let m = Material::preset(name)
             .unwrap()
             .with_model(translucent::physics::Model::Dipole)

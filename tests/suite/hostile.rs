@@ -2,9 +2,9 @@
 //! settings that make a result meaningless, or a preprocessing no device takes, are refused by
 //! name before anything is allocated; a setting the model does not use is said.
 
-mod common;
+use crate::common;
 
-use common::{bin, fails_with, temp_dir};
+use crate::common::{bin, fails_with, temp_dir};
 use std::path::Path;
 
 /// What a path is, without following a link.

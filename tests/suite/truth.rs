@@ -1,6 +1,6 @@
 //! The volumetric path tracer (`truth`) against closed forms and conservation laws, on the CPU.
 
-mod common;
+use crate::common;
 
 use glam::DVec3;
 use rayon::prelude::*;

@@ -9,7 +9,7 @@
 //! (libxkbcommon-x11-0, libxcursor1, libxrandr2, libxi6); `.ci/run` installs them. Without
 //! them the tests fail rather than skip.
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -346,7 +346,7 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
                   light-colour 0 1 0.6 0.4; light-intensity 0 1.5; light-direction 0 1 -1 -0.5\n\
                   exposure 3; tonemap agx\n\
                   add-light point; frames 2; screenshot edited; save-scene edited\n\
-                  settings texel=0.9; wait; frames 2; screenshot coarse\n\
+                  settings texel=1.4; wait; frames 2; screenshot coarse\n\
                   remove-light 1; light-kind 0 spot; frames 2; screenshot spot\n\
                   albedo 0.6 0.5 0.4; scatter-distance 0.8 0.6 0.4; wait; frames 2\n\
                   screenshot appearance; quit";
@@ -357,6 +357,8 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     // longer than the frames between the drag's steps on a loaded machine.
     // The half-space profile, named: the default scene's walks are made again for an edited
     // material rather than re-weighted.
+    // Texels of 1 mm, coarser than the scene's own: every preparation here is a fraction of the
+    // default's, and the saved scene keeps the size given.
     view.args([
         "--model",
         "halfspace",
@@ -364,6 +366,8 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
         "device",
         "--settle-ms",
         "3000",
+        "--texel-mm",
+        "1.0",
     ]);
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(400));
     assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
@@ -397,7 +401,7 @@ fn panel_edits_reach_the_image_and_the_saved_scene_reproduces_it() {
     assert_eq!(edited["exposure"], 3.0);
     assert_eq!(edited["tonemap"], "agx");
     let coarse = json(&dir.join("coarse.json"));
-    assert_eq!(coarse["settings"]["texel_mm"], 0.9);
+    assert_eq!(coarse["settings"]["texel_mm"], 1.4);
     assert_eq!(
         coarse["model"], "halfspace",
         "the settings keep the material"

@@ -1,9 +1,9 @@
 //! Bad input, limits, faults and numerical stability (see docs/robustness.md): each case ends
 //! in a clear error and exit code 1, or in a finite image, never a panic, hang or garbage.
 
-mod common;
+use crate::common;
 
-use common::{bin, fails_with, stderr, temp_dir};
+use crate::common::{bin, fails_with, stderr, temp_dir};
 
 use std::path::Path;
 use std::process::{Command, Output};

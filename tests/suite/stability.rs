@@ -6,7 +6,7 @@
 //! relative RMS must stay under the bound given. The bounds are ceilings set about 30 % above
 //! the measured figures (docs/results/stability.md), so a regression fails; where a figure is
 //! far from the 2 % goal docs/results/stability.md says so and why.
-//! `TRANSLUCENT_STABILITY_TABLE=1 cargo test --release --test stability -- --nocapture
+//! `TRANSLUCENT_STABILITY_TABLE=1 cargo test --release --test suite stability:: -- --nocapture
 //! --test-threads 1` prints the table rows.
 //!
 //! Each case is also rendered with an index-matched boundary (eta = 1) and compared with its
@@ -20,10 +20,10 @@
 //! of the model against reality fails too. Only the walks' column is asserted: the other three
 //! are rendered when `TRANSLUCENT_STABILITY_TABLE` is set, for the table in
 //! docs/results/stability.md. The truth images
-//! are made by this suite: `TRANSLUCENT_WRITE_TRUTH=512 cargo test --release --test stability
+//! are made by this suite: `TRANSLUCENT_WRITE_TRUTH=512 cargo test --release --test suite stability::
 //! -- --test-threads 1` traces each case with 512 paths per pixel and channel and writes them.
 
-mod common;
+use crate::common;
 
 use glam::{Mat4, Vec3};
 use translucent::metrics;
@@ -33,7 +33,7 @@ use translucent::reference::{Reference, ReferenceSettings};
 use translucent::renderer::Options;
 use translucent::scene::{mesh::Mesh, Scene};
 
-use common::scene;
+use crate::common::scene;
 
 /// Appends `part` (moved by `t`) to the scene's mesh.
 fn add(scene: &mut Scene, mut part: Mesh, t: Mat4) {
