@@ -157,7 +157,9 @@ fn render_warned(dir: &Path, scene: &Path, extra: &[&str]) -> (String, f32, Vec<
         "out-{}",
         scene.file_stem().unwrap().to_string_lossy()
     ));
+    // Few walks: the warnings are the question here, not the walks' noise.
     let o = render_cmd(&out, 32)
+        .args(["--walk-paths", "64"])
         .arg(scene)
         .args(extra)
         .output()
