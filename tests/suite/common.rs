@@ -167,16 +167,24 @@ pub fn truth_scene(
     size: Option<u32>,
     model: Option<translucent::physics::Model>,
 ) -> Scene {
-    Scene::load(
-        Some(std::path::Path::new(&format!(
-            "assets/scenes/truth/{name}.toml"
-        ))),
-        &translucent::scene::Overrides {
+    truth_scene_with(
+        name,
+        translucent::scene::Overrides {
             width: size,
             height: size,
             model,
             ..Default::default()
         },
+    )
+}
+
+/// A scene of `assets/scenes/truth/` with `overrides` over its file.
+pub fn truth_scene_with(name: &str, overrides: translucent::scene::Overrides) -> Scene {
+    Scene::load(
+        Some(std::path::Path::new(&format!(
+            "assets/scenes/truth/{name}.toml"
+        ))),
+        &overrides,
     )
     .unwrap()
 }

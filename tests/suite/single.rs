@@ -5,6 +5,7 @@
 
 use crate::common;
 
+use glam::DVec3;
 use translucent::metrics;
 use translucent::preprocess::settings::SettingsOverrides;
 use translucent::renderer::{Captured, Options, RenderOutput};
@@ -46,17 +47,14 @@ fn single_error(
     (scene, settings): (translucent::scene::Overrides, SettingsOverrides),
     truth_dir: &str,
 ) -> [f64; 3] {
-    let scene = Scene::load(
-        Some(std::path::Path::new(&format!(
-            "assets/scenes/truth/{name}.toml"
-        ))),
-        &translucent::scene::Overrides {
+    let scene = common::truth_scene_with(
+        name,
+        translucent::scene::Overrides {
             width: Some(64),
             height: Some(64),
             ..scene
         },
-    )
-    .unwrap();
+    );
     assert!(scene.material.model.has_single_pass());
     let (w, h, truth, noise) = common::committed_truth(truth_dir);
     let (out, c) = render_captured_with(&scene, settings);
@@ -83,6 +81,18 @@ fn single_error(
     );
     assert!(e.bins >= 20);
     e.rel_rms
+}
+
+/// Asserts that each channel's error in `e` is below its bound in `bounds`.
+fn assert_below(e: [f64; 3], bounds: [f64; 3]) {
+    for (c, (e, bound)) in e.into_iter().zip(bounds).enumerate() {
+        assert!(
+            e < bound,
+            "channel {c}: {:.1} %, bound {:.1} %",
+            100.0 * e,
+            100.0 * bound
+        );
+    }
 }
 
 /// The reference's single scattering of `scene` (its quadrature along each view ray), alpha 1,
@@ -117,14 +127,7 @@ fn single_scattering_of_the_ketchup_sphere_matches_the_truth() {
         Default::default(),
         "sphere-ketchup-single",
     );
-    for (c, (e, bound)) in e.into_iter().zip([0.027, 0.02, 0.025]).enumerate() {
-        assert!(
-            e < bound,
-            "channel {c}: {:.1} %, bound {:.1} %",
-            100.0 * e,
-            100.0 * bound
-        );
-    }
+    assert_below(e, [0.027, 0.02, 0.025]);
 }
 
 /// Behind a refractive boundary (eta 1.3), on a skim-milk sphere of 40 mm radius lit from the
@@ -152,14 +155,7 @@ fn single_scattering_behind_a_refractive_boundary_matches_the_truth() {
         (refracted, few_walks),
         "sphere-skimmilk-thick-single-eta1.3",
     );
-    for (c, (e, bound)) in e.into_iter().zip([0.055, 0.05, 0.045]).enumerate() {
-        assert!(
-            e < bound,
-            "channel {c}: {:.1} %, bound {:.1} %",
-            100.0 * e,
-            100.0 * bound
-        );
-    }
+    assert_below(e, [0.055, 0.05, 0.045]);
 }
 
 /// The reference's single scattering (deterministic quadrature along each view ray with
@@ -187,6 +183,45 @@ fn the_references_single_scattering_matches_the_truth() {
     }
 }
 
+/// A camera ray of a scene centred on `centre` through a pixel its render covers whole.
+struct CoveredRay {
+    pixel: usize,
+    origin: DVec3,
+    direction: DVec3,
+    centre: DVec3,
+    /// The distance along the ray to its point nearest the centre.
+    along: f64,
+    /// The squared distance of that point from the centre.
+    b2: f64,
+}
+
+/// The camera rays of `scene` through the pixels `out` covers whole.
+fn covered_rays(scene: &Scene, out: &RenderOutput) -> Vec<CoveredRay> {
+    let (w, h) = (scene.width, scene.height);
+    let centre = scene.bounds().0.as_dvec3();
+    let mut rays = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let pixel = (y * w + x) as usize;
+            if out.radiance[4 * pixel + 3] < 1.0 {
+                continue;
+            }
+            let (origin, direction) = translucent::scene::camera_ray(scene, x, y);
+            let to = centre - origin;
+            let along = to.dot(direction);
+            rays.push(CoveredRay {
+                pixel,
+                origin,
+                direction,
+                centre,
+                along,
+                b2: (to - direction * along).length_squared(),
+            });
+        }
+    }
+    rays
+}
+
 /// The view ray's length inside the object, which the pass writes in its alpha for the
 /// composite's chord factor (`halfspace-single`), against the chord of a sphere in closed form,
 /// 2 sqrt(R^2 - b^2) for a ray passing at b from the centre: within 1 % of the diameter
@@ -201,26 +236,15 @@ fn the_pass_measures_the_view_rays_length_inside() {
     let (w, h) = (scene.width, scene.height);
     let (out, c) = render_captured(&scene);
     assert_eq!(c.single.len(), (w * h) as usize, "one sample per pixel");
-    let (center, _) = scene.bounds();
-    let center = center.as_dvec3();
     let r2 = radius * radius;
     let (mut checked, mut worst, mut shortest) = (0, 0.0f64, f64::INFINITY);
-    for y in 0..h {
-        for x in 0..w {
-            let i = (y * w + x) as usize;
-            if out.radiance[4 * i + 3] < 1.0 {
-                continue;
-            }
-            let (o, d) = translucent::scene::camera_ray(&scene, x, y);
-            let to = center - o;
-            let b2 = (to - d * to.dot(d)).length_squared();
-            let got = c.single[i][3] as f64;
-            shortest = shortest.min(got);
-            if b2 < 0.95 * 0.95 * r2 {
-                let want = 2.0 * (r2 - b2).sqrt();
-                worst = worst.max((got - want).abs() / (2.0 * radius));
-                checked += 1;
-            }
+    for ray in covered_rays(&scene, &out) {
+        let got = c.single[ray.pixel][3] as f64;
+        shortest = shortest.min(got);
+        if ray.b2 < 0.95 * 0.95 * r2 {
+            let want = 2.0 * (r2 - ray.b2).sqrt();
+            worst = worst.max((got - want).abs() / (2.0 * radius));
+            checked += 1;
         }
     }
     println!(
@@ -261,44 +285,30 @@ fn the_pass_measures_the_refracted_view_rays_length_inside() {
         ..Default::default()
     };
     let (out, c) = render_captured_with(&scene, few_walks);
-    let (w, h) = (scene.width, scene.height);
+    // The pass's cap (`DEPTH_CAP` in glsl/single.comp), in free paths of the least
+    // extinguishing channel.
     let sigma_t = scene.material.sigma_t();
     let cap = 12.0 / sigma_t.iter().cloned().fold(f64::INFINITY, f64::min);
     assert!(cap < 2.0 * radius, "cap {cap} mm");
-    let (center, _) = scene.bounds();
-    let center = center.as_dvec3();
     let r2 = radius * radius;
     let (mut capped, mut bisected, mut worst, mut at_cap) = (0, 0, 0.0f64, 0.0f64);
-    for y in 0..h {
-        for x in 0..w {
-            let i = (y * w + x) as usize;
-            if out.radiance[4 * i + 3] < 1.0 {
-                continue;
-            }
-            let (o, d) = translucent::scene::camera_ray(&scene, x, y);
-            let to = center - o;
-            let along = to.dot(d);
-            let b2 = (to - d * along).length_squared();
-            if b2 >= 0.95 * 0.95 * r2 {
-                continue;
-            }
-            let entry = o + d * (along - (r2 - b2).sqrt());
-            let n = (entry - center) / radius;
-            // Snell's law towards the normal.
-            let cos_i = -n.dot(d);
-            let k = 1.0 / eta;
-            let cos_t = (1.0 - k * k * (1.0 - cos_i * cos_i)).sqrt();
-            let t = d * k + n * (k * cos_i - cos_t);
-            let bent = -2.0 * (entry - center).dot(t);
-            let want = bent.min(cap);
-            let got = c.single[i][3] as f64;
-            worst = worst.max((got - want).abs() / (2.0 * radius));
-            if bent > cap && 2.0 * (r2 - b2).sqrt() >= cap {
-                capped += 1;
-                at_cap = at_cap.max((got / cap - 1.0).abs());
-            } else if bent < cap {
-                bisected += 1;
-            }
+    for ray in covered_rays(&scene, &out) {
+        if ray.b2 >= 0.95 * 0.95 * r2 {
+            continue;
+        }
+        let entry = ray.origin + ray.direction * (ray.along - (r2 - ray.b2).sqrt());
+        let n = (entry - ray.centre) / radius;
+        let t = translucent::physics::surface::refract(ray.direction, n, eta)
+            .expect("light entering a denser medium always refracts");
+        let bent = -2.0 * (entry - ray.centre).dot(t);
+        let want = bent.min(cap);
+        let got = c.single[ray.pixel][3] as f64;
+        worst = worst.max((got - want).abs() / (2.0 * radius));
+        if bent > cap && 2.0 * (r2 - ray.b2).sqrt() >= cap {
+            capped += 1;
+            at_cap = at_cap.max((got / cap - 1.0).abs());
+        } else if bent < cap {
+            bisected += 1;
         }
     }
     println!(
@@ -777,11 +787,10 @@ fn fewer_samples_on_sides_they_do_not_divide() {
 /// (docs/results/tests.md).
 #[test]
 fn a_thick_object_side_lit_matches_the_reference() {
-    let scene = common::scene(
-        "[mesh]\nbuiltin = \"sphere\"\nradius = 40.0\nsegments = 96\n\
-         [[lights]]\nkind = \"directional\"\ndirection = [1.0, -0.2, 0.3]\n\
-         [material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n\
-         [output]\nwidth = 64\nheight = 64\n",
+    let scene = common::truth_scene(
+        "sphere-skimmilk-thick",
+        None,
+        Some(translucent::physics::Model::HalfspaceSingle),
     );
     let (w, h) = (scene.width, scene.height);
     let (out, c) = render_captured(&scene);
