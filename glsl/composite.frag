@@ -10,6 +10,7 @@
 #include "shadow.glsl"
 #include "view_normal.glsl"
 #include "display.glsl"
+#include "numeric.glsl"
 
 layout(set = 0, binding = 2, rgba32f) uniform readonly image2D local_b;
 layout(set = 0, binding = 3) uniform sampler2D albedo_texture;
@@ -440,7 +441,7 @@ void main() {
                      ? single_upsampled(gl_FragCoord.xy, gl_FragCoord.z, dz)
                      : single_at(ivec2(gl_FragCoord.xy));
         if (CHORD && s.a > 0.0) {
-            l *= 1.0 - exp(-frame.sigma_t.rgb * s.a);
+            l *= one_minus_exp(frame.sigma_t.rgb * s.a);
         }
         // Scattered once, near where it entered: through T / R, in and out at one place.
         l += s.rgb * shown;

@@ -7,4 +7,9 @@ float one_minus_exp(float x) {
     return x < 1e-2 ? x * (1.0 - 0.5 * x * (1.0 - x / 3.0 * (1.0 - 0.25 * x))) : 1.0 - exp(-x);
 }
 
+// The same per channel.
+vec3 one_minus_exp(vec3 x) {
+    return vec3(one_minus_exp(x.r), one_minus_exp(x.g), one_minus_exp(x.b));
+}
+
 #endif

@@ -50,6 +50,9 @@ layout(set = 0, binding = 6, rgba32f) uniform writeonly image2D out_single;
 // pipeline: lavapipe runs both sides of a branch, so the index-matched pass carries none of
 // the refracted path's work.
 layout(constant_id = 0) const bool REFRACTS = false;
+// Free paths of the least extinguishing channel beyond which the view ray is not followed, set
+// with the pipeline from `DEPTH_CAP` in src/passes/single.rs (0 here: an unset cap draws nothing).
+layout(constant_id = 1) const float DEPTH_CAP = 0.0;
 
 layout(push_constant) uniform Push {
     uint steps;
@@ -296,9 +299,6 @@ float light_inside(Light l, vec3 p, vec3 travel, float eta, Anchor a, vec3 insid
     return d;
 }
 
-// Free paths of the least extinguishing channel beyond which the view ray is not followed.
-const float DEPTH_CAP = 12.0;
-
 // Bisection steps that find where the refracted view ray leaves the object.
 const uint EXIT_STEPS = 8u;
 
@@ -452,7 +452,7 @@ void main() {
                 // s + d_l(s) linear over the interval: the exponential integrates exactly.
                 vec3 rate = sigma_t * max(1.0 + (d1 - d0) / ds, 1e-4);
                 vec3 start = exp(-sigma_t * (s0 + d0));
-                sum += 0.5 * (e0 + e1) * start * (1.0 - exp(-rate * ds)) / rate;
+                sum += 0.5 * (e0 + e1) * start * one_minus_exp(rate * ds) / rate;
             }
             d0 = d1;
             e0 = e1;

@@ -36,6 +36,12 @@ pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 /// truth of single scattering on the ketchup sphere).
 pub const STEPS: u32 = 8;
 
+/// Free paths of the least extinguishing channel beyond which `single` does not follow the
+/// view ray: what lies beyond is attenuated below e^-12 on the view ray alone, and the chord
+/// factor of the higher orders is within as much of 1 there (a specialization constant of
+/// `glsl/single.comp`).
+pub const DEPTH_CAP: f32 = 12.0;
+
 /// The mesh both passes draw and the frame uniforms.
 #[derive(Clone, Copy)]
 pub struct MeshInputs {
@@ -191,7 +197,7 @@ pub fn single(graph: &mut RenderGraph, i: SingleInputs, out: ResourceId) {
                 PassName::Single.as_str(),
                 shaders::SINGLE_COMP,
                 set,
-                &[i.refracts as u32],
+                &[i.refracts as u32, DEPTH_CAP.to_bits()],
             )?;
             let extent = res.image(out).info.extent;
             Ok(Box::new(move |rec| {

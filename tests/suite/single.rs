@@ -264,8 +264,8 @@ fn the_pass_measures_the_view_rays_length_inside() {
 }
 
 /// Behind a refractive boundary (eta 1.3) the view ray bends at its entry and the pass finds
-/// its length inside along the bent ray, up to the depth cap of twelve free paths of the least
-/// extinguishing channel (`refracted_exit`). On a sphere the bent chord is known in closed
+/// its length inside along the bent ray, up to the depth cap (`DEPTH_CAP` free paths of the least
+/// extinguishing channel, `refracted_exit`). On a sphere the bent chord is known in closed
 /// form: from the entry x along the refracted direction t, -2 (x - c) . t. Skim milk's cap
 /// (17 mm) is shorter than the 20 mm diameter: rays through the middle reach it while still
 /// inside, where the pass keeps the cap without bisecting (their straight chord reaches it
@@ -285,10 +285,10 @@ fn the_pass_measures_the_refracted_view_rays_length_inside() {
         ..Default::default()
     };
     let (out, c) = render_captured_with(&scene, few_walks);
-    // The pass's cap (`DEPTH_CAP` in glsl/single.comp), in free paths of the least
-    // extinguishing channel.
+    // The pass's cap in free paths of the least extinguishing channel.
     let sigma_t = scene.material.sigma_t();
-    let cap = 12.0 / sigma_t.iter().cloned().fold(f64::INFINITY, f64::min);
+    let cap = translucent::passes::single::DEPTH_CAP as f64
+        / sigma_t.iter().cloned().fold(f64::INFINITY, f64::min);
     assert!(cap < 2.0 * radius, "cap {cap} mm");
     let r2 = radius * radius;
     let (mut capped, mut bisected, mut worst, mut at_cap) = (0, 0, 0.0f64, 0.0f64);
