@@ -8,69 +8,6 @@ use std::path::Path;
 use std::process::Command;
 
 #[test]
-fn default_render_writes_all_outputs_validated() {
-    let out = temp_dir("default");
-    let o = bin()
-        .args([
-            "--validate",
-            "render",
-            "--frames",
-            "3",
-            "--width",
-            "128",
-            "--height",
-            "96",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    // The resolved scene is printed with its defaults.
-    assert!(
-        stdout.contains("preset = \"skimmilk\"") && stdout.contains("fov_deg"),
-        "{stdout}"
-    );
-    for f in [
-        "render.png",
-        "render.exr",
-        "timings.json",
-        "trace.json",
-        "scene.toml",
-    ] {
-        assert!(out.join(f).is_file(), "{f} missing");
-    }
-    let png = image::open(out.join("render.png")).unwrap();
-    assert_eq!((png.width(), png.height()), (128, 96));
-    let (w, h, px) = translucent::output::read_exr(&out.join("render.exr")).unwrap();
-    assert_eq!((w, h), (128, 96));
-    assert!(px.iter().all(|v| v.is_finite()));
-    let t: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("timings.json")).unwrap()).unwrap();
-    assert_eq!(t["frames"], 3);
-    assert!(t["device"].as_str().unwrap().len() > 1);
-    for key in ["name", "min_ms", "median_ms", "max_ms"] {
-        assert!(t["passes"][0].get(key).is_some(), "{key}");
-    }
-    let trace: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("trace.json")).unwrap()).unwrap();
-    assert!(trace["traceEvents"].as_array().unwrap().len() >= 3 * 4);
-    // The written scene renders again.
-    let o2 = bin()
-        .args(["render", "--frames", "1", "--cache"])
-        .arg(out.join("cache"))
-        .arg("--out")
-        .arg(out.join("again"))
-        .arg(out.join("scene.toml"))
-        .args(["--width", "32", "--height", "32"])
-        .output()
-        .unwrap();
-    assert!(o2.status.success(), "{}", stderr(&o2));
-    let _ = std::fs::remove_dir_all(&out);
-}
-
-#[test]
 fn devices_are_listed() {
     let o = bin().arg("devices").output().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
@@ -742,10 +679,16 @@ fn truth_writes_image_noise_and_figures_and_compare_removes_its_noise() {
 }
 
 /// The bare command is `render` with clap's defaults: the same settings printed (the pruning
-/// tolerance among them, which must not read 0 %) and the same image.
+/// tolerance among them, which must not read 0 %) and the same image. Then the default scene
+/// under the validation layer writes every output (from the same preprocessing, found in the
+/// cache), and the scene it wrote renders again.
 #[test]
 fn the_bare_command_renders_like_render() {
-    let (a, b) = (temp_dir("bare"), temp_dir("bare-render"));
+    let (a, b, c) = (
+        temp_dir("bare"),
+        temp_dir("bare-render"),
+        temp_dir("bare-validated"),
+    );
     // One cache: the second run finds the first's preprocessing only where its settings, and
     // so its cache key, are the same.
     let cache = a.join("cache");
@@ -757,33 +700,74 @@ fn the_bare_command_renders_like_render() {
             .output()
             .unwrap();
         assert!(o.status.success(), "{args:?}: {}", stderr(&o));
-        let text = String::from_utf8_lossy(&o.stdout).into_owned();
-        // The scene and the derived settings: everything before the timings, but the time
-        // estimate (it scales by the machine's speed as each run finds it) and where the
-        // second run found the first's preprocessing.
-        let settings: Vec<String> = text
-            .lines()
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    // The scene and the derived settings: everything before the timings, but the time
+    // estimate (it scales by the machine's speed as each run finds it) and where the second
+    // run found the first's preprocessing.
+    let settings = |text: &str| -> Vec<String> {
+        text.lines()
             .take_while(|l| !l.starts_with("device:"))
             .filter(|l| {
                 !l.starts_with("# estimate:") && !l.starts_with("# preprocessing loaded from")
             })
             .map(str::to_owned)
-            .collect();
-        (
-            settings,
-            translucent::output::read_exr(&dir.join("out/render.exr")).unwrap(),
-        )
+            .collect()
     };
-    let (bare, bare_image) = run(&a, &[]);
-    let (render, render_image) = run(&b, &["render"]);
+    let image = |dir: &Path| translucent::output::read_exr(&dir.join("out/render.exr")).unwrap();
+    let bare = settings(&run(&a, &[]));
+    let render = settings(&run(&b, &["render"]));
     assert!(
         bare.iter().any(|l| l.contains("pruning tolerance 1.00 %")),
         "{bare:#?}"
     );
     assert_eq!(bare, render);
-    assert_eq!(bare_image, render_image);
-    let _ = std::fs::remove_dir_all(&a);
-    let _ = std::fs::remove_dir_all(&b);
+    let bare_image = image(&a);
+    assert_eq!(bare_image, image(&b));
+
+    let stdout = run(&c, &["--validate", "render", "--frames", "3"]);
+    // The resolved scene is printed with its defaults.
+    assert!(
+        stdout.contains("preset = \"skimmilk\"") && stdout.contains("fov_deg"),
+        "{stdout}"
+    );
+    let out = c.join("out");
+    for f in [
+        "render.png",
+        "render.exr",
+        "timings.json",
+        "trace.json",
+        "scene.toml",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let (w, h, px) = &bare_image;
+    let png = image::open(out.join("render.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (*w, *h));
+    assert!(px.iter().all(|v| v.is_finite()));
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("timings.json")).unwrap()).unwrap();
+    assert_eq!(t["frames"], 3);
+    assert!(t["device"].as_str().unwrap().len() > 1);
+    for key in ["name", "min_ms", "median_ms", "max_ms"] {
+        assert!(t["passes"][0].get(key).is_some(), "{key}");
+    }
+    let trace: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("trace.json")).unwrap()).unwrap();
+    assert!(trace["traceEvents"].as_array().unwrap().len() >= 3 * 4);
+    // The written scene renders again.
+    let scene = out.join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    run(
+        &c,
+        &[
+            "render", "--frames", "1", "--out", "again", scene, "--width", "32", "--height", "32",
+        ],
+    );
+    assert!(c.join("again/render.png").is_file());
+    for d in [&a, &b, &c] {
+        let _ = std::fs::remove_dir_all(d);
+    }
 }
 
 /// The oblique-incidence factor is said with the derived settings where the model takes it
