@@ -58,7 +58,7 @@ pub struct Cli {
 /// Subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Render a scene to render.png, render.exr, timings.json and trace.json.
+    /// Render a scene to render.png, render.exr, timings.json, trace.json and scene.toml (the scene as rendered).
     Render(RenderArgs),
     /// Run the preprocessing (atlas, global response, kernels, blending) and cache it.
     Precompute(PrecomputeArgs),

@@ -81,7 +81,7 @@ pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     )?;
     let result = render_frames(&mut renderer, args)?;
     let report = timing_report(&gpu, &result, scene_warnings);
-    write_outputs(&mut set, &result, &report, &resolved, args)?;
+    write_outputs(&mut set, &result, &report, &resolved)?;
     set.commit()?;
     print_summary(&report, &args.out);
     drop(renderer);
@@ -147,7 +147,6 @@ fn write_outputs(
     result: &crate::renderer::RenderOutput,
     report: &TimingReport,
     resolved: &str,
-    args: &RenderArgs,
 ) -> Result<()> {
     output::encode_png(
         &set.path("render.png"),
@@ -163,9 +162,7 @@ fn write_outputs(
     )?;
     output::encode_timings(&set.path("timings.json"), report)?;
     output::encode_trace(&set.path("trace.json"), &result.pass_names, &result.frames)?;
-    std::fs::write(set.path("scene.toml"), resolved)
-        .with_context(|| format!("cannot write scene.toml in '{}'", args.out.display()))?;
-    Ok(())
+    set.text("scene.toml", resolved)
 }
 
 /// Prints the device, each pass's times and the frame's, and where the files went.

@@ -128,7 +128,7 @@ pub fn write(
         Image::from_channels((w, w / 2), channels)
             .write()
             .non_parallel()
-            .to_file(tmp)?;
-        Ok(())
+            .to_file(tmp)
+            .map_err(crate::output::exr_error)
     })
 }

@@ -66,6 +66,17 @@ pub enum GpuError {
         /// The allocator's reason.
         source: gpu_allocator::AllocationError,
     },
+    /// A requested count that the device does not offer (it offers a set of counts, not a
+    /// range).
+    #[error("{what} = {value} is not offered by this device, which offers {offered}")]
+    NotOffered {
+        /// What was asked for.
+        what: String,
+        /// The requested count.
+        value: u64,
+        /// The counts the device offers.
+        offered: String,
+    },
     /// A request exceeds a limit of the device or of a data layout.
     #[error("{what} needs {value}, above the limit {limit} = {max}")]
     Limit {

@@ -26,6 +26,30 @@ fn temporary(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}{TEMPORARY_SUFFIX}", std::process::id()))
 }
 
+/// The name a file written to `path` is for: the final name where `path` is one of this
+/// process's temporaries ([`temporary`]), `path` itself otherwise. Errors name that file,
+/// not the temporary the user never sees.
+fn destination(path: &Path) -> PathBuf {
+    let suffix = format!(".{}{TEMPORARY_SUFFIX}", std::process::id());
+    path.file_name()
+        .and_then(|n| n.to_str())
+        .and_then(|n| n.strip_prefix('.')?.strip_suffix(suffix.as_str()))
+        .map_or_else(|| path.to_path_buf(), |n| path.with_file_name(n))
+}
+
+/// The context of a failed write of `path`: the file it is for and its folder.
+fn cannot_write(path: &Path) -> String {
+    let target = destination(path);
+    match target.parent().filter(|d| !d.as_os_str().is_empty()) {
+        Some(dir) => format!(
+            "cannot write '{}' (in the output folder '{}')",
+            target.display(),
+            dir.display()
+        ),
+        None => format!("cannot write '{}'", target.display()),
+    }
+}
+
 /// Refuses `path` as a target to replace when something other than a regular file is there: a
 /// rename would put a file in place of a device, a FIFO, a socket or a symbolic link (the link
 /// replaced, not its target written), and cannot replace a folder.
@@ -92,7 +116,15 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    result.with_context(|| format!("cannot write '{}'", path.display()))
+    // Named once: the encoders below already name the file they write for.
+    let context = cannot_write(path);
+    result.map_err(|e| {
+        if e.to_string() == context {
+            e
+        } else {
+            e.context(context)
+        }
+    })
 }
 
 /// The files of one run, written as a set: each is written under a temporary name, and only
@@ -142,6 +174,13 @@ impl OutputSet {
         for name in names {
             check_replaceable(&dir.join(name))?;
         }
+        // A folder that takes no files (read-only, not ours) is refused now, not after the
+        // work: an empty temporary is made and removed again.
+        if let Some(first) = names.first() {
+            let probe = temporary(&dir.join(first));
+            std::fs::write(&probe, b"").with_context(|| cannot_write(&probe))?;
+            let _ = std::fs::remove_file(&probe);
+        }
         Ok(OutputSet {
             dir: dir.to_path_buf(),
             names,
@@ -186,8 +225,7 @@ impl OutputSet {
     /// Writes the set's file `name` with `contents`.
     pub fn text(&mut self, name: &str, contents: &str) -> Result<()> {
         let path = self.path(name);
-        std::fs::write(&path, contents)
-            .with_context(|| format!("cannot write {}", self.dir.join(name).display()))
+        std::fs::write(&path, contents).with_context(|| cannot_write(&path))
     }
 
     /// Moves every file into place, and removes the set's names it did not write (an older
@@ -285,8 +323,13 @@ pub fn encode_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<(
         height,
         image::ColorType::Rgba8,
         image::ImageFormat::Png,
-    )?;
-    Ok(())
+    )
+    .map_err(|e| match e {
+        // The I/O error alone: the codec's wrapper would print it twice.
+        image::ImageError::IoError(io) => anyhow::Error::new(io),
+        other => anyhow::Error::new(other),
+    })
+    .with_context(|| cannot_write(path))
 }
 
 /// Writes linear RGBA f32 pixels (row-major, top row first) as an OpenEXR file
@@ -308,8 +351,18 @@ pub fn encode_exr(path: &Path, width: u32, height: u32, rgba: &[f32]) -> Result<
     Image::from_channels((w, height as usize), channels)
         .write()
         .non_parallel()
-        .to_file(path)?;
-    Ok(())
+        .to_file(path)
+        .map_err(exr_error)
+        .with_context(|| cannot_write(path))
+}
+
+/// An OpenEXR error, its I/O error alone where it is one: the codec's wrapper would print it
+/// twice.
+pub(crate) fn exr_error(e: exr::error::Error) -> anyhow::Error {
+    match e {
+        exr::error::Error::Io(io) => anyhow::Error::new(io),
+        other => anyhow::Error::new(other),
+    }
 }
 
 /// Reads an RGBA EXR written by [`write_exr`] (for tests and comparisons).
@@ -404,8 +457,7 @@ pub fn write_timings(path: &Path, report: &TimingReport) -> Result<()> {
 
 /// Writes `timings.json` to `path` directly: for an [`OutputSet`]'s temporary paths.
 pub fn encode_timings(path: &Path, report: &TimingReport) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(report)?)?;
-    Ok(())
+    std::fs::write(path, serde_json::to_string_pretty(report)?).with_context(|| cannot_write(path))
 }
 
 /// Writes `trace.json` ([`write_atomic`], [`encode_trace`]).
@@ -439,13 +491,47 @@ pub fn encode_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) 
         t0_us += frame.wall_ms * 1e3;
     }
     let trace = serde_json::json!({"traceEvents": events, "displayTimeUnit": "ms"});
-    std::fs::write(path, serde_json::to_string(&trace)?)?;
+    std::fs::write(path, serde_json::to_string(&trace)?).with_context(|| cannot_write(path))?;
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A failed write names the file it was for (not the temporary) and its folder once, and
+    /// the I/O error once, whichever encoder or path failed.
+    #[test]
+    fn a_failed_write_names_its_file_once() {
+        let dir = std::env::temp_dir()
+            .join(format!("translucent-out-missing-{}", std::process::id()))
+            .join("gone");
+        let px = [0.5f32; 4];
+        let message = |r: Result<()>| format!("{:#}", r.unwrap_err());
+        for (name, result) in [
+            ("a.exr", message(write_exr(&dir.join("a.exr"), 1, 1, &px))),
+            (
+                "a.png",
+                message(write_png(&dir.join("a.png"), 1, 1, &[0u8; 4])),
+            ),
+            (
+                "t.json",
+                message(write_atomic(&dir.join("t.json"), |p| {
+                    Ok(std::fs::write(p, b"{}")?)
+                })),
+            ),
+        ] {
+            let expected = format!(
+                "cannot write '{}' (in the output folder '{}'): ",
+                dir.join(name).display(),
+                dir.display()
+            );
+            assert!(result.starts_with(&expected), "{result}");
+            let rest = &result[expected.len()..];
+            assert_eq!(rest.matches("os error 2").count(), 1, "{result}");
+            assert!(!result.contains(TEMPORARY_SUFFIX), "{result}");
+        }
+    }
 
     #[test]
     fn exr_round_trip_and_no_temporaries_left() {
@@ -547,6 +633,30 @@ mod tests {
 
     /// A set lands whole: an uncommitted one leaves nothing, a committed one its files and
     /// none of an older set's that it did not write.
+    /// A folder the set cannot write into is refused when the set is opened, before any work,
+    /// and the refusal names the file the set would have written first. (Where nothing can be
+    /// written at the probe's name: a folder in its place, as a read-only folder refuses every
+    /// name.)
+    #[test]
+    fn a_set_is_refused_where_nothing_can_be_written() {
+        let dir = std::env::temp_dir().join(format!("translucent-probe-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        const NAMES: &[&str] = &["a.txt"];
+        let blocked = temporary(&dir.join("a.txt"));
+        std::fs::create_dir_all(&blocked).unwrap();
+        let refused = OutputSet::new(&dir, NAMES, &[]).err().expect("refused");
+        let message = format!("{refused:#}");
+        assert!(
+            message.starts_with(&format!("cannot write '{}'", dir.join("a.txt").display())),
+            "{message}"
+        );
+        std::fs::remove_dir(&blocked).unwrap();
+        assert!(OutputSet::new(&dir, NAMES, &[]).is_ok());
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        assert!(left.is_empty(), "the probe stayed: {left:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn a_set_lands_whole_and_replaces_an_older_set() {
         let dir = std::env::temp_dir().join(format!("translucent-set-{}", std::process::id()));

@@ -536,14 +536,13 @@ impl Requirements {
                 .filter(|&n| info.supports_samples(n))
                 .collect();
             let counts: Vec<String> = supported.iter().map(u32::to_string).collect();
-            return Err(GpuError::Limit {
-                what: format!(
-                    "[output] samples (this device multisamples the camera view at {} per pixel)",
+            return Err(GpuError::NotOffered {
+                what: "[output] samples".into(),
+                value: self.samples as u64,
+                offered: format!(
+                    "{} samples per pixel of the camera view (the framebuffer's and the attachments' sample counts)",
                     counts.join(", ")
                 ),
-                limit: "framebuffer sample counts",
-                value: self.samples as u64,
-                max: supported.last().copied().unwrap_or(1) as u64,
             });
         }
         if self.largest_image_side > info.max_image_dimension_2d {

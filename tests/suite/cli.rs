@@ -7,6 +7,30 @@ use crate::common::{bin, fails_with, stderr, temp_dir};
 use std::path::Path;
 use std::process::Command;
 
+/// A sample count the device does not offer (lavapipe offers 1 and 4) is refused with the
+/// counts it does offer, not as a limit it exceeds.
+#[test]
+fn a_sample_count_the_device_lacks_names_those_it_offers() {
+    let dir = temp_dir("samples");
+    let mut c = render_scene(
+        &dir,
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n[material]\nmodel = \"dipole\"\n[output]\nwidth = 16\nheight = 16\nsamples = 2\n",
+    );
+    let o = c.arg("--no-cache").output().unwrap();
+    if !o.status.success() {
+        let e = stderr(&o);
+        assert!(
+            e.contains("[output] samples = 2 is not offered by this device, which offers 1, "),
+            "{e}"
+        );
+        assert!(!e.contains("above the limit"), "{e}");
+        let offered = e.split("which offers ").nth(1).unwrap();
+        let counts = offered.split(" samples").next().unwrap();
+        assert!(!counts.split(", ").any(|n| n == "2"), "{e}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn devices_are_listed() {
     let o = bin().arg("devices").output().unwrap();
