@@ -1038,7 +1038,7 @@ mod tests {
                 samples: 8,
                 ..fits.clone()
             },
-            "1, 4 per pixel",
+            "samples = 8 is not offered by this device, which offers 1, 4 samples per pixel",
         );
         refused(
             Requirements {

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"TRLCACHE";
 /// Bump whenever the preprocessing's results change for the same inputs.
-pub const FORMAT_VERSION: u32 = 17;
+pub const FORMAT_VERSION: u32 = 18;
 
 /// Key of a preprocessing run: mesh geometry, material, settings and format version.
 pub fn key(mesh: &Mesh, material: &Material, settings: &Settings) -> u64 {

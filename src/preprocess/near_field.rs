@@ -71,7 +71,7 @@ impl Operators {
             .into_par_iter()
             .map(|q| {
                 let mut row: Vec<(u32, [f32; 3])> = self.global.row(q).collect();
-                let Some(c) = receiver_texel(&supports[q]) else {
+                let Some(c) = receiver_texel(atlas, &supports[q]) else {
                     return row;
                 };
                 if !self.fit_row(&fit, q, c as u32, &mut row) {

@@ -524,11 +524,11 @@ impl Basis {
             .collect()
     }
 
-    /// Where node `q` (at `xq`) receives: the centre of its own texel, where phi_q peaks, so
+    /// Where node `q` (at `xq`) receives: the centre of its receiving texel ([`receiver_texel`]), so
     /// that the peak of R_d falls on that texel's exact disc mean rather than between
     /// sub-samples, the same way as in the kernels; `xq` for a node without support.
     pub fn receiver_point(&self, atlas: &Atlas, q: usize, xq: DVec3) -> DVec3 {
-        receiver_texel(&self.supports[q])
+        receiver_texel(atlas, &self.supports[q])
             .map(|c| atlas.texels[c].position.as_dvec3())
             .unwrap_or(xq)
     }
@@ -1021,11 +1021,20 @@ pub fn seam_pattern(atlas: &Atlas, kernel_size: u32) -> Vec<Vec<u32>> {
         .collect()
 }
 
-/// The texel that represents node `q` as a receiver: where phi_q peaks.
-pub(super) fn receiver_texel(support: &[(u32, f32)]) -> Option<usize> {
+/// The texel that represents node `q` as a receiver: where phi_q times the texel's covered
+/// area peaks, so that where phi_q peaks on a texel a chart's border cuts to a sliver, a whole
+/// texel beside it receives. The receiver's texel mean is the exact disc of the texel's area
+/// around its centre: on a sliver that disc is far smaller than the texel's neighbours, whose
+/// own discs (those of whole texels, about half a texel in radius) then reach the sliver's
+/// centre across the border and count the profile's peak again, or, where none does, the
+/// peak is sampled too coarsely. With texels larger than the profile's width (a large object
+/// at the pixel's texel) either way left rows of F at a fraction or a multiple of the total
+/// reflectance, blotches the size of a node.
+pub(super) fn receiver_texel(atlas: &Atlas, support: &[(u32, f32)]) -> Option<usize> {
+    let weight = |&(t, phi): &(u32, f32)| phi as f64 * atlas.texels[t as usize].area as f64;
     support
         .iter()
-        .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+        .max_by(|a, b| weight(a).total_cmp(&weight(b)).then(b.0.cmp(&a.0)))
         .map(|s| s.0 as usize)
 }
 

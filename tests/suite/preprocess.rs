@@ -597,3 +597,35 @@ fn reading_the_cache_removes_stale_temporaries() {
     assert!(!stale.exists() && fresh.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// On an object far larger than its material's diffusion length the derived texel is the
+/// image's pixel, wider than the profile's peak: every row of F must still hold the total
+/// reflectance (the surface is all but flat at the scale the light travels), whatever texel
+/// a node's basis function peaks on. A receiving texel that a chart's border cut to a sliver
+/// once left rows at 0.45 to 2.7 times it (blotches the size of a node on a 1 m sphere).
+#[test]
+fn rows_of_f_hold_the_total_where_the_texel_is_wider_than_the_profile() {
+    let scene = crate::common::scene(
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 1000.0\nsegments = 64\n[material]\nmodel = \"halfspace\"\n[output]\nwidth = 160\nheight = 160\n",
+    );
+    let pre = crate::common::preprocess(&scene, SettingsOverrides::default());
+    // Skim milk's peak is about half a millimetre wide (z_r of blue).
+    assert!(
+        pre.atlas.texel_mm > 10.0,
+        "texel {} mm: not wider than the profile",
+        pre.atlas.texel_mm
+    );
+    let total = scene.material.total_reflectance();
+    let g = &pre.ops.global;
+    let mut worst = [0.0f64; 3];
+    for q in 0..g.rows() {
+        let sum = g.row_sum(q);
+        for c in 0..3 {
+            worst[c] = worst[c].max((sum.0[c] / total[c] - 1.0).abs());
+        }
+    }
+    assert!(
+        worst.iter().all(|&w| w < 0.05),
+        "rows off the total by {worst:?}"
+    );
+}
