@@ -524,9 +524,10 @@ impl Basis {
             .collect()
     }
 
-    /// Where node `q` (at `xq`) receives: the centre of its receiving texel ([`receiver_texel`]), so
-    /// that the peak of R_d falls on that texel's exact disc mean rather than between
-    /// sub-samples, the same way as in the kernels; `xq` for a node without support.
+    /// Where node `q` (at `xq`) receives: the centre of its receiving texel (where phi_q times
+    /// the covered area peaks), so that the peak of R_d falls on that texel's exact disc mean
+    /// rather than between sub-samples, the same way as in the kernels; `xq` for a node
+    /// without support.
     pub fn receiver_point(&self, atlas: &Atlas, q: usize, xq: DVec3) -> DVec3 {
         receiver_texel(atlas, &self.supports[q])
             .map(|c| atlas.texels[c].position.as_dvec3())
