@@ -491,8 +491,7 @@ pub fn encode_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) 
         t0_us += frame.wall_ms * 1e3;
     }
     let trace = serde_json::json!({"traceEvents": events, "displayTimeUnit": "ms"});
-    std::fs::write(path, serde_json::to_string(&trace)?).with_context(|| cannot_write(path))?;
-    Ok(())
+    std::fs::write(path, serde_json::to_string(&trace)?).with_context(|| cannot_write(path))
 }
 
 #[cfg(test)]
@@ -631,8 +630,6 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// A set lands whole: an uncommitted one leaves nothing, a committed one its files and
-    /// none of an older set's that it did not write.
     /// A folder the set cannot write into is refused when the set is opened, before any work,
     /// and the refusal names the file the set would have written first. (Where nothing can be
     /// written at the probe's name: a folder in its place, as a read-only folder refuses every
@@ -657,6 +654,8 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// A set lands whole: an uncommitted one leaves nothing, a committed one its files and
+    /// none of an older set's that it did not write.
     #[test]
     fn a_set_lands_whole_and_replaces_an_older_set() {
         let dir = std::env::temp_dir().join(format!("translucent-set-{}", std::process::id()));

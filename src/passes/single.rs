@@ -37,8 +37,8 @@ pub const DEPTH_FORMAT: vk::Format = Item::BackDepth.format();
 pub const STEPS: u32 = 8;
 
 /// Free paths of the least extinguishing channel beyond which `single` does not follow the
-/// view ray: what lies beyond is attenuated below e^-12 on the view ray alone, and the chord
-/// factor of the higher orders is within as much of 1 there (a specialization constant of
+/// view ray: what lies beyond is attenuated below e^-DEPTH_CAP on the view ray alone, and the
+/// chord factor of the higher orders is within as much of 1 there (a specialization constant of
 /// `glsl/single.comp`).
 pub const DEPTH_CAP: f32 = 12.0;
 

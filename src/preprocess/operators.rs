@@ -1029,8 +1029,8 @@ pub fn seam_pattern(atlas: &Atlas, kernel_size: u32) -> Vec<Vec<u32>> {
 /// own discs (those of whole texels, about half a texel in radius) then reach the sliver's
 /// centre across the border and count the profile's peak again, or, where none does, the
 /// peak is sampled too coarsely. With texels larger than the profile's width (a large object
-/// at the pixel's texel) either way left rows of F at a fraction or a multiple of the total
-/// reflectance, blotches the size of a node.
+/// at the pixel's texel) either way puts rows of F at a fraction or a multiple of the total
+/// reflectance: blotches the size of a node.
 pub(super) fn receiver_texel(atlas: &Atlas, support: &[(u32, f32)]) -> Option<usize> {
     let weight = |&(t, phi): &(u32, f32)| phi as f64 * atlas.texels[t as usize].area as f64;
     support

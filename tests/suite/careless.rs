@@ -402,13 +402,7 @@ fn outputs_land_as_a_set() {
     std::fs::remove_dir(out.join("scene.toml")).unwrap();
     let o = render_cmd(&out, 16).output().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
-    for f in [
-        "render.png",
-        "render.exr",
-        "timings.json",
-        "trace.json",
-        "scene.toml",
-    ] {
+    for f in common::RENDER_FILES {
         assert!(out.join(f).is_file(), "{f}");
     }
     assert_ne!(std::fs::read(out.join("render.png")).unwrap(), b"old");

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::Command;
 
 /// A sample count the device does not offer (lavapipe offers 1 and 4) is refused with the
-/// counts it does offer, not as a limit it exceeds.
+/// counts it does offer, not as a limit it exceeds (a device that offers 2 renders it).
 #[test]
 fn a_sample_count_the_device_lacks_names_those_it_offers() {
     let dir = temp_dir("samples");
@@ -756,13 +756,7 @@ fn the_bare_command_renders_like_render() {
         "{stdout}"
     );
     let out = c.join("out");
-    for f in [
-        "render.png",
-        "render.exr",
-        "timings.json",
-        "trace.json",
-        "scene.toml",
-    ] {
+    for f in common::RENDER_FILES {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     let (w, h, px) = &bare_image;

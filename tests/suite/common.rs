@@ -87,6 +87,15 @@ pub fn render_cmd(out: &std::path::Path, size: u32) -> Command {
     c
 }
 
+/// The files `render` writes into its output folder (the README's list).
+pub const RENDER_FILES: [&str; 5] = [
+    "render.png",
+    "render.exr",
+    "timings.json",
+    "trace.json",
+    "scene.toml",
+];
+
 /// A fresh, empty temporary folder for one test.
 pub fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("translucent-test-{name}-{}", std::process::id()));

@@ -601,8 +601,8 @@ fn reading_the_cache_removes_stale_temporaries() {
 /// On an object far larger than its material's diffusion length the derived texel is the
 /// image's pixel, wider than the profile's peak: every row of F must still hold the total
 /// reflectance (the surface is all but flat at the scale the light travels), whatever texel
-/// a node's basis function peaks on. A receiving texel that a chart's border cut to a sliver
-/// once left rows at 0.45 to 2.7 times it (blotches the size of a node on a 1 m sphere).
+/// a node's basis function peaks on: a node that received on a texel a chart's border cut to
+/// a sliver would hold a fraction or a multiple of it (blotches the size of a node).
 #[test]
 fn rows_of_f_hold_the_total_where_the_texel_is_wider_than_the_profile() {
     let scene = crate::common::scene(
