@@ -58,15 +58,16 @@ pub(super) fn image_warnings(radiance: &[f32]) -> Vec<String> {
 
 pub(super) fn render(cli: &Cli, args: &RenderArgs) -> Result<()> {
     frame_count("--frames", args.frames, 1)?;
-    let scene = args.input.load()?;
+    let mut scene = args.input.load()?;
+    // The default model is decided first, so that the scene printed is the one rendered and
+    // saved (`pipeline::plan` applies it again and changes nothing).
+    crate::pipeline::model::apply_default(&mut scene, args.pre.target_error)?;
     println!(
         "# scene, every default filled in (save as a .toml file to reuse):\n{}",
         scene.resolved.to_toml()
     );
     let mut set = open_outputs(&args.out, RENDER_OUTPUTS, &args.input, &scene)?;
-    let mut scene = scene;
     let (gpu, prepared) = open_and_prepare(cli, &mut scene, &args.pre, true)?;
-    // The scene as rendered: the default model, which the saved scene names.
     let resolved = scene.resolved.to_toml();
     let scene_warnings = scene.warnings.clone();
     let mode = args

@@ -52,13 +52,7 @@ pub(super) fn view(cli: &Cli, args: &ViewArgs) -> Result<()> {
             } else {
                 s.clone()
             };
-            let steps = crate::viewer::script::parse(&text)?;
-            if steps.is_empty() {
-                anyhow::bail!(
-                    "--script has no commands (a script drives the viewer: \"frames 3; screenshot; quit\")"
-                );
-            }
-            steps
+            crate::viewer::script::parse(&text)?
         }
     };
     let scene = args.input.load()?;

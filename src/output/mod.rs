@@ -404,6 +404,16 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
 
 /// Creates the output folder `dir` (and its parents), naming it in the error.
 pub fn create_dir(dir: &Path) -> Result<()> {
+    if let Some(file) = dir
+        .ancestors()
+        .find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir())
+    {
+        anyhow::bail!(
+            "cannot create output folder '{}': '{}' is a file, not a folder",
+            dir.display(),
+            file.display()
+        );
+    }
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create output folder '{}'", dir.display()))
 }
@@ -497,6 +507,20 @@ pub fn encode_trace(path: &Path, pass_names: &[String], frames: &[FrameTiming]) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An output folder that is a file, or lies under one, is named as a file.
+    #[test]
+    fn an_output_folder_that_is_a_file_is_named() {
+        let file =
+            std::env::temp_dir().join(format!("translucent-out-file-{}", std::process::id()));
+        std::fs::write(&file, b"").unwrap();
+        for dir in [file.clone(), file.join("below")] {
+            let e = format!("{:#}", create_dir(&dir).unwrap_err());
+            let want = format!("'{}' is a file, not a folder", file.display());
+            assert!(e.contains(&want), "{e}");
+        }
+        std::fs::remove_file(&file).unwrap();
+    }
 
     /// A failed write names the file it was for (not the temporary) and its folder once, and
     /// the I/O error once, whichever encoder or path failed.

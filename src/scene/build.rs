@@ -11,6 +11,7 @@ use super::mesh::Mesh;
 use super::{
     absolute, Camera, Light, Overrides, Surface, BUNNY_OBJ, LONG_EDGE_SPACINGS, MAX_LIGHTS,
     MAX_OFFSET_RADII, MAX_POSITION_MM, MAX_RADIANCE, MAX_RADIUS_MM, MAX_SEGMENTS, MAX_TRIANGLES,
+    MIN_RADIUS_MM,
 };
 use crate::physics::Material;
 use anyhow::{bail, Context, Result};
@@ -126,6 +127,10 @@ impl Format {
             "obj" => Format::Obj,
             "ply" => Format::Ply,
             "gltf" | "glb" => Format::Gltf,
+            "" => bail!(
+                "mesh file '{}' has no extension: the format is told by it (OBJ, PLY, glTF: .obj, .ply, .gltf, .glb)",
+                path.display()
+            ),
             _ => bail!(
                 "mesh file '{}': '.{ext}' is not a format read here (OBJ, PLY, glTF: .obj, .ply, .gltf, .glb)",
                 path.display()
@@ -351,6 +356,11 @@ pub(super) fn place_mesh(
         bail!(
             "the object, placed in the scene, has its centre at {:?} and a radius of {radius:e} mm: at most {MAX_RADIUS_MM:e} mm (f32 coordinates; check [mesh] units and [transform])",
             center.to_array()
+        );
+    }
+    if radius < MIN_RADIUS_MM {
+        bail!(
+            "the object, placed in the scene, has a radius of {radius:e} mm: at least {MIN_RADIUS_MM:e} mm (a micrometre; check [mesh] units and [transform] scale)"
         );
     }
     let far = center.length() + radius;

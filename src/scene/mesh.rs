@@ -873,6 +873,14 @@ mod tests {
             ("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite"),
             ("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n", "degenerate"),
             ("v 0 0 zero\nf 1 2 3\n", ""),
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1/1 2/2/2 3/3/3\n",
+                "line 4: texture coordinate index 1 with 0 read so far",
+            ),
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n",
+                "line 5: normal index 2 with 1 read so far",
+            ),
         ];
         for (text, needle) in cases {
             let e = Mesh::parse_obj("bad", text).unwrap_err().to_string();

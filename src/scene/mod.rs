@@ -148,6 +148,11 @@ pub const LONG_EDGE_SPACINGS: f64 = 3.0;
 /// of coordinates stay far from overflow.
 pub const MAX_RADIUS_MM: f32 = 1e7;
 
+/// Smallest radius of the object after units and transform, mm (a micrometre): an object
+/// smaller than a few wavelengths of light lies outside radiative transfer, and the camera
+/// and bounds derived from it would meet the absolute tolerances of f32 positions.
+pub const MIN_RADIUS_MM: f32 = 1e-3;
+
 /// Largest distance of the object's farthest point from the origin, in object radii: f32
 /// positions there are spaced at most 1e-3 of the radius (2^-23 x 8390), a tenth of the finest
 /// derived texel. A small object moved far away would otherwise be cut into slivers of its
@@ -513,6 +518,14 @@ mod tests {
             (
                 "[mesh]\nfile = \"Cargo.toml\"",
                 "'.toml' is not a format read here",
+            ),
+            (
+                "[mesh]\nbuiltin = \"sphere\"\n[transform]\nscale = 1e-9",
+                "mm: at least 1e-3 mm (a micrometre",
+            ),
+            (
+                "[mesh]\nfile = \".ci/run\"",
+                "has no extension: the format is told by it",
             ),
             (
                 "[output]\nshadow_map = 16385",

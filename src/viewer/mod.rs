@@ -564,6 +564,9 @@ impl App {
                     self.frames_left = n - 1;
                     return Ok(true);
                 }
+                Step::Stay => {
+                    println!("script done: the window is yours (q or Esc closes it)");
+                }
                 Step::Wait => {
                     if running.busy() {
                         self.waiting = true;

@@ -10,7 +10,9 @@
 //! add-light point; light-kind 1 spot; remove-light 0; save-scene edited
 //! ```
 //!
-//! Commands are separated by `;` or new lines; `#` starts a comment. The interface's controls
+//! Commands are separated by `;` or new lines; `#` starts a comment. A script ends with `quit`
+//! (the viewer closes) or `stay` (the window is handed to the user), so that no script leaves
+//! a window open that nobody asked for. The interface's controls
 //! produce the same actions as these commands (material, settings, lights, screenshot, save
 //! scene), so a script exercises what a click does.
 
@@ -102,7 +104,47 @@ pub enum Step {
     Frames(u32),
     /// Render until no preprocessing is running or queued.
     Wait,
+    /// End the script and leave the window to the user.
+    Stay,
 }
+
+/// The commands a script takes, as the error for an unknown one lists them.
+pub const COMMANDS: &[&str] = &[
+    "frames",
+    "wait",
+    "orbit",
+    "light",
+    "environment",
+    "envmap",
+    "pan",
+    "zoom",
+    "turntable",
+    "material",
+    "mode",
+    "model",
+    "sigma-s",
+    "sigma-a",
+    "albedo",
+    "scatter-distance",
+    "eta",
+    "settings",
+    "light-direction",
+    "light-colour",
+    "light-intensity",
+    "light-kind",
+    "add-light",
+    "remove-light",
+    "backdrop",
+    "exposure",
+    "tonemap",
+    "screenshot",
+    "save-scene",
+    "ui",
+    "reset",
+    "resize",
+    "quit",
+    "stay",
+];
 
 fn number<T: std::str::FromStr>(word: Option<&str>, what: &str) -> Result<T> {
     let w = word.with_context(|| format!("missing {what}"))?;
@@ -213,6 +255,7 @@ fn view_step(command: &str, args: &[&str]) -> Result<Option<(Step, usize)>> {
             (Step::Frames(n), 1)
         }
         "wait" => (Step::Wait, 0),
+        "stay" => (Step::Stay, 0),
         "orbit" | "light" => {
             let (a, b) = (real(0, "angle in degrees")?, real(1, "angle in degrees")?);
             let act = if command == "orbit" {
@@ -410,12 +453,7 @@ fn parse_step(words: &[&str]) -> Result<Step> {
     } else if let Some(found) = light_step(command, args)? {
         found
     } else {
-        bail!(
-            "unknown command '{command}' (frames, wait, orbit, light, environment, envmap, pan, \
-             zoom, material, mode, sigma-s, sigma-a, eta, model, settings, light-direction, \
-             light-colour, light-intensity, light-kind, add-light, remove-light, screenshot, \
-             save-scene, ui, reset, resize, quit)"
-        )
+        bail!("unknown command '{command}' ({})", COMMANDS.join(", "))
     };
     want(n)?;
     Ok(step)
@@ -435,6 +473,20 @@ pub fn parse(text: &str) -> Result<Vec<Step>> {
                 .with_context(|| format!("script line {}: '{}'", n + 1, command.trim()))?;
             steps.push(step);
         }
+    }
+    let Some(last) = steps.last() else {
+        bail!(
+            "--script has no commands (a script drives the viewer: \"frames 3; screenshot; quit\")"
+        );
+    };
+    if !matches!(last, Step::Stay | Step::Act(Action::Quit)) {
+        bail!(
+            "--script ends without quit or stay: end it with quit to close the viewer, or with \
+             stay to hand the window to the user"
+        );
+    }
+    if steps[..steps.len() - 1].contains(&Step::Stay) {
+        bail!("--script: stay hands the window to the user, so it must be the last command");
     }
     Ok(steps)
 }
@@ -491,9 +543,47 @@ mod tests {
     }
 
     #[test]
+    fn a_script_may_hand_the_window_to_the_user() {
+        assert_eq!(
+            parse("frames 2; stay").unwrap(),
+            vec![Step::Frames(2), Step::Stay]
+        );
+    }
+
+    /// Every command the unknown-command message lists is one the parser takes (it may want
+    /// arguments), and every command in the module's example is listed.
+    #[test]
+    fn the_listed_commands_are_the_parsed_ones() {
+        for command in COMMANDS {
+            let e = parse_step(&[command]).err().map(|e| format!("{e:#}"));
+            assert!(
+                !e.as_deref().unwrap_or("").contains("unknown command"),
+                "{command}: {e:?}"
+            );
+        }
+        let example = include_str!("script.rs")
+            .lines()
+            .take_while(|l| l.starts_with("//!"))
+            .skip_while(|l| !l.contains("```text"))
+            .skip(1)
+            .take_while(|l| !l.contains("```"))
+            .flat_map(|l| l.trim_start_matches("//!").split(';'))
+            .filter_map(|c| c.split_whitespace().next())
+            .collect::<Vec<_>>();
+        assert!(example.len() > 20, "{example:?}");
+        for command in example {
+            assert!(COMMANDS.contains(&command), "{command} is not listed");
+        }
+    }
+
+    #[test]
     fn errors_name_the_line_and_the_problem() {
         for (text, needle) in [
             ("frames 0", "at least 1"),
+            ("", "has no commands"),
+            ("# only a comment", "has no commands"),
+            ("frames 2; screenshot", "ends without quit or stay"),
+            ("frames 2; stay; frames 1; quit", "must be the last command"),
             ("frames x", "not a valid frame count"),
             ("light 10", "missing angle"),
             ("light 10 NaN", "finite"),

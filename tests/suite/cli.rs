@@ -750,12 +750,19 @@ fn the_bare_command_renders_like_render() {
     assert_eq!(bare_image, image(&b));
 
     let stdout = run(&c, &["--validate", "render", "--frames", "3"]);
-    // The resolved scene is printed with its defaults.
+    // The resolved scene is printed with its defaults, the default model among them: the
+    // scene saved, as rendered.
     assert!(
         stdout.contains("preset = \"skimmilk\"") && stdout.contains("fov_deg"),
         "{stdout}"
     );
     let out = c.join("out");
+    let saved = std::fs::read_to_string(out.join("scene.toml")).unwrap();
+    assert!(saved.contains("model = \"volume\""), "{saved}");
+    assert!(
+        stdout.contains(saved.trim()),
+        "printed:\n{stdout}\nsaved:\n{saved}"
+    );
     for f in common::RENDER_FILES {
         assert!(out.join(f).is_file(), "{f} missing");
     }

@@ -44,6 +44,14 @@ impl Mesh {
                 None => e.to_string(),
             },
         })?;
+        // tobj drops references to texture coordinates and normals the file lacks; a face
+        // that names them is malformed, and the file is refused rather than read without them.
+        if let Some(place) = locate_obj_error(text) {
+            return Err(MeshError::Obj {
+                path: name.into(),
+                reason: place,
+            });
+        }
         let mut mesh = Mesh::default();
         let mut all_have_normals = true;
         let mut all_have_uvs = true;
@@ -93,9 +101,9 @@ impl Mesh {
     }
 }
 
-/// Where an OBJ the parser refused goes wrong: the first line whose statement cannot be
-/// read (too few or unreadable numbers, an index past the vertices read so far), with its
-/// number and text.
+/// Where an OBJ goes wrong: the first line whose statement cannot be read (too few or
+/// unreadable numbers, an index past the vertices, texture coordinates or normals read so
+/// far), with its number and text.
 fn locate_obj_error(text: &str) -> Option<String> {
     let (mut v, mut vt, mut vn) = (0i64, 0i64, 0i64);
     for (n, line) in text.lines().enumerate() {
