@@ -403,19 +403,21 @@ pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
 }
 
 /// Creates the output folder `dir` (and its parents), naming it in the error.
+/// Where that fails because the path or a folder above it is a file, the file is named
+/// (the system's own word is "File exists").
 pub fn create_dir(dir: &Path) -> Result<()> {
-    if let Some(file) = dir
-        .ancestors()
-        .find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir())
-    {
-        anyhow::bail!(
-            "cannot create output folder '{}': '{}' is a file, not a folder",
-            dir.display(),
-            file.display()
-        );
-    }
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create output folder '{}'", dir.display()))
+    std::fs::create_dir_all(dir).map_err(|e| {
+        let message = format!("cannot create output folder '{}'", dir.display());
+        match dir
+            .ancestors()
+            .find(|a| !a.as_os_str().is_empty() && a.exists() && !a.is_dir())
+        {
+            Some(file) => {
+                anyhow::anyhow!("{message}: '{}' is a file, not a folder", file.display())
+            }
+            None => anyhow::Error::new(e).context(message),
+        }
+    })
 }
 
 /// RGBA8 premultiplied by alpha (the mean of a pixel's samples, transparent black off the
