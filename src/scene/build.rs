@@ -275,8 +275,8 @@ pub(super) fn load_texture(
                 bail!("a texture is given but the mesh has no texture coordinates");
             }
             let p = base.join(t);
-            let bytes = crate::input::read_regular(&p, crate::input::MAX_TEXTURE_BYTES, "texture")
-                .with_context(|| format!("cannot read texture '{}'", p.display()))?;
+            // The read names the texture in its own errors; decoding is given the name here.
+            let bytes = crate::input::read_regular(&p, crate::input::MAX_TEXTURE_BYTES, "texture")?;
             let img = decode_texture(&bytes)
                 .with_context(|| format!("cannot read texture '{}'", p.display()))?;
             md.texture = Some(absolute(&p));

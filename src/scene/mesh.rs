@@ -869,10 +869,20 @@ mod tests {
     fn broken_objs_are_refused_with_reasons() {
         let cases = [
             ("", "no triangles"),
-            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", ""),
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n",
+                "line 4: vertex index 7 with 3 read so far",
+            ),
             ("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite"),
             ("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n", "degenerate"),
-            ("v 0 0 zero\nf 1 2 3\n", ""),
+            (
+                "v 0 0 zero\nf 1 2 3\n",
+                "line 1: a vertex needs three numbers",
+            ),
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.5\nf 1/1 2/1 3/1\n",
+                "line 4: a texture coordinate needs two numbers",
+            ),
             (
                 "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1/1 2/2/2 3/3/3\n",
                 "line 4: texture coordinate index 1 with 0 read so far",

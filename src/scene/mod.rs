@@ -555,6 +555,11 @@ mod tests {
             let e = Scene::from_desc(desc, Path::new(""), &Overrides::default()).unwrap_err();
             let msg = format!("{e:#}");
             assert!(msg.contains(needle), "{text:?}: {msg}");
+            // One layer of the message says what could not be read, not each of them.
+            assert!(
+                msg.matches("cannot read").count() <= 1,
+                "{text:?}: 'cannot read' repeated in {msg}"
+            );
         }
     }
 }

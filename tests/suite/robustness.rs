@@ -95,7 +95,10 @@ fn broken_inputs_are_refused() {
     // A texture that is not an image, and one that is a folder.
     std::fs::write(dir.join("junk.png"), b"not a png at all").unwrap();
     std::fs::create_dir_all(dir.join("folder.png")).unwrap();
-    for tex in ["junk.png", "folder.png"] {
+    for (tex, needle) in [
+        ("junk.png", "cannot read texture"),
+        ("folder.png", "is a folder, not a regular file"),
+    ] {
         let scene = dir.join(format!("{tex}.toml"));
         std::fs::write(
             &scene,
@@ -104,7 +107,7 @@ fn broken_inputs_are_refused() {
         .unwrap();
         let mut c = bin();
         c.args(["render", "--no-cache"]).arg(&scene);
-        fails_with(c, "cannot read texture");
+        fails_with(c, needle);
     }
     let cases: [(&[&str], &str); 5] = [
         (&["--kernel", "33"], "between 1 and 31"),

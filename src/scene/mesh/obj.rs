@@ -115,7 +115,8 @@ fn locate_obj_error(text: &str) -> Option<String> {
         };
         let problem = match key {
             "v" if !numbers(3) => Some("a vertex needs three numbers".to_string()),
-            "vt" if !numbers(1) => Some("a texture coordinate needs numbers".to_string()),
+            // OBJ allows a lone u; the reader takes two.
+            "vt" if !numbers(2) => Some("a texture coordinate needs two numbers".to_string()),
             "vn" if !numbers(3) => Some("a normal needs three numbers".to_string()),
             "f" if rest.len() < 3 => Some("a face needs at least three vertices".to_string()),
             "f" => rest.iter().find_map(|w| {
