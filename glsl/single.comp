@@ -53,6 +53,11 @@ layout(constant_id = 0) const bool REFRACTS = false;
 // Free paths of the least extinguishing channel beyond which the view ray is not followed, set
 // with the pipeline from `DEPTH_CAP` in src/passes/single.rs (0 here: an unset cap draws nothing).
 layout(constant_id = 1) const float DEPTH_CAP = 0.0;
+// Whether the light's entry for a point inside comes from the neighbouring texels where the one
+// under it fails (`entry_texel`), set with the pipeline where the shadow map's texels are wider
+// than the shortest free path (`scene::shadow::entry_neighbours`): lavapipe runs both sides
+// of a branch, and the lookup costs every point of every ray.
+layout(constant_id = 2) const bool ENTRY_NEIGHBOURS = false;
 
 layout(push_constant) uniform Push {
     uint steps;
@@ -64,23 +69,81 @@ vec3 unproject(mat4 inverse_matrix, vec2 ndc, float z) {
     return w.xyz / w.w;
 }
 
-// The light-entry map's texel under shadow-map coordinates `uv` of `layer`: depth, slopes
-// along u and v per texel, which of them are known; and the offset of `uv` from the texel's
-// centre, in texels.
-vec4 entry_texel(uint layer, vec2 uv, out vec2 offset) {
+// Relative size of the rounding that the light's entry and the points along the view ray are
+// computed with: a few units of f32's 2^-23 of the largest coordinate, or of the light-space
+// depth's step there.
+const float ROUNDING = 16.0 / 8388608.0;
+
+// The light-entry map's texel for the point at shadow-map coordinates `uv` and depth `depth`
+// of `layer`: depth, slopes along u and v per texel, which of them are known; and the offset
+// of `uv` from the texel's centre, in texels. The texel under `uv`; for a point `inside` the
+// object with ENTRY_NEIGHBOURS, only where it sees a surface whose plane, extended to `uv` by
+// its slopes, lies in front of the point (within `tolerance`, the rounding): the light enters
+// before it reaches a point inside. Otherwise the deepest such plane among its eight
+// neighbours (a line enters a convex object through the last of its faces' planes that it
+// crosses): where the texel's centre misses the object (its rim as the light sees it passes
+// between `uv` and the centre), or sees a face so nearly edge-on that its slopes are unknown
+// and its depth at the centre lies behind the point, the point would find the light
+// unattenuated, a speck past the terminator. Without such a neighbour, the texel under `uv`,
+// or where it sees nothing the nearest neighbour that sees a surface.
+vec4 entry_texel(uint layer, vec2 uv, float depth, float tolerance, bool inside,
+                 out vec2 offset) {
     ivec2 size = imageSize(entry_depth).xy;
     vec2 f = uv * vec2(size);
     ivec2 i = clamp(ivec2(floor(f)), ivec2(0), size - 1);
     offset = f - (vec2(i) + 0.5);
-    return imageLoad(entry_depth, ivec3(i, int(layer)));
+    vec4 e = imageLoad(entry_depth, ivec3(i, int(layer)));
+    if (!ENTRY_NEIGHBOURS || !inside
+        || (e.r < 1.0 && e.r + dot(e.gb, offset) <= depth + tolerance)) {
+        return e;
+    }
+    float deepest = -1e30;
+    float nearest_seen = e.r < 1.0 ? 0.0 : 1e30;
+    vec4 found = e;
+    vec2 found_offset = offset;
+    vec4 seen = e;
+    vec2 seen_offset = offset;
+    for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+            ivec2 j = i + ivec2(dx, dy);
+            if ((dx == 0 && dy == 0) || any(lessThan(j, ivec2(0))) || any(greaterThanEqual(j, size))) {
+                continue;
+            }
+            vec4 n = imageLoad(entry_depth, ivec3(j, int(layer)));
+            vec2 o = f - (vec2(j) + 0.5);
+            if (n.r >= 1.0) {
+                continue;
+            }
+            float z = n.r + dot(n.gb, o);
+            if (z <= depth + tolerance && z > deepest) {
+                deepest = z;
+                found = n;
+                found_offset = o;
+            }
+            if (dot(o, o) < nearest_seen) {
+                nearest_seen = dot(o, o);
+                seen = n;
+                seen_offset = o;
+            }
+        }
+    }
+    if (deepest > -1e30) {
+        offset = found_offset;
+        return found;
+    }
+    offset = seen_offset;
+    return seen;
 }
 
 // Where the light of `l` first meets the surface on its straight line through p: true with
 // that point, its shadow-map layer and coordinates and the entry texel's slopes (and which
 // are known), where the map sees a surface there. The surface is placed within the texel by
 // its slopes (exact on a plane): over one texel, light grazing a face crosses many times the
-// medium's free path in depth, at any scale.
-bool entry_point(Light l, vec3 p, out vec3 entry, out uint layer, out vec2 uv, out vec3 slopes) {
+// medium's free path in depth, at any scale. For a point `inside` the object the entry lies in
+// front of it (`entry_texel`); a point on the surface (the view ray's start, where the light
+// enters a refracted path) takes the texel under it as it is.
+bool entry_point(Light l, vec3 p, bool inside, out vec3 entry, out uint layer, out vec2 uv,
+                 out vec3 slopes) {
     layer = shadow_layer(l, p);
     entry = p;
     uv = vec2(0.0);
@@ -94,8 +157,17 @@ bool entry_point(Light l, vec3 p, out vec3 entry, out uint layer, out vec2 uv, o
     if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) {
         return false;
     }
+    // The rounding of p's depth: of the depth itself, and of p's coordinates through the
+    // depth's gradient in the world (four times over, a margin).
+    mat4 m = frame.shadow_view_proj[layer];
+    vec3 row_z = vec3(m[0][2], m[1][2], m[2][2]);
+    vec3 row_w = vec3(m[0][3], m[1][3], m[2][3]);
+    vec3 gradient = (row_z - ndc.z * row_w) / clip.w;
+    vec3 a = abs(p);
+    float tolerance =
+        4.0 * ROUNDING * (max(abs(ndc.z), 1e-3) + max(a.x, max(a.y, a.z)) * length(gradient));
     vec2 offset;
-    vec4 e = entry_texel(layer, uv, offset);
+    vec4 e = entry_texel(layer, uv, ndc.z, tolerance, inside, offset);
     if (e.r >= 1.0) {
         return false;
     }
@@ -114,7 +186,7 @@ float light_depth(Light l, vec3 p, vec3 travel) {
     uint layer;
     vec2 uv;
     vec3 slopes;
-    if (!entry_point(l, p, entry, layer, uv, slopes)) {
+    if (!entry_point(l, p, true, entry, layer, uv, slopes)) {
         return 0.0;
     }
     return max(dot(p - entry, travel), 0.0);
@@ -160,7 +232,7 @@ float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
     uint layer;
     vec2 uv;
     vec3 slopes;
-    if (!entry_point(l, p, entry, layer, uv, slopes)) {
+    if (!entry_point(l, p, true, entry, layer, uv, slopes)) {
         return 0.0;
     }
     float straight = max(dot(p - entry, travel), 0.0);
@@ -177,16 +249,11 @@ float refracted_path(Light l, vec3 p, vec3 travel, float eta, out float cos_i) {
     uint lq;
     vec2 uq;
     vec3 sq;
-    if (entry_point(l, q, e, lq, uq, sq) && abs(dot(q - e, travel)) <= PLANE_TOLERANCE * planar) {
+    if (entry_point(l, q, false, e, lq, uq, sq) && abs(dot(q - e, travel)) <= PLANE_TOLERANCE * planar) {
         return planar;
     }
     return straight;
 }
-
-// Relative size of the rounding that the light's entry and the points along the view ray are
-// computed with: a few units of f32's 2^-23 of the largest coordinate, or of the light-space
-// depth's step there.
-const float ROUNDING = 16.0 / 8388608.0;
 
 // Where the light of `l` enters at the view ray's start x: whether x lies on the surface the
 // light enters (its straight path inside is zero there, within the rounding), that surface's
@@ -222,7 +289,7 @@ Anchor anchor_at(Light l, vec3 x, vec3 normal, vec3 facet, vec3 travel, vec2 ext
     uint layer;
     vec2 uv;
     vec3 slopes;
-    if (!entry_point(l, x, entry, layer, uv, slopes)) {
+    if (!entry_point(l, x, false, entry, layer, uv, slopes)) {
         return a;
     }
     vec3 m = max(abs(x), abs(entry));

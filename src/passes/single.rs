@@ -167,6 +167,9 @@ pub struct SingleInputs {
     /// Whether the medium refracts (eta != 1): the view ray and the lights' paths bend at the
     /// surface and are weighed by Fresnel's transmittance.
     pub refracts: bool,
+    /// Whether the light's entry for a point inside comes from the neighbouring texels of the
+    /// light-entry image where the one under it fails (`scene::shadow::entry_neighbours`).
+    pub entry_neighbours: bool,
 }
 
 /// Declares `single`, writing the single-scattered radiance per sample into `out`: a compute
@@ -197,7 +200,11 @@ pub fn single(graph: &mut RenderGraph, i: SingleInputs, out: ResourceId) {
                 PassName::Single.as_str(),
                 shaders::SINGLE_COMP,
                 set,
-                &[i.refracts as u32, DEPTH_CAP.to_bits()],
+                &[
+                    i.refracts as u32,
+                    DEPTH_CAP.to_bits(),
+                    i.entry_neighbours as u32,
+                ],
             )?;
             let extent = res.image(out).info.extent;
             Ok(Box::new(move |rec| {

@@ -103,12 +103,15 @@ pub fn choose_at(
         ));
     }
     // Not a preprocessing setting, but chosen from the texel like them: said here with them.
-    let (_, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
+    let (size, why) = crate::scene::shadow::shadow_map_size(scene, choice.settings.texel_mm);
     choice.reasons.push(why);
     if scene.material.model.has_single_pass() {
         choice
             .reasons
             .push(crate::scene::single::downsample(scene).1);
+        choice
+            .reasons
+            .push(crate::scene::shadow::entry_neighbours(scene, size).1);
     }
     if let Some(env) = &scene.environment {
         let p = scene.prt;

@@ -395,6 +395,11 @@ impl<'a> Assembly<'a> {
                     back,
                     front,
                     refracts: self.scene.material.eta != 1.0,
+                    entry_neighbours: crate::scene::shadow::entry_neighbours(
+                        self.scene,
+                        self.shadow_map_size(),
+                    )
+                    .0,
                 },
                 single,
             );

@@ -153,11 +153,61 @@ pub fn shadow_map_size(scene: &Scene, texel_mm: f64) -> (u32, String) {
     (size, why)
 }
 
+/// Shadow texels, at the object, per shortest free path of the medium above which `single`
+/// looks up the light's entry among the neighbouring texels too ([`entry_neighbours`]).
+pub const ENTRY_NEIGHBOURS_ABOVE: f64 = 1.0;
+
+/// Whether `single` takes the light's entry for a point inside from the neighbouring texels of
+/// the light-entry image where the texel under it fails (its centre misses the object, or its
+/// face, extended, lies behind the point), with `size`-texel maps, and why: where a texel at
+/// the object is wider than [`ENTRY_NEIGHBOURS_ABOVE`] of the medium's shortest free paths. A
+/// point just past the terminator there projects into a texel that misses the light's rim by
+/// many free paths in depth, and would take the light as unattenuated (specks); where the texels are
+/// finer the specks are single pixels of a rim a few free paths deep, and on lavapipe the
+/// lookup costs every point of every ray (it runs both sides of a branch).
+pub fn entry_neighbours(scene: &Scene, size: u32) -> (bool, String) {
+    let (center, radius) = scene.bounds();
+    let texel = scene
+        .lights
+        .iter()
+        .map(|l| shadow_projections(l, center, radius, size.max(1))[0].texel_mm as f64)
+        .fold(0.0, f64::max);
+    let densest = scene.material.sigma_t().into_iter().fold(0.0, f64::max);
+    let free_path = 1.0 / densest.max(1e-12);
+    let on = texel > ENTRY_NEIGHBOURS_ABOVE * free_path;
+    let why = if on {
+        format!(
+            "light entry from the neighbouring texels where the one under a point fails: the shadow texel ({texel:.3} mm) is wider than the shortest free path ({free_path:.3} mm)"
+        )
+    } else {
+        format!(
+            "light entry from the texel under each point: the shadow texel ({texel:.3} mm) is within the shortest free path ({free_path:.3} mm)"
+        )
+    };
+    (on, why)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     use crate::scene::tests::from_text as default_scene;
+
+    /// The light's entry is looked up among the neighbouring texels where a shadow texel is
+    /// wider than the shortest free path: on a sphere of a metre in skim milk, not on the
+    /// default scene's 50 mm bunny, and it follows the map's size.
+    #[test]
+    fn entry_neighbours_where_texels_are_wider_than_a_free_path() {
+        let bunny = default_scene("");
+        let (on, why) = entry_neighbours(&bunny, 768);
+        assert!(!on, "{why}");
+        let sphere = default_scene("[mesh]\nbuiltin = \"sphere\"\nradius = 1000.0");
+        let (on, why) = entry_neighbours(&sphere, 848);
+        assert!(on, "{why}");
+        assert!(why.contains("wider than the shortest free path"), "{why}");
+        // Fine enough a map keeps the texel under each point.
+        assert!(!entry_neighbours(&sphere, 16384).0);
+    }
 
     /// The derived shadow map follows the atlas texel and the lights, not the image; a size in
     /// the scene wins.

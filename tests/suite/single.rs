@@ -629,6 +629,70 @@ fn coarse_against_fine(eta: f64) -> (metrics::BinnedError, metrics::BinnedError)
     (compare(false), compare(true))
 }
 
+/// No specks past the terminator: on a sphere of a metre the shadow map's texels are wider
+/// than skim milk's free paths, and a point just past the terminator, or under a face the
+/// light sees nearly edge-on, projects into a texel whose centre misses the sphere (its rim,
+/// as the light sees it, passes between) or whose face, extended by its slopes, lies behind
+/// the point. Taken as it is, that texel lets the light reach the point unattenuated: single
+/// pixels at the whole single scattering along the terminator, where the reference has almost
+/// none. Where the texels are wider than the shortest free path, as here
+/// (`scene::shadow::entry_neighbours`), the deepest plane of the texel's neighbours that lies
+/// in front of the point gives the entry (a convex object's entry is the last of its faces'
+/// planes crossed). Against the reference's quadrature along each view ray
+/// (`reference_single`, no shadow map), over the pixels well inside the outline: the relative
+/// RMS per pixel and after 4x4 bins, and the pixels over twice the reference and 1 % of its
+/// peak.
+#[test]
+fn no_specks_past_the_terminator_of_a_large_sphere() {
+    let n = 128usize;
+    let scene = common::scene(&format!(
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 1000.0\nsegments = 64\n[camera]\nposition = [0.0, 0.0, 4500.0]\ntarget = [0.0, 0.0, 0.0]\nfov_deg = 30.0\n[[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.6]\n[material]\npreset = \"skimmilk\"\neta = 1.0\nmodel = \"halfspace-single\"\n[output]\nwidth = {n}\nheight = {n}\nsamples = 1\nsingle_downsample = 1\n"
+    ));
+    let (out, c) = render_captured(&scene);
+    assert_eq!(c.single.len(), n * n);
+    let covered = |x: usize, y: usize| out.radiance[4 * (y * n + x) + 3] == 1.0;
+    // Well inside the outline: every pixel within two covered.
+    let inside = |k: usize| {
+        let (x, y) = (k % n, k / n);
+        (x >= 2 && y >= 2 && x + 2 < n && y + 2 < n)
+            && (y - 2..=y + 2).all(|j| (x - 2..=x + 2).all(|i| covered(i, j)))
+    };
+    let reference = reference_single(&scene, inside);
+    let masked = |v: &dyn Fn(usize) -> [f32; 3]| -> Vec<f32> {
+        (0..n * n)
+            .flat_map(|k| {
+                let [r, g, b] = v(k);
+                [r, g, b, if inside(k) { 1.0 } else { 0.0 }]
+            })
+            .collect()
+    };
+    let pass = masked(&|k| [c.single[k][0], c.single[k][1], c.single[k][2]]);
+    let truth = masked(&|k| [reference[4 * k], reference[4 * k + 1], reference[4 * k + 2]]);
+    let peak = (0..n * n).map(|k| truth[4 * k + 1]).fold(0.0f32, f32::max);
+    let specks: Vec<(usize, usize, f32, f32)> = (0..n * n)
+        .filter(|&k| inside(k))
+        .map(|k| (k % n, k / n, pass[4 * k + 1], truth[4 * k + 1]))
+        .filter(|&(_, _, p, t)| p > 2.0 * t + 0.01 * peak)
+        .collect();
+    let pixels = metrics::compare_binned(&pass, &truth, None, n as u32, n as u32, 1);
+    let binned = metrics::compare_binned(&pass, &truth, None, n as u32, n as u32, 4);
+    println!(
+        "a 1 m sphere against the reference: {:.2} / {:.2} / {:.2} % per pixel over {}, {:.2} / {:.2} / {:.2} % after 4x4 bins; {} pixels over twice the reference: {specks:?}",
+        100.0 * pixels.rel_rms[0],
+        100.0 * pixels.rel_rms[1],
+        100.0 * pixels.rel_rms[2],
+        pixels.bins,
+        100.0 * binned.rel_rms[0],
+        100.0 * binned.rel_rms[1],
+        100.0 * binned.rel_rms[2],
+        specks.len()
+    );
+    assert!(pixels.bins > 5000, "only {} pixels inside", pixels.bins);
+    assert!(specks.len() <= 5, "{} specks: {specks:?}", specks.len());
+    assert_below(pixels.rel_rms, [0.05, 0.06, 0.075]);
+    assert_below(binned.rel_rms, [0.025, 0.025, 0.03]);
+}
+
 /// The frame of `scene` (preprocessed as `pre`) at one single-scattering sample per `k` x `k`
 /// pixels.
 fn render_at(scene: &Scene, pre: &translucent::preprocess::Preprocessed, k: u32) -> RenderOutput {
