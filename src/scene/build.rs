@@ -796,6 +796,8 @@ pub(super) struct Output {
     /// Shadow-map edge length in texels, when given.
     pub(super) shadow_map: Option<u32>,
     pub(super) single_downsample: Option<u32>,
+    /// `[output] entry_neighbours`, when given.
+    pub(super) entry_neighbours: Option<bool>,
     /// Radiance -> display multiplier.
     pub(super) exposure: f64,
     /// Samples per pixel of the camera view.
@@ -864,6 +866,7 @@ pub(super) fn resolve_output(
         settings,
         shadow_map,
         single_downsample,
+        entry_neighbours: od.entry_neighbours,
         exposure,
     })
 }

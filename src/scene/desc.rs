@@ -252,6 +252,11 @@ pub struct OutputDesc {
     /// depth). By default the largest factor at which the object still spans
     /// `single::MIN_SAMPLES_ACROSS` samples, else 1 (`single::downsample`).
     pub single_downsample: Option<u32>,
+    /// Whether the single-scattering pass takes the light's entry for a point inside from the
+    /// neighbouring texels of the light-entry image where the one under it fails. By default
+    /// where a shadow texel at the object is wider than the shortest free path
+    /// (`shadow::entry_neighbours`).
+    pub entry_neighbours: Option<bool>,
     /// Whether the image holds the surface's own reflection (eta != 1): the environment in
     /// the mirror direction and the lamps' highlights, with Fresnel's weight. On by default;
     /// off leaves the subsurface light alone, for comparisons.

@@ -121,6 +121,10 @@ pub struct Scene {
     /// Image pixels per single-scattering sample along each side, when the scene sets it
     /// (otherwise derived from the object's size on screen: `single::downsample`).
     pub single_downsample: Option<u32>,
+    /// Whether `single` looks up the light's entry among the neighbouring texels, when the
+    /// scene sets it (otherwise derived from the shadow texel and the free path:
+    /// `shadow::entry_neighbours`).
+    pub entry_neighbours: Option<bool>,
     /// The surface's own reflection.
     pub surface: Surface,
     /// The preprocessing settings the scene file gives (`[settings]`); the command line's
@@ -244,6 +248,7 @@ impl Scene {
             tonemap: output.tonemap,
             shadow_map: output.shadow_map,
             single_downsample: output.single_downsample,
+            entry_neighbours: output.entry_neighbours,
             surface: output.surface,
             settings: output.settings,
             resolved: desc,

@@ -159,13 +159,21 @@ pub const ENTRY_NEIGHBOURS_ABOVE: f64 = 1.0;
 
 /// Whether `single` takes the light's entry for a point inside from the neighbouring texels of
 /// the light-entry image where the texel under it fails (its centre misses the object, or its
-/// face, extended, lies behind the point), with `size`-texel maps, and why: where a texel at
-/// the object is wider than [`ENTRY_NEIGHBOURS_ABOVE`] of the medium's shortest free paths. A
+/// face, extended, lies behind the point), with `size`-texel maps, and why: as the scene's
+/// `[output] entry_neighbours` says, else where a texel at the object is wider than [`ENTRY_NEIGHBOURS_ABOVE`] of the medium's shortest free paths. A
 /// point just past the terminator there projects into a texel that misses the light's rim by
 /// many free paths in depth, and would take the light as unattenuated (specks); where the texels are
 /// finer the specks are single pixels of a rim a few free paths deep, and on lavapipe the
 /// lookup costs every point of every ray (it runs both sides of a branch).
 pub fn entry_neighbours(scene: &Scene, size: u32) -> (bool, String) {
+    if let Some(on) = scene.entry_neighbours {
+        let how = if on {
+            "from the neighbouring texels where the one under a point fails"
+        } else {
+            "from the texel under each point"
+        };
+        return (on, format!("light entry {how}: given"));
+    }
     let (center, radius) = scene.bounds();
     let texel = scene
         .lights
@@ -207,6 +215,20 @@ mod tests {
         assert!(why.contains("wider than the shortest free path"), "{why}");
         // Fine enough a map keeps the texel under each point.
         assert!(!entry_neighbours(&sphere, 16384).0);
+        // The scene's word wins either way.
+        let given = default_scene("[output]\nentry_neighbours = true");
+        assert_eq!(
+            entry_neighbours(&given, 768),
+            (
+                true,
+                "light entry from the neighbouring texels where the one under a point fails: given"
+                    .to_string()
+            )
+        );
+        let refused = default_scene(
+            "[mesh]\nbuiltin = \"sphere\"\nradius = 1000.0\n[output]\nentry_neighbours = false",
+        );
+        assert!(!entry_neighbours(&refused, 848).0);
     }
 
     /// The derived shadow map follows the atlas texel and the lights, not the image; a size in
