@@ -123,6 +123,17 @@ pub const SHADOW_TEXELS_PER_ATLAS_TEXEL: f64 = 6.0;
 /// Largest derived shadow map, texels per side.
 const MAX_DERIVED_SHADOW_MAP: u32 = 4096;
 
+/// The most that one light's map spans across the object, mm: the largest texel at size 1
+/// (a texel of an `n`-texel map is this over `n`).
+fn map_extent(scene: &Scene) -> f64 {
+    let (center, radius) = scene.bounds();
+    scene
+        .lights
+        .iter()
+        .map(|l| shadow_projections(l, center, radius, 1)[0].texel_mm as f64)
+        .fold(0.0, f64::max)
+}
+
 /// The shadow map's edge length for `scene` with atlas texel `texel_mm`, and why: the scene's
 /// `[output] shadow_map` when set; otherwise the size whose texels, at the object, are
 /// [`SHADOW_TEXELS_PER_ATLAS_TEXEL`] times finer than the atlas texel, for the light whose map
@@ -135,13 +146,7 @@ pub fn shadow_map_size(scene: &Scene, texel_mm: f64) -> (u32, String) {
     if let Some(s) = scene.shadow_map {
         return (s, format!("shadow map {s}x{s}: given"));
     }
-    let (center, radius) = scene.bounds();
-    // The extent each light's map spans across the object: its texel at size 1.
-    let extent = scene
-        .lights
-        .iter()
-        .map(|l| shadow_projections(l, center, radius, 1)[0].texel_mm as f64)
-        .fold(0.0, f64::max);
+    let extent = map_extent(scene);
     let want = (SHADOW_TEXELS_PER_ATLAS_TEXEL * extent / texel_mm.max(1e-6)).ceil();
     let size = ((want.min(MAX_DERIVED_SHADOW_MAP as f64) as u32).div_ceil(16) * 16)
         .clamp(64, MAX_DERIVED_SHADOW_MAP);
@@ -166,33 +171,26 @@ pub const ENTRY_NEIGHBOURS_ABOVE: f64 = 1.0;
 /// finer the specks are single pixels of a rim a few free paths deep, and on lavapipe the
 /// lookup costs every point of every ray (it runs both sides of a branch).
 pub fn entry_neighbours(scene: &Scene, size: u32) -> (bool, String) {
-    if let Some(on) = scene.entry_neighbours {
-        let how = if on {
-            "from the neighbouring texels where the one under a point fails"
-        } else {
-            "from the texel under each point"
-        };
-        return (on, format!("light entry {how}: given"));
-    }
-    let (center, radius) = scene.bounds();
-    let texel = scene
-        .lights
-        .iter()
-        .map(|l| shadow_projections(l, center, radius, size.max(1))[0].texel_mm as f64)
-        .fold(0.0, f64::max);
-    let densest = scene.material.sigma_t().into_iter().fold(0.0, f64::max);
-    let free_path = 1.0 / densest.max(1e-12);
-    let on = texel > ENTRY_NEIGHBOURS_ABOVE * free_path;
-    let why = if on {
-        format!(
-            "light entry from the neighbouring texels where the one under a point fails: the shadow texel ({texel:.3} mm) is wider than the shortest free path ({free_path:.3} mm)"
-        )
-    } else {
-        format!(
-            "light entry from the texel under each point: the shadow texel ({texel:.3} mm) is within the shortest free path ({free_path:.3} mm)"
-        )
+    let (on, because) = match scene.entry_neighbours {
+        Some(on) => (on, "given".to_string()),
+        None => {
+            let texel = map_extent(scene) / size.max(1) as f64;
+            let densest = scene.material.sigma_t().into_iter().fold(0.0, f64::max);
+            let free_path = 1.0 / densest.max(1e-12);
+            let on = texel > ENTRY_NEIGHBOURS_ABOVE * free_path;
+            let relation = if on { "is wider than" } else { "is within" };
+            (
+                on,
+                format!("the shadow texel ({texel:.3} mm) {relation} the shortest free path ({free_path:.3} mm)"),
+            )
+        }
     };
-    (on, why)
+    let how = if on {
+        "from the neighbouring texels where the one under a point fails"
+    } else {
+        "from the texel under each point"
+    };
+    (on, format!("light entry {how}: {because}"))
 }
 
 #[cfg(test)]

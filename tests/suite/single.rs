@@ -70,17 +70,23 @@ fn single_error(
     assert!(single.iter().all(|v| v.is_finite() && *v >= 0.0));
     let e = metrics::compare_binned(&single, &truth, Some(&noise), w, h, 4);
     println!(
-        "{name}: single scattering {:.1} / {:.1} / {:.1} % against truth --max-order 1 ({} bins, noise {:.2} / {:.2} / {:.2} %)",
-        100.0 * e.rel_rms[0],
-        100.0 * e.rel_rms[1],
-        100.0 * e.rel_rms[2],
+        "{name}: single scattering {} % against truth --max-order 1 ({} bins, noise {} %)",
+        percents(e.rel_rms, 1),
         e.bins,
-        100.0 * e.noise[0],
-        100.0 * e.noise[1],
-        100.0 * e.noise[2],
+        percents(e.noise, 2),
     );
     assert!(e.bins >= 20);
     e.rel_rms
+}
+
+/// Per-channel fractions `v` as "R / G / B" percentages with `digits` decimals.
+fn percents(v: [f64; 3], digits: usize) -> String {
+    format!(
+        "{:.digits$} / {:.digits$} / {:.digits$}",
+        100.0 * v[0],
+        100.0 * v[1],
+        100.0 * v[2]
+    )
 }
 
 /// Asserts that each channel's error in `e` is below its bound in `bounds`.
@@ -677,14 +683,10 @@ fn no_specks_past_the_terminator_of_a_large_sphere() {
     let pixels = metrics::compare_binned(&pass, &truth, None, n as u32, n as u32, 1);
     let binned = metrics::compare_binned(&pass, &truth, None, n as u32, n as u32, 4);
     println!(
-        "a 1 m sphere against the reference: {:.2} / {:.2} / {:.2} % per pixel over {}, {:.2} / {:.2} / {:.2} % after 4x4 bins; {} pixels over twice the reference: {specks:?}",
-        100.0 * pixels.rel_rms[0],
-        100.0 * pixels.rel_rms[1],
-        100.0 * pixels.rel_rms[2],
+        "a 1 m sphere against the reference: {} % per pixel over {}, {} % after 4x4 bins; {} pixels over twice the reference: {specks:?}",
+        percents(pixels.rel_rms, 2),
         pixels.bins,
-        100.0 * binned.rel_rms[0],
-        100.0 * binned.rel_rms[1],
-        100.0 * binned.rel_rms[2],
+        percents(binned.rel_rms, 2),
         specks.len()
     );
     assert!(pixels.bins > 5000, "only {} pixels inside", pixels.bins);
