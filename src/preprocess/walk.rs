@@ -334,6 +334,18 @@ impl Sources {
         }
     }
 
+    /// The triangles node `p`'s basis function covers, with the integral of phi_p over each.
+    pub(super) fn support(&self, p: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let cum = &self.cumulative[p];
+        self.triangles[p]
+            .iter()
+            .zip(cum)
+            .enumerate()
+            .map(move |(i, (&(tri, _), &c))| {
+                (tri as usize, c - if i > 0 { cum[i - 1] } else { 0.0 })
+            })
+    }
+
     /// Integral of phi_p over the surface.
     pub(super) fn area(&self, p: usize) -> f64 {
         self.cumulative[p].last().copied().unwrap_or(0.0)
@@ -412,7 +424,7 @@ impl Surface {
     }
 
     /// Whether the surface blocks the segment from `o` along `d` up to `t_max`.
-    fn occluded(&self, o: DVec3, d: DVec3, t_max: f64) -> bool {
+    pub(super) fn occluded(&self, o: DVec3, d: DVec3, t_max: f64) -> bool {
         match self.grid() {
             Some(grid) => grid.occluded(&self.bvh, o, d, t_max),
             None => self.bvh.occluded(o, d, t_max),
@@ -433,6 +445,11 @@ impl Surface {
             Some(grid) => grid.ray(&self.bvh, o, d),
             None => self.bvh.intersect(o, d, f64::INFINITY),
         }
+    }
+
+    /// The medium's relative index of refraction.
+    pub(super) fn eta(&self) -> f64 {
+        self.eta
     }
 
     /// The same surface as the boundary of a medium of relative index `eta`: light entering
@@ -507,7 +524,7 @@ impl Surface {
     /// `towards` that enters: times the cosine and, behind a refractive boundary, Fresnel's
     /// transmittance, as the illumination pass weighs a lamp's; 0 where it comes from below
     /// the horizon or, with `shadows`, the mesh blocks it within `distance`.
-    fn entering(
+    pub(super) fn entering(
         &self,
         e: f64,
         (x, n): (DVec3, DVec3),
@@ -576,6 +593,18 @@ impl Surface {
         refract(d, n, self.eta)
     }
 
+    /// The outward unit normal of node `p`: its triangles' normals weighted by the integral
+    /// of phi_p over each (zero where it covers none).
+    pub(super) fn node_normal(&self, mesh: &Mesh, p: usize) -> DVec3 {
+        let mut sum = DVec3::ZERO;
+        for &(tri, w) in &self.sources.triangles[p] {
+            let [a, b, c] = triangle(mesh, tri as usize);
+            let cross = (b - a).cross(c - a) * self.orientation;
+            sum += cross * (w[0] + w[1] + w[2]);
+        }
+        sum.normalize_or_zero()
+    }
+
     /// The unit normal of triangle `tri` of `mesh` (the mesh this was made from), turned
     /// out of the object.
     pub(super) fn outward_normal(&self, mesh: &Mesh, tri: usize) -> DVec3 {
@@ -587,19 +616,59 @@ impl Surface {
 /// Per receiver of one source node's walks: the deposit per channel (0..3), the lobe's weight
 /// (the deposit; behind a refractive boundary the deposit over the Fresnel transmittance of
 /// its exit) weighted by the exit cosine (3..6) and by the exit direction's component along
-/// the receiving triangle (6..15: x, y, z per channel), and the lobe's weight alone (15..18).
-type Deposit = [f64; DEPOSIT];
-const DEPOSIT: usize = 18;
+/// the receiving triangle (6..15: x, y, z per channel), the lobe's weight alone (15..18), and
+/// all of it again split by the optical depth of the walk's first collision (18.., 18 slots
+/// per [`DEPTH_BINS`] bin), which the light-independent response re-weighs.
+pub(super) type Deposit = [f64; DEPOSIT];
+pub(super) const DEPOSIT: usize = 18 * (1 + DEPTH_BINS);
+
+/// Slots of one pair of nodes' entry: per depth bin, F per channel (per unit area of the
+/// receiver) and the exits' moments (the deposit's slots 3..18: the lobe's weight by the exit
+/// cosine, by the exit direction along the surface, alone).
+pub const ENTRY: usize = 18 * DEPTH_BINS;
+
+/// One pair of nodes' entry ([`ENTRY`]).
+pub type Entry = [f32; ENTRY];
+
+/// The entry of deposit `v` at a receiver of area `aq`.
+pub(super) fn entry(v: &Deposit, aq: f64) -> Entry {
+    std::array::from_fn(|i| {
+        let x = v[18 + i];
+        if i % 18 < 3 {
+            (x / aq) as f32
+        } else {
+            x as f32
+        }
+    })
+}
 
 /// The channel of deposit slot `i`.
-fn deposit_channel(i: usize) -> usize {
+pub(super) fn deposit_channel(i: usize) -> usize {
     if i < 6 {
         i % 3
     } else if i < 15 {
         (i - 6) / 3
-    } else {
+    } else if i < 18 {
         i - 15
+    } else {
+        deposit_channel(i % 18)
     }
+}
+
+/// Bins of the optical depth at which a walk entering along the normal first collides
+/// ([`DEPTH_EDGES`]).
+pub const DEPTH_BINS: usize = 5;
+
+/// The bins' bounds in optical depth (sigma_t times the first flight's length): about 0.11,
+/// 0.18, 0.30, 0.24 and 0.17 of the collisions of light entering along the normal.
+pub const DEPTH_EDGES: [f64; DEPTH_BINS + 1] = [0.0, 0.12, 0.35, 0.9, 1.8, f64::INFINITY];
+
+/// The depth bin of a first flight of optical length `tau`.
+fn depth_bin(tau: f64) -> usize {
+    DEPTH_EDGES[1..DEPTH_BINS]
+        .iter()
+        .take_while(|&&e| tau >= e)
+        .count()
 }
 
 /// One source node's walks: (receiver, deposit), the counters ([`Counter`]), the flux that
@@ -685,6 +754,9 @@ struct Walker<'a> {
     /// Sources walked, for the progress.
     done: std::sync::atomic::AtomicU64,
     progress: super::Progress<'a>,
+    /// Whether deposits are also kept by the depth of the first collision (slots 18..), for
+    /// the light-independent response; the lamps' walks leave those slots empty.
+    binned: bool,
 }
 
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
@@ -764,10 +836,72 @@ fn walk(
         n: nodes.positions.len(),
         done: std::sync::atomic::AtomicU64::new(0),
         progress,
+        binned: false,
     };
     let estimated_seconds = walker.pilot(paths);
-    let (rows, exits, report) = walker.walk_all(paths, estimated_seconds);
+    let n = walker.n;
+    let mut rows: Rows = vec![Vec::new(); n];
+    // Per receiver: what left through its support, and that weighted by the exit cosine and
+    // by the exit direction along the surface, each source weighted by its lobe weight.
+    let mut exits = vec![[0.0f64; DEPOSIT]; n];
+    let sources = &walker.surface.sources;
+    let report = walker.walk_all(paths, estimated_seconds, |p, q, v, lobe| {
+        for (i, (e, x)) in exits[q].iter_mut().zip(v).enumerate() {
+            *e += x * lobe[deposit_channel(i)];
+        }
+        let aq = sources.area(q);
+        if aq > 0.0 {
+            rows[q].push((p as u32, Rgb([v[0] / aq, v[1] / aq, v[2] / aq])));
+        }
+    });
     (with_exit_lobes(rows, &exits, material.eta), report)
+}
+
+/// The walks of the light-independent response of `mesh` ([`super::mix`]): `paths` walks per
+/// node and channel entering along the inward normal with unit weight, counting exits after
+/// `min_order` or more scattering events; per receiver, (source, [`Entry`]): each pair of
+/// nodes' deposits and exit moments by the depth of the first collision, the moments
+/// unweighted, for [`super::mix`] to weigh for any lamps.
+pub fn walk_independent(
+    mesh: &Mesh,
+    nodes: &Nodes,
+    material: &Material,
+    (paths, min_order): (u32, u32),
+    progress: super::Progress<'_>,
+) -> (Vec<Vec<(u32, Entry)>>, WalkReport) {
+    let medium = crate::physics::Medium::new(material, 0.0);
+    let densest = medium.sigma_t.iter().cloned().fold(0.0, f64::max);
+    let surface = Surface::new(mesh, nodes)
+        .behind(material.eta)
+        .with_clearance(
+            1.0 / (CLEARANCE_CELLS_PER_FREE_PATH * densest),
+            CLEARANCE_MAX_CELLS,
+            true,
+        );
+    let walker = Walker {
+        mesh,
+        nodes,
+        surface,
+        medium,
+        jumps: Some(escape::table()),
+        lamps: &[],
+        sky: None,
+        min_order,
+        n: nodes.positions.len(),
+        done: std::sync::atomic::AtomicU64::new(0),
+        progress,
+        binned: true,
+    };
+    let estimated_seconds = walker.pilot(paths);
+    let mut rows: Vec<Vec<(u32, Entry)>> = vec![Vec::new(); walker.n];
+    let sources = &walker.surface.sources;
+    let report = walker.walk_all(paths, estimated_seconds, |p, q, v, _| {
+        let aq = sources.area(q);
+        if aq > 0.0 {
+            rows[q].push((p as u32, entry(v, aq)));
+        }
+    });
+    (rows, report)
 }
 
 impl Walker<'_> {
@@ -859,6 +993,8 @@ impl Walker<'_> {
         let mut x = at + d * eps;
         let mut order = 0u32;
         let mut events = 0u64;
+        // The depth bin of the first collision (or of the first flight's crossing).
+        let mut bin = None;
         // Reflections at the surface (behind a refractive boundary): cut with the collisions,
         // since a path reflected totally at every face of a box never leaves.
         let mut reflections = 0u64;
@@ -869,6 +1005,8 @@ impl Walker<'_> {
             // surface and needs no ray cast: this changes no walk, only what a walk costs.
             // The same hit either way: the grid only finds it cheaper, or knows there is none.
             let hit = surface.flight(x, d, s);
+            let bin =
+                *bin.get_or_insert_with(|| depth_bin(sigma_t * hit.as_ref().map_or(s, |h| h.t)));
             if let Some(hit) = hit {
                 // Behind a refractive boundary: reflected back in with Fresnel's probability
                 // (always beyond the critical angle), a new flight from the surface;
@@ -888,7 +1026,7 @@ impl Walker<'_> {
                 };
                 if order >= min_order {
                     tally.left[c] += weight;
-                    self.deposit(scratch, &hit, d_out, c, weight);
+                    self.deposit(scratch, &hit, d_out, (c, bin), weight);
                 }
                 // On through the air: into the object again where the line meets it
                 // (refracted, with Fresnel's probability, behind a refractive boundary),
@@ -989,7 +1127,7 @@ impl Walker<'_> {
         (acc, seen, touched): &mut Scratch,
         hit: &Hit,
         d: DVec3,
-        c: usize,
+        (c, bin): (usize, usize),
         weight: f64,
     ) {
         let normal = self
@@ -1016,13 +1154,16 @@ impl Walker<'_> {
                 seen[q as usize] = true;
                 touched.push(q);
             }
-            let a = &mut acc[q as usize];
-            a[c] += phi * weight;
-            a[3 + c] += phi * mu * lobe_weight;
-            for (j, x) in along.to_array().iter().enumerate() {
-                a[6 + 3 * c + j] += phi * x * lobe_weight;
+            let bins = if self.binned { 2 } else { 1 };
+            for base in [0, 18 * (1 + bin)].into_iter().take(bins) {
+                let a = &mut acc[q as usize][base..base + 18];
+                a[c] += phi * weight;
+                a[3 + c] += phi * mu * lobe_weight;
+                for (j, x) in along.to_array().iter().enumerate() {
+                    a[6 + 3 * c + j] += phi * x * lobe_weight;
+                }
+                a[15 + c] += phi * lobe_weight;
             }
-            a[15 + c] += phi * lobe_weight;
         }
     }
 
@@ -1042,7 +1183,7 @@ impl Walker<'_> {
             .drain(..)
             .map(|q| {
                 seen[q as usize] = false;
-                let v = std::mem::take(&mut acc[q as usize]);
+                let v = std::mem::replace(&mut acc[q as usize], [0.0; DEPOSIT]);
                 (q, std::array::from_fn(|i| v[i] * scale[deposit_channel(i)]))
             })
             .collect();
@@ -1086,10 +1227,15 @@ impl Walker<'_> {
         estimated_seconds
     }
 
-    /// Walks every source, [`SOURCE_BLOCK`] at a time in parallel, and sums the columns in
-    /// node order: F's rows, per receiver the exits weighted by the sources' lobe weights, and
+    /// Walks every source, [`SOURCE_BLOCK`] at a time in parallel, and hands each column's
+    /// entries to `sink` in node order (source, receiver, deposit, the source's lobe weights):
     /// the report.
-    fn walk_all(&self, paths: u32, estimated_seconds: f64) -> (Rows, Vec<Deposit>, WalkReport) {
+    fn walk_all(
+        &self,
+        paths: u32,
+        estimated_seconds: f64,
+        mut sink: impl FnMut(usize, usize, &Deposit, &[f64; 3]),
+    ) -> WalkReport {
         let n = self.n;
         let sources = &self.surface.sources;
         let clock = std::time::Instant::now();
@@ -1098,10 +1244,6 @@ impl Walker<'_> {
             estimated_seconds,
             ..WalkReport::default()
         };
-        let mut rows: Rows = vec![Vec::new(); n];
-        // Per receiver: what left through its support, and that weighted by the exit cosine and
-        // by the exit direction along the surface, each source weighted by its lobe weight.
-        let mut exits = vec![[0.0f64; DEPOSIT]; n];
         let mut entered = 0.0;
         for start in (0..n).step_by(SOURCE_BLOCK) {
             let block: Vec<Column> = (start..(start + SOURCE_BLOCK).min(n))
@@ -1121,32 +1263,26 @@ impl Walker<'_> {
                     report.left[c] += left[c];
                 }
                 for (q, v) in column {
-                    for (i, (e, x)) in exits[q as usize].iter_mut().zip(v).enumerate() {
-                        *e += x * lobe[deposit_channel(i)];
-                    }
-                    let aq = sources.area(q as usize);
-                    if aq > 0.0 {
-                        rows[q as usize].push((p as u32, Rgb([v[0] / aq, v[1] / aq, v[2] / aq])));
-                    }
+                    sink(p, q as usize, &v, &lobe);
                 }
             }
         }
         (self.progress)("walks", n as u64, n as u64);
         report.seconds = clock.elapsed().as_secs_f64();
         report.left = report.left.map(|l| l / entered.max(1e-300));
-        (rows, exits, report)
+        report
     }
 }
 
 /// F's rows by receiver: (source, value per channel).
-type Rows = Vec<Vec<(u32, Rgb)>>;
+pub(super) type Rows = Vec<Vec<(u32, Rgb)>>;
 
 /// The walks' result from F's rows and the lobe-weighted exits per receiver: the exit lobes'
 /// slopes and drifts. Behind a refractive boundary (`eta` != 1) the lobe is fitted to the exits
 /// over their Fresnel transmittance, which the composite multiplies back; each receiver's row
 /// of F is then divided by the flux that lobe lets out per unit ([`lobe_flux`]), so that the
 /// composite lets out the flux that left.
-fn with_exit_lobes(mut rows: Rows, exits: &[Deposit], eta: f64) -> Walked {
+pub(super) fn with_exit_lobes(mut rows: Rows, exits: &[Deposit], eta: f64) -> Walked {
     // The lobe's weight alone: the deposit itself where the surface is index-matched.
     let lobe_total = |e: &Deposit, c: usize| if eta != 1.0 { e[15 + c] } else { e[c] };
     let slopes: Vec<[f32; 3]> = exits
