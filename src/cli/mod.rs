@@ -181,6 +181,10 @@ pub struct PreprocessArgs {
     /// Random walks per node and channel filling F (model volume).
     #[arg(long)]
     pub walk_paths: Option<u32>,
+    /// Make the walks once for any lamp (model volume under lamps): they enter along the
+    /// normal and are weighed for the lamps where they are, so a moved lamp needs no new walks.
+    #[arg(long)]
+    pub lamp_independent: bool,
     /// Target relative error of the render.
     #[arg(long, default_value_t = preprocess::DEFAULT_TARGET_ERROR)]
     pub target_error: f64,
@@ -200,6 +204,7 @@ impl PreprocessArgs {
             node_spacing_mm: self.node_spacing_mm,
             prune_tolerance: self.prune,
             walk_paths: self.walk_paths,
+            lamp_independent: self.lamp_independent.then_some(true),
         }
     }
 

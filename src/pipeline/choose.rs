@@ -63,10 +63,18 @@ pub fn choose_at(
             .environment_light()
             .and_then(|(env, light)| crate::preprocess::walk::WalkSky::new(env, light));
         choice.settings.walk_sky = choice.sky.as_ref().map(|s| s.key());
-        choice.reasons.push(crate::preprocess::walk::entry_reason(
-            &choice.settings.walk_lights,
-            choice.sky.is_some(),
-        ));
+        if choice.settings.lamp_independent && choice.sky.is_some() {
+            choice.settings.lamp_independent = false;
+            choice.reasons.push("walks for any lamp given, not used: the walks also enter from the environment's map, which they are made for".into());
+        }
+        choice.reasons.push(if choice.settings.lamp_independent {
+            crate::preprocess::mix::entry_reason(&choice.settings.walk_lights)
+        } else {
+            crate::preprocess::walk::entry_reason(
+                &choice.settings.walk_lights,
+                choice.sky.is_some(),
+            )
+        });
     }
     // The model is the material's; said with the derived settings, with why: the default's
     // reason where it chose the model (`model::apply_default`), else the scene's own default

@@ -25,6 +25,7 @@ pub fn same_geometry(a: &Settings, b: &Settings) -> bool {
         walk_paths: 0,
         walk_lights: [None; crate::scene::MAX_LIGHTS],
         walk_sky: None,
+        lamp_independent: false,
         ..*s
     };
     geometry(a) == geometry(b)
@@ -164,6 +165,7 @@ mod tests {
             walk_paths: 0,
             walk_lights: [None; crate::scene::MAX_LIGHTS],
             walk_sky: None,
+            lamp_independent: false,
         };
         assert!(same_geometry(
             &a,

@@ -6,6 +6,7 @@ pub mod air;
 pub mod apply;
 pub mod atlas;
 pub mod cache;
+pub mod mix;
 mod near_field;
 pub mod nodes;
 pub mod operators;

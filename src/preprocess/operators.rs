@@ -292,16 +292,33 @@ impl Weights {
             // Single scattering is its own pass wherever the walks fill F.
             let min_order = 2;
             let lamps: Vec<_> = settings.walk_lights.iter().flatten().copied().collect();
-            let (walked, report) = super::walk::walk_response(
-                mesh,
-                nodes,
-                material,
-                settings.walk_paths,
-                min_order,
-                (&lamps, sky),
-                progress,
-            );
-            (walked.rows, Some(report), walked.slopes, walked.drifts)
+            if settings.lamp_independent && sky.is_none() {
+                let response = super::mix::walked_once(
+                    mesh,
+                    nodes,
+                    material,
+                    (settings.walk_paths, min_order),
+                    progress,
+                );
+                let walked = response.for_lamps(mesh, nodes, material, &lamps);
+                (
+                    walked.rows,
+                    Some(response.report),
+                    walked.slopes,
+                    walked.drifts,
+                )
+            } else {
+                let (walked, report) = super::walk::walk_response(
+                    mesh,
+                    nodes,
+                    material,
+                    settings.walk_paths,
+                    min_order,
+                    (&lamps, sky),
+                    progress,
+                );
+                (walked.rows, Some(report), walked.slopes, walked.drifts)
+            }
         } else {
             let rows = global_rows(atlas, nodes, basis, &profiles, progress);
             (rows, None, Vec::new(), Vec::new())

@@ -46,6 +46,9 @@ pub struct Settings {
     /// The key of the environment's sky the walks enter from besides the lamps
     /// ([`crate::preprocess::walk::WalkSky::key`]; none without one).
     pub walk_sky: Option<u64>,
+    /// Whether the walks are made once for any lamp ([`crate::preprocess::mix`]): along the
+    /// normal, weighed for [`Settings::walk_lights`] afterwards.
+    pub lamp_independent: bool,
 }
 
 impl Settings {
@@ -60,6 +63,7 @@ impl Settings {
             node_spacing_mm: Some(self.node_spacing_mm),
             prune_tolerance: Some(self.prune_tolerance),
             walk_paths: (self.walk_paths > 0).then_some(self.walk_paths),
+            lamp_independent: self.lamp_independent.then_some(true),
         }
     }
 }
@@ -234,6 +238,17 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
         n
     };
 
+    let lamp_independent = o.lamp_independent == Some(true) && walk_paths > 0;
+    match o.lamp_independent {
+        Some(true) if lamp_independent => reasons.push(
+            "walks made once for any lamp: given (along the normal, weighed for the lamps where they are)".into(),
+        ),
+        Some(true) => reasons.push(format!(
+            "walks for any lamp given, not used: model {} fills F without walks",
+            material.model.name()
+        )),
+        _ => {}
+    }
     Choice {
         settings: Settings {
             texel_mm: texel,
@@ -244,6 +259,7 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             walk_paths,
             walk_lights: [None; crate::scene::light::MAX_LIGHTS],
             walk_sky: None,
+            lamp_independent,
         },
         reasons,
         sky: None,
@@ -301,6 +317,35 @@ mod tests {
             max_texels: 1.0e6,
             target_error: 0.02,
         }
+    }
+
+    /// Walks for any lamp are made where they are given and the model walks, and said either
+    /// way.
+    #[test]
+    fn walks_for_any_lamp_where_given_and_the_model_walks() {
+        let given = SettingsOverrides {
+            lamp_independent: Some(true),
+            ..Default::default()
+        };
+        let volume = Material::preset("skimmilk")
+            .unwrap()
+            .with_model(crate::physics::Model::Volume)
+            .unwrap();
+        let c = derive(&volume, &scale(), &given);
+        assert!(c.settings.lamp_independent);
+        assert!(c
+            .reasons
+            .iter()
+            .any(|r| r.starts_with("walks made once for any lamp: given")));
+        assert_eq!(c.settings.pinned().lamp_independent, Some(true));
+        assert!(
+            !derive(&volume, &scale(), &Default::default())
+                .settings
+                .lamp_independent
+        );
+        let dipole = derive(&Material::preset("skimmilk").unwrap(), &scale(), &given);
+        assert!(!dipole.settings.lamp_independent);
+        assert!(dipole.reasons.iter().any(|r| r.contains("not used")));
     }
 
     #[test]
@@ -366,6 +411,7 @@ mod tests {
             node_spacing_mm: Some(3.0),
             prune_tolerance: Some(0.0),
             walk_paths: None,
+            lamp_independent: None,
         };
         let s = derive(&Material::preset("skimmilk").unwrap(), &scale(), &o).settings;
         assert_eq!(

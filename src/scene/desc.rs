@@ -45,6 +45,7 @@
 //! node_spacing_mm = 3.5
 //! prune = 0.005
 //! walk_paths = 4096          # model "volume" only
+//! lamp_independent = true    # model "volume" under lamps: walks made once for any lamp
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -283,6 +284,9 @@ pub struct SettingsDesc {
     /// Random walks per node and channel (model "volume").
     #[serde(skip_serializing_if = "Option::is_none")]
     pub walk_paths: Option<u32>,
+    /// Walks made once for any lamp (model "volume" under lamps).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lamp_independent: Option<bool>,
 }
 
 impl SettingsDesc {

@@ -18,6 +18,9 @@ pub struct SettingsOverrides {
     pub prune_tolerance: Option<f64>,
     /// Random walks per node and channel (`model = "volume"`).
     pub walk_paths: Option<u32>,
+    /// Whether the walks are made once for any lamp (`model = "volume"` under lamps,
+    /// [`crate::preprocess::mix`]) rather than along the scene's lamps.
+    pub lamp_independent: Option<bool>,
 }
 
 impl SettingsOverrides {
@@ -30,6 +33,7 @@ impl SettingsOverrides {
             node_spacing_mm: self.node_spacing_mm.or(below.node_spacing_mm),
             prune_tolerance: self.prune_tolerance.or(below.prune_tolerance),
             walk_paths: self.walk_paths.or(below.walk_paths),
+            lamp_independent: self.lamp_independent.or(below.lamp_independent),
         }
     }
 }
@@ -78,6 +82,7 @@ impl From<SettingsDesc> for SettingsOverrides {
             node_spacing_mm: d.node_spacing_mm,
             prune_tolerance: d.prune,
             walk_paths: d.walk_paths,
+            lamp_independent: d.lamp_independent,
         }
     }
 }
@@ -90,6 +95,7 @@ impl From<SettingsOverrides> for SettingsDesc {
             node_spacing_mm: o.node_spacing_mm,
             prune: o.prune_tolerance,
             walk_paths: o.walk_paths,
+            lamp_independent: o.lamp_independent,
         }
     }
 }

@@ -192,7 +192,12 @@ impl Running {
         if sky_moved || walked.iter().zip(&now).any(|(a, b)| moved(a, b)) {
             let asked = self.request_walk_lights((lights, sky), app);
             if asked && self.job.is_none() {
-                self.status = "volume: the lights moved; the walks start again for them once they stay (until then F answers the lights where they were)".into();
+                self.status = if self.prepared.pre.settings.lamp_independent {
+                    "volume: the lights moved; F is weighed for them once they stay, from the walks made for any lamp (until then F answers the lights where they were)"
+                } else {
+                    "volume: the lights moved; the walks start again for them once they stay (until then F answers the lights where they were)"
+                }
+                .into();
             }
         }
     }
