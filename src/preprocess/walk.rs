@@ -617,10 +617,15 @@ impl Surface {
 /// (the deposit; behind a refractive boundary the deposit over the Fresnel transmittance of
 /// its exit) weighted by the exit cosine (3..6) and by the exit direction's component along
 /// the receiving triangle (6..15: x, y, z per channel), the lobe's weight alone (15..18), and
-/// all of it again split by the optical depth of the walk's first collision (18.., 18 slots
-/// per [`DEPTH_BINS`] bin), which the light-independent response re-weighs.
+/// in a [`Binned`] deposit all of it again split by the optical depth of the walk's first
+/// collision (18.., 18 slots per [`DEPTH_BINS`] bin), which the light-independent response
+/// re-weighs.
 pub(super) type Deposit = [f64; DEPOSIT];
-pub(super) const DEPOSIT: usize = 18 * (1 + DEPTH_BINS);
+pub(super) const DEPOSIT: usize = 18;
+
+/// A deposit with its copies by depth bin ([`Deposit`]).
+pub(super) type Binned = [f64; BINNED];
+pub(super) const BINNED: usize = DEPOSIT * (1 + DEPTH_BINS);
 
 /// Slots of one pair of nodes' entry: per depth bin, F per channel (per unit area of the
 /// receiver) and the exits' moments (the deposit's slots 3..18: the lobe's weight by the exit
@@ -631,7 +636,7 @@ pub const ENTRY: usize = 18 * DEPTH_BINS;
 pub type Entry = [f32; ENTRY];
 
 /// The entry of deposit `v` at a receiver of area `aq`.
-pub(super) fn entry(v: &Deposit, aq: f64) -> Entry {
+pub(super) fn entry(v: &Binned, aq: f64) -> Entry {
     std::array::from_fn(|i| {
         let x = v[18 + i];
         if i % 18 < 3 {
@@ -673,7 +678,7 @@ fn depth_bin(tau: f64) -> usize {
 
 /// One source node's walks: (receiver, deposit), the counters ([`Counter`]), the flux that
 /// left and the source's weight in the exit lobes per channel.
-type Column = (Vec<(u32, Deposit)>, [u64; COUNTERS], [f64; 3], [f64; 3]);
+type Column<const S: usize> = (Vec<(u32, [f64; S])>, [u64; COUNTERS], [f64; 3], [f64; 3]);
 
 /// What a source's walks count.
 #[derive(Clone, Copy)]
@@ -713,15 +718,11 @@ const CLEARANCE_MAX_CELLS: usize = 1 << 22;
 
 /// Per thread, the scratch of one source's walks: the deposit per receiver, whether a
 /// receiver holds one, and the receivers that do.
-type Scratch = (Vec<Deposit>, Vec<bool>, Vec<u32>);
+type Scratch<const S: usize> = (Vec<[f64; S]>, Vec<bool>, Vec<u32>);
 
 /// Empty scratch for `n` nodes.
-fn scratch(n: usize) -> Scratch {
-    (
-        vec![[0.0f64; DEPOSIT]; n],
-        vec![false; n],
-        Vec::<u32>::new(),
-    )
+fn scratch<const S: usize>(n: usize) -> Scratch<S> {
+    (vec![[0.0f64; S]; n], vec![false; n], Vec::<u32>::new())
 }
 
 /// One source's running tallies: the counters ([`Counter`]) and the weight that left per channel; per channel the walks' summed entry weights (their count
@@ -754,9 +755,6 @@ struct Walker<'a> {
     /// Sources walked, for the progress.
     done: std::sync::atomic::AtomicU64,
     progress: super::Progress<'a>,
-    /// Whether deposits are also kept by the depth of the first collision (slots 18..), for
-    /// the light-independent response; the lamps' walks leave those slots empty.
-    binned: bool,
 }
 
 /// The volumetric F (rows = receivers, unpruned, dense where paths arrived) and what the
@@ -836,16 +834,15 @@ fn walk(
         n: nodes.positions.len(),
         done: std::sync::atomic::AtomicU64::new(0),
         progress,
-        binned: false,
     };
-    let estimated_seconds = walker.pilot(paths);
+    let estimated_seconds = walker.pilot::<DEPOSIT>(paths);
     let n = walker.n;
     let mut rows: Rows = vec![Vec::new(); n];
     // Per receiver: what left through its support, and that weighted by the exit cosine and
     // by the exit direction along the surface, each source weighted by its lobe weight.
     let mut exits = vec![[0.0f64; DEPOSIT]; n];
     let sources = &walker.surface.sources;
-    let report = walker.walk_all(paths, estimated_seconds, |p, q, v, lobe| {
+    let report = walker.walk_all::<DEPOSIT>(paths, estimated_seconds, |p, q, v, lobe| {
         for (i, (e, x)) in exits[q].iter_mut().zip(v).enumerate() {
             *e += x * lobe[deposit_channel(i)];
         }
@@ -890,12 +887,11 @@ pub fn walk_independent(
         n: nodes.positions.len(),
         done: std::sync::atomic::AtomicU64::new(0),
         progress,
-        binned: true,
     };
-    let estimated_seconds = walker.pilot(paths);
+    let estimated_seconds = walker.pilot::<BINNED>(paths);
     let mut rows: Vec<Vec<(u32, Entry)>> = vec![Vec::new(); walker.n];
     let sources = &walker.surface.sources;
-    let report = walker.walk_all(paths, estimated_seconds, |p, q, v, _| {
+    let report = walker.walk_all::<BINNED>(paths, estimated_seconds, |p, q, v, _| {
         let aq = sources.area(q);
         if aq > 0.0 {
             rows[q].push((p as u32, entry(v, aq)));
@@ -906,7 +902,11 @@ pub fn walk_independent(
 
 impl Walker<'_> {
     /// Source `p`'s walks, `paths` per channel: its column (receiver, deposit) and tallies.
-    fn walk_source(&self, scratch: &mut Scratch, (p, paths): (usize, u32)) -> Column {
+    fn walk_source<const S: usize>(
+        &self,
+        scratch: &mut Scratch<S>,
+        (p, paths): (usize, u32),
+    ) -> Column<S> {
         let mut tally = Tally {
             counters: [0u64; COUNTERS],
             left: [0.0; 3],
@@ -928,9 +928,9 @@ impl Walker<'_> {
     /// Channel `c` of source `p`'s walks, from its own random stream: along the lamps and from
     /// the sky where the scene has any; without the shadow ray where none reaches this node;
     /// along the normal where it faces away from every light, or the scene has none.
-    fn walk_channel(
+    fn walk_channel<const S: usize>(
         &self,
-        scratch: &mut Scratch,
+        scratch: &mut Scratch<S>,
         (p, paths): (usize, u32),
         c: usize,
         tally: &mut Tally,
@@ -979,9 +979,9 @@ impl Walker<'_> {
     /// and isotropic scattering until it is absorbed, cut or gone, its exits after `min_order`
     /// or more events deposited in `scratch`, through the air into the object again where the
     /// line meets it.
-    fn trace(
+    fn trace<const S: usize>(
         &self,
-        scratch: &mut Scratch,
+        scratch: &mut Scratch<S>,
         rng: &mut Rng,
         c: usize,
         (at, mut d, mut weight, min_order): (DVec3, DVec3, f64, u32),
@@ -1122,9 +1122,9 @@ impl Walker<'_> {
     /// Adds a walk of channel `c` and weight `weight` that leaves through `hit` along `d` to
     /// every node q of the triangle it leaves through: w phi_q, that weighted by the exit
     /// cosine, and by the exit direction's components along the surface.
-    fn deposit(
+    fn deposit<const S: usize>(
         &self,
-        (acc, seen, touched): &mut Scratch,
+        (acc, seen, touched): &mut Scratch<S>,
         hit: &Hit,
         d: DVec3,
         (c, bin): (usize, usize),
@@ -1154,7 +1154,7 @@ impl Walker<'_> {
                 seen[q as usize] = true;
                 touched.push(q);
             }
-            let bins = if self.binned { 2 } else { 1 };
+            let bins = if S > DEPOSIT { 2 } else { 1 };
             for base in [0, 18 * (1 + bin)].into_iter().take(bins) {
                 let a = &mut acc[q as usize][base..base + 18];
                 a[c] += phi * weight;
@@ -1169,7 +1169,12 @@ impl Walker<'_> {
 
     /// Source `p`'s column out of `scratch` (which it leaves empty) and its tallies, scaled to
     /// A_p of flux spread over the walks by their weights.
-    fn column(&self, (acc, seen, touched): &mut Scratch, p: usize, tally: Tally) -> Column {
+    fn column<const S: usize>(
+        &self,
+        (acc, seen, touched): &mut Scratch<S>,
+        p: usize,
+        tally: Tally,
+    ) -> Column<S> {
         touched.sort_unstable();
         // A_p of flux spread over the walks by their weights.
         let scale: [f64; 3] = std::array::from_fn(|c| {
@@ -1183,7 +1188,7 @@ impl Walker<'_> {
             .drain(..)
             .map(|q| {
                 seen[q as usize] = false;
-                let v = std::mem::replace(&mut acc[q as usize], [0.0; DEPOSIT]);
+                let v = std::mem::replace(&mut acc[q as usize], [0.0; S]);
                 (q, std::array::from_fn(|i| v[i] * scale[deposit_channel(i)]))
             })
             .collect();
@@ -1202,18 +1207,21 @@ impl Walker<'_> {
     /// The time of the walks, from a pilot on this machine under its current load: a strided
     /// sample of the sources with an eighth of their walks, timed and scaled up (where it is a
     /// small part of the work). Its columns are dropped. 0 where there are too few nodes for one.
-    fn pilot(&self, paths: u32) -> f64 {
+    fn pilot<const S: usize>(&self, paths: u32) -> f64 {
         let n = self.n;
         let mut estimated_seconds = 0.0;
         if n >= 4 * PILOT_SOURCES {
             let pilot_step = n / PILOT_SOURCES;
             let pilot_paths = (paths / 8).max(PILOT_MIN_PATHS).min(paths);
             let clock = std::time::Instant::now();
-            let pilot: Vec<Column> = (0..n)
+            let pilot: Vec<Column<S>> = (0..n)
                 .step_by(pilot_step)
                 .collect::<Vec<_>>()
                 .into_par_iter()
-                .map_init(|| scratch(n), |s, p| self.walk_source(s, (p, pilot_paths)))
+                .map_init(
+                    || scratch::<S>(n),
+                    |s, p| self.walk_source(s, (p, pilot_paths)),
+                )
                 .collect();
             let pilot_seconds = clock.elapsed().as_secs_f64();
             estimated_seconds = pilot_seconds * n as f64 / pilot.len().max(1) as f64 * paths as f64
@@ -1230,11 +1238,11 @@ impl Walker<'_> {
     /// Walks every source, [`SOURCE_BLOCK`] at a time in parallel, and hands each column's
     /// entries to `sink` in node order (source, receiver, deposit, the source's lobe weights):
     /// the report.
-    fn walk_all(
+    fn walk_all<const S: usize>(
         &self,
         paths: u32,
         estimated_seconds: f64,
-        mut sink: impl FnMut(usize, usize, &Deposit, &[f64; 3]),
+        mut sink: impl FnMut(usize, usize, &[f64; S], &[f64; 3]),
     ) -> WalkReport {
         let n = self.n;
         let sources = &self.surface.sources;
@@ -1246,9 +1254,9 @@ impl Walker<'_> {
         };
         let mut entered = 0.0;
         for start in (0..n).step_by(SOURCE_BLOCK) {
-            let block: Vec<Column> = (start..(start + SOURCE_BLOCK).min(n))
+            let block: Vec<Column<S>> = (start..(start + SOURCE_BLOCK).min(n))
                 .into_par_iter()
-                .map_init(|| scratch(n), |s, p| self.walk_source(s, (p, paths)))
+                .map_init(|| scratch::<S>(n), |s, p| self.walk_source(s, (p, paths)))
                 .collect();
             for (i, (column, counters, left, lobe)) in block.into_iter().enumerate() {
                 let p = start + i;
