@@ -8,27 +8,30 @@
 //! not know where it came from. On a plane, light that enters at y refracted along a direction
 //! of cosine mu to the inward normal first collides at depth z with density
 //! (sigma_t / mu) e^(-sigma_t z / mu), at y + z tan(theta) along the surface in the direction
-//! the refracted light travels. A walk that entered along the normal at y' and collided at
-//! depth z therefore stands for light entering at y' - z tan(theta) (the same first collision),
-//! weighed by the ratio of the two depth densities. Per landing node p' and depth bin d:
+//! the refracted light travels. The walks that entered along the normal at that point and
+//! collided at depth z therefore stand for it, weighed by the ratio of the two depth
+//! densities. Per source p, with its light landing on nodes p' and depth bin d:
 //!
-//!   F_pq(lamps) = sum over p', d of r_d(mu) phi_p(x_p' - s_d a) B_p'dq,
+//!   F_pq(lamps) = sum over p', d of r_d (A_p / A_p') phi_p'(x_p + o + s_d a) B_p'dq,
 //!
 //! B_p'dq the deposits of p''s walks whose first collision fell in bin d (they sum to the
-//! normal-incidence F), r_d the bin's probability at mu over that at normal incidence, s_d the
-//! lateral shift at the bin's mean depth at mu (per channel, through sigma_t), a the direction
-//! the refracted light travels along the surface at p', phi_p evaluated where a ray along the
-//! normal meets the surface next to p'. The lamps' incidence is taken over p''s support (each
-//! triangle at its centre, weighted by the integral of phi over it and by the lamp's entering
+//! normal-incidence F), A the nodes' areas (the integrals of phi), and, from p's incidence:
+//! r_d the bin's probability at mu over that at normal incidence, s_d the lateral shift at the
+//! bin's mean depth at mu (per channel, through sigma_t), a the direction the refracted light
+//! travels along the surface, o where on p's support the light enters (the centroid of its
+//! entering irradiance less that of phi_p, which the walks start from: a support half in shadow
+//! gives its light from its lit half), phi_p' evaluated where a ray along p's normal meets the
+//! surface next to that point. Since the phi_p' there sum to 1, each source's light lands
+//! whole. The lamps' incidence is taken over p's support (four points per triangle, each
+//! weighted by the integral of phi over its quarter of the triangle and by the lamp's entering
 //! irradiance: cosine, distance, cone, Fresnel's transmittance, a shadow ray, as the
 //! lamp-entered walks weigh their start points), several lamps by their shares; a node no lamp
 //! reaches unshadowed, or one that faces away from all, takes normal incidence. Each bin is
 //! cut where the lamp's refracted ray leaves the object, over the same cut of the walks' own
-//! ray along the normal (which their bins already hold). Where the shift varies along the
-//! surface (a bend, a point lamp) the landing nodes stretch or squeeze a source's support, so
-//! each source's landed weight per bin is scaled to what its own incidence gives the bin
-//! (by at most `MAX_LANDING_SCALE`, the rest landing under the source itself). At normal
-//! incidence (or without lamps) it is the normal-entry walks' F exactly.
+//! ray along the normal (which their bins already hold). Where no surface is found next to
+//! the landing point (an edge, a thin part), the light lands under the source itself. At
+//! normal incidence on a uniformly lit support (or without lamps) it is the normal-entry
+//! walks' F exactly.
 //!
 //! The exit lobes' moments are binned and weighed as F is, each landing node's moments also
 //! weighted by the irradiance where its light entered (the lamp-entered walks weigh their
@@ -80,25 +83,24 @@ fn bin_at(mu: f64, d: usize, deepest: f64) -> (f64, f64) {
     (p, mean)
 }
 
-/// The most a source's landed light is scaled up to what its incidence gives it; the rest
-/// lands under the source itself.
-const MAX_LANDING_SCALE: f64 = 16.0;
-
 /// One value per depth bin and channel (bin-major).
 type Bins = [f64; 3 * DEPTH_BINS];
 
-/// The sources whose light lands under a node, with their coefficients ([`Bins`]).
+/// Nodes with a coefficient per bin and channel ([`Bins`]): the landing nodes of a source's
+/// light, or the sources whose light a node carries.
 type Sources = Vec<(u32, Bins)>;
 
-/// How one lamp's light enters a node's support: per channel and depth bin, the bin's probability over
-/// normal incidence's and the optical shift along the surface (sigma_t times the shift, a
-/// vector from where the light enters to where it first collides), each the mean over the
-/// support weighted by the lamp's entering irradiance; and its share of the node's entering
-/// irradiance per channel.
+/// How one lamp's light enters a node's support: per channel and depth bin, the bin's
+/// probability over normal incidence's and the optical shift along the surface (sigma_t times
+/// the shift, a vector from where the light enters to where it first collides), each the mean
+/// over the support weighted by the lamp's entering irradiance; its share of the node's
+/// entering irradiance per channel; and where on the support it enters (the centroid of its
+/// entering irradiance less phi's centroid).
 struct LampEntry {
     ratio: [[f64; DEPTH_BINS]; 3],
     shift: [[DVec3; DEPTH_BINS]; 3],
     share: [f64; 3],
+    offset: DVec3,
 }
 
 /// How the lamps reach one node: the lamps' entries, the share of normal incidence per
@@ -135,12 +137,15 @@ impl Response {
             .into_par_iter()
             .map(|p| incidence(mesh, &surface, lamps, medium.sigma_t, p))
             .collect();
-        // Per landing node: the sources whose light lands under it, with a coefficient per
-        // bin and channel, and its weight in the exit lobes.
-        let mut landing: Vec<Sources> = (0..n)
+        // Where each source's light first collides, per bin and channel: the landing nodes
+        // with phi there, times the bin's weight; then per landing node, the sources whose
+        // light it carries, each by its share of the landing node's support (A_p / A_p'), so
+        // that every source's light lands whole, as much of it as its incidence gives.
+        let area = |p: usize| surface.sources.area(p);
+        let targets: Vec<Sources> = (0..n)
             .into_par_iter()
             .map(|p| {
-                landing_sources(
+                landings(
                     (mesh, nodes, &surface),
                     (p, normals[p]),
                     &incidence[p],
@@ -148,54 +153,14 @@ impl Response {
                 )
             })
             .collect();
-        // Each source's light lands somewhere, all of it: where the shift varies along the
-        // surface (a curved surface, a point lamp) the landing nodes would otherwise count a
-        // source's support stretched or squeezed. Scaled per source, bin and channel to the
-        // weight the source's own incidence gives the bin.
-        let area = |p: usize| surface.sources.area(p);
-        let mut landed = vec![[0.0f64; 3 * DEPTH_BINS]; n];
-        for (q, sources) in landing.iter().enumerate() {
-            for (p, k) in sources {
-                for (l, x) in landed[*p as usize].iter_mut().zip(k) {
-                    *l += area(q) * x;
+        let mut landing: Vec<Sources> = vec![Vec::new(); n];
+        for (p, targets) in targets.into_iter().enumerate() {
+            for (q, mut k) in targets {
+                let share = area(p) / area(q as usize).max(1e-300);
+                for x in &mut k {
+                    *x *= share;
                 }
-            }
-        }
-        // Too little landed: scaled up to at most MAX_LANDING_SCALE (beyond, it would multiply
-        // the few walks that did land), the rest under the source itself, as at normal
-        // incidence.
-        let fit: Vec<(Bins, Bins)> = (0..n)
-            .map(|p| {
-                let want = bin_weights(&incidence[p]);
-                let mut scale = [1.0; 3 * DEPTH_BINS];
-                let mut rest = [0.0; 3 * DEPTH_BINS];
-                for i in 0..3 * DEPTH_BINS {
-                    let got = landed[p][i] / area(p).max(1e-300);
-                    if got > 0.0 {
-                        scale[i] = (want[i] / got).min(MAX_LANDING_SCALE);
-                    }
-                    rest[i] = (want[i] - got * scale[i]).max(0.0);
-                }
-                (scale, rest)
-            })
-            .collect();
-        for sources in &mut landing {
-            for (p, k) in sources.iter_mut() {
-                for (x, s) in k.iter_mut().zip(&fit[*p as usize].0) {
-                    *x *= s;
-                }
-            }
-        }
-        for (p, (_, rest)) in fit.iter().enumerate() {
-            if rest.iter().any(|&r| r > 0.0) {
-                match landing[p].iter_mut().find(|e| e.0 == p as u32) {
-                    Some(e) => {
-                        for (x, r) in e.1.iter_mut().zip(rest) {
-                            *x += r;
-                        }
-                    }
-                    None => landing[p].push((p as u32, *rest)),
-                }
+                landing[q as usize].push((p as u32, k));
             }
         }
         let landing: Vec<(Sources, Bins)> = landing
@@ -258,8 +223,8 @@ impl Response {
     }
 }
 
-/// How `lamps` reach node `p`'s support on `surface`: over its triangles (each at its centre,
-/// weighted by the integral of phi_p over it), per channel the lamps whose light enters there
+/// How `lamps` reach node `p`'s support on `surface`: over its triangles (four points each,
+/// weighted by the integral of phi_p over their quarters), per channel the lamps whose light enters there
 /// unblocked, as the walks weigh their start points; where none does, those that face it
 /// without the shadow ray; where none faces it (or there are no lamps), normal incidence. The
 /// lobe weight is the mean entering irradiance of the unblocked lamps (0 where none reaches
@@ -288,6 +253,7 @@ fn incidence(
         f64,
         [[f64; DEPTH_BINS]; 3],
         [[DVec3; DEPTH_BINS]; 3],
+        DVec3,
     );
     let mut sums: [Vec<Sums>; 2] = std::array::from_fn(|_| {
         vec![
@@ -295,14 +261,15 @@ fn incidence(
                 [0.0; 3],
                 0.0,
                 [[0.0; DEPTH_BINS]; 3],
-                [[DVec3::ZERO; DEPTH_BINS]; 3]
+                [[DVec3::ZERO; DEPTH_BINS]; 3],
+                DVec3::ZERO,
             );
             lamps.len()
         ]
     });
-    for (tri, weight) in surface.sources.support(p) {
-        let [a, b, c] = super::walk::triangle(mesh, tri);
-        let x = (a + b + c) / 3.0;
+    let mut centroid = DVec3::ZERO;
+    for (tri, x, weight) in surface.sources.support_points(mesh, p) {
+        centroid += weight * x;
         let n = surface.outward_normal(mesh, tri);
         for (pass, shadows) in [true, false].into_iter().enumerate() {
             for (sum, lamp) in sums[pass].iter_mut().zip(lamps) {
@@ -315,6 +282,7 @@ fn incidence(
                     sum.0[c] += e * lamp.radiance[c] as f64;
                 }
                 sum.1 += e;
+                sum.4 += e * x;
                 let (inside, mu) = inside(-towards, n, eta);
                 let along = inside + n * mu;
                 // Where the refracted ray leaves the object, and where the normal-entry
@@ -362,7 +330,7 @@ fn incidence(
         // The lamp's own means, from the pass its channels took (the shadowed one where it
         // reaches the support at all).
         let pass = if sums[0][l].1 > 0.0 { 0 } else { 1 };
-        let (_, e, ratio, shift) = &sums[pass][l];
+        let (_, e, ratio, shift, at) = &sums[pass][l];
         out.lamps.push(LampEntry {
             ratio: ratio.map(|r| r.map(|r| r / e)),
             shift: std::array::from_fn(|c| {
@@ -375,6 +343,7 @@ fn incidence(
                 })
             }),
             share,
+            offset: *at / *e - centroid / area,
         });
     }
     for c in 0..3 {
@@ -398,23 +367,9 @@ fn inside(travel: DVec3, n: DVec3, eta: f64) -> (DVec3, f64) {
     (d, (-d.dot(n)).clamp(1e-3, 1.0))
 }
 
-/// Per depth bin and channel, the weight a node's incidence gives the bin: its lamps' bin
-/// probabilities over normal incidence's, by their shares (1 at normal incidence).
-fn bin_weights(incidence: &Incidence) -> Bins {
-    std::array::from_fn(|i| {
-        let (d, c) = (i / 3, i % 3);
-        incidence.normal[c]
-            + incidence
-                .lamps
-                .iter()
-                .map(|l| l.share[c] * l.ratio[c][d])
-                .sum::<f64>()
-    })
-}
-
-/// The sources whose light lands under node `p` (outward normal `n`) at each depth bin and
-/// channel, with their coefficients (share x bin ratio x phi at the entry point).
-fn landing_sources(
+/// Where node `p`'s light (outward normal `n`) first collides at each depth bin and channel:
+/// the landing nodes with their coefficients (share x bin ratio x phi at the landing point).
+fn landings(
     (mesh, nodes, surface): (&Mesh, &Nodes, &Surface),
     (p, n): (usize, DVec3),
     incidence: &Incidence,
@@ -444,7 +399,7 @@ fn landing_sources(
                     continue;
                 }
                 // Along the surface at this node.
-                let v = lamp.shift[c][d] / sigma_t[c];
+                let v = lamp.shift[c][d] / sigma_t[c] + lamp.offset;
                 let v = v - n * v.dot(n);
                 let shift = v.length();
                 if shift < 1e-6 * reach {
@@ -454,7 +409,7 @@ fn landing_sources(
                 // A bend of radius r drops the surface by shift^2 / (2 r) below the node's
                 // plane; half the shift allows a bend as sharp as the shift itself.
                 let bounds = (shift + reach, 0.5 * shift + 0.5 * reach);
-                match surface_weights(mesh, nodes, surface, x - v, n, bounds) {
+                match surface_weights(mesh, nodes, surface, x + v, n, bounds) {
                     Some(weights) => {
                         for (q, w) in weights {
                             add(q, 3 * d + c, ratio * w);
@@ -588,23 +543,23 @@ mod tests {
         (mesh, nodes)
     }
 
-    /// Per source node: the light its support gives back (sum_q F_pq A_q) and the x of its
-    /// centroid relative to the node, per channel.
-    fn columns(w: &Walked, nodes: &Nodes, surface: &Surface) -> Vec<([f64; 3], [f64; 3])> {
+    /// Per source node: the light its support gives back (sum_q F_pq A_q) and its centroid
+    /// relative to the node, per channel.
+    fn columns(w: &Walked, nodes: &Nodes, surface: &Surface) -> Vec<([f64; 3], [DVec3; 3])> {
         let n = nodes.positions.len();
-        let (mut t, mut x) = (vec![[0.0f64; 3]; n], vec![[0.0f64; 3]; n]);
+        let (mut t, mut x) = (vec![[0.0f64; 3]; n], vec![[DVec3::ZERO; 3]; n]);
         for (q, row) in w.rows.iter().enumerate() {
             for &(s, v) in row {
                 for c in 0..3 {
                     let a = v.0[c] * surface.sources.area(q);
                     t[s as usize][c] += a;
-                    x[s as usize][c] += a * nodes.positions[q].x as f64;
+                    x[s as usize][c] += a * nodes.positions[q].as_dvec3();
                 }
             }
         }
         (0..n)
             .map(|p| {
-                let at = nodes.positions[p].x as f64;
+                let at = nodes.positions[p].as_dvec3();
                 (t[p], std::array::from_fn(|c| x[p][c] / t[p][c] - at))
             })
             .collect()
@@ -624,8 +579,10 @@ mod tests {
 
     /// Without lamps the response weighed for none is the normal-entry walks' F and lobes:
     /// the same walks, summed over the depth bins. Under a lamp along the top face's normal
-    /// F is theirs too (every lit face is lit along its normal: no shift, and each bin keeps
-    /// its weight, the refracted ray and the walks' own crossing the box alike).
+    /// the light of every source whose support it lights evenly is theirs too (no shift, and
+    /// each bin keeps its weight, the refracted ray and the walks' own crossing the box
+    /// alike); only the supports across the top face's rim, lit on the top alone, give
+    /// theirs from further in.
     #[test]
     fn without_lamps_it_is_the_normal_entry_walks() {
         let (mesh, nodes) = slab();
@@ -634,15 +591,27 @@ mod tests {
         let response = walked_once(&mesh, &nodes, &m, (64, 2), &|_, _, _| {});
         let mixed = response.for_lamps(&mesh, &nodes, &m, &[]);
         let down = response.for_lamps(&mesh, &nodes, &m, &[directional(-glam::Vec3::Z)]);
+        // Supports within the top face (its rim at 12 mm, supports 2 mm across), or below
+        // the light.
+        let even = |p: u32| {
+            let x = nodes.positions[p as usize];
+            (x.z > 5.9 && x.x.abs() < 10.5 && x.y.abs() < 10.5) || x.z < 3.5
+        };
+        let mut rim = 0;
         for (a, b) in normal.rows.iter().zip(&down.rows) {
-            assert_eq!(a.len(), b.len());
-            for ((pa, va), (pb, vb)) in a.iter().zip(b) {
-                assert_eq!(pa, pb);
+            let b: std::collections::HashMap<u32, Rgb> = b.iter().copied().collect();
+            for (p, va) in a {
+                if !even(*p) {
+                    rim += 1;
+                    continue;
+                }
+                let vb = b[p];
                 for c in 0..3 {
                     assert!((va.0[c] - vb.0[c]).abs() <= 1e-5 * va.0[c].abs().max(1e-12));
                 }
             }
         }
+        assert!(rim > 0);
         for (a, b) in normal.rows.iter().zip(&mixed.rows) {
             assert_eq!(a.len(), b.len());
             for ((pa, va), (pb, vb)) in a.iter().zip(b) {
@@ -686,7 +655,7 @@ mod tests {
             let cols = columns(w, &nodes, &surface);
             let k = centre.len() as f64;
             let total: f64 = centre.iter().map(|&p| cols[p].0[0]).sum::<f64>() / k;
-            let shift: f64 = centre.iter().map(|&p| cols[p].1[0]).sum::<f64>() / k;
+            let shift: f64 = centre.iter().map(|&p| cols[p].1[0].x).sum::<f64>() / k;
             (total, shift)
         };
         let (lit, mixed, normal) = (mean(&lit), mean(&mixed), mean(&normal));
@@ -701,5 +670,59 @@ mod tests {
         );
         assert!(lit.1 > 0.9 && normal.1.abs() < 0.3, "{lit:?}, {normal:?}");
         assert!((mixed.1 - lit.1).abs() < 0.25, "{mixed:?} vs {lit:?}");
+    }
+
+    /// A spot lamp's cone edge across nodes' supports: its light enters on their lit part
+    /// only, and the response weighed for it gives it back from there, as walks started
+    /// where the lamp lights do; normal-entry walks spread over the whole support would give
+    /// it back from the node.
+    #[test]
+    fn a_half_lit_support_gives_back_from_its_lit_part() {
+        let (mesh, nodes) = slab();
+        let m = skim_milk();
+        // Nearly overhead, so that the light enters along the normal: only the edge matters.
+        let (height, radius) = (100.0f32, 6.0f32);
+        let lamp = Light {
+            kind: LightKind::Spot,
+            position: glam::Vec3::new(0.0, 0.0, 6.0 + height),
+            direction: -glam::Vec3::Z,
+            cos_cone: (radius / height).atan().cos(),
+            ..directional(-glam::Vec3::Z)
+        };
+        let paths = 1000;
+        let progress = &|_: &str, _: u64, _: u64| {};
+        let (lit, _) = walk_response(&mesh, &nodes, &m, paths, 2, (&[lamp], None), progress);
+        let response = walked_once(&mesh, &nodes, &m, (paths, 2), progress);
+        let mixed = response.for_lamps(&mesh, &nodes, &m, &[lamp]);
+        let surface = Surface::new(&mesh, &nodes);
+        // Top-face nodes whose support the edge cuts, away from the face's rim.
+        let edge: Vec<usize> = (0..nodes.positions.len())
+            .filter(|&p| {
+                let x = nodes.positions[p];
+                let r = x.truncate().length();
+                x.z > 5.9 && (r - radius).abs() < 1.0
+            })
+            .collect();
+        // The centroid's move towards the spot's centre, mean over those nodes (red).
+        let inward = |w: &Walked| {
+            let cols = columns(w, &nodes, &surface);
+            edge.iter()
+                .map(|&p| {
+                    let out = nodes.positions[p].truncate().normalize().as_dvec2();
+                    -cols[p].1[0].truncate().dot(out)
+                })
+                .sum::<f64>()
+                / edge.len() as f64
+        };
+        let normal = inward(&response.for_lamps(&mesh, &nodes, &m, &[]));
+        let (lit, mixed) = (inward(&lit), inward(&mixed));
+        println!(
+            "{} nodes on the edge: their light moved inwards by {lit:.3} mm (lamp walks), {mixed:.3} mm (weighed), {normal:.3} mm (normal entry)",
+            edge.len()
+        );
+        // The bound is one the normal-entry walks, which give the light back about the node,
+        // must fail by far.
+        assert!(lit > 0.3 && normal.abs() < 0.5 * lit, "{lit}, {normal}");
+        assert!((mixed - lit).abs() < 0.25 * lit, "{mixed} vs {lit}");
     }
 }

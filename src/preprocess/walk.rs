@@ -334,16 +334,28 @@ impl Sources {
         }
     }
 
-    /// The triangles node `p`'s basis function covers, with the integral of phi_p over each.
-    pub(super) fn support(&self, p: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        let cum = &self.cumulative[p];
-        self.triangles[p]
-            .iter()
-            .zip(cum)
-            .enumerate()
-            .map(move |(i, (&(tri, _), &c))| {
-                (tri as usize, c - if i > 0 { cum[i - 1] } else { 0.0 })
+    /// Points of node `p`'s support, four per triangle (the centres of its midpoint
+    /// subdivision), each with the integral of phi_p over its quarter of the triangle (phi_p
+    /// at the point times the quarter's area): (triangle, point, weight).
+    pub(super) fn support_points<'a>(
+        &'a self,
+        mesh: &'a Mesh,
+        p: usize,
+    ) -> impl Iterator<Item = (usize, DVec3, f64)> + 'a {
+        const CENTRES: [[f64; 3]; 4] = [
+            [2.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0],
+            [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0],
+            [1.0 / 6.0, 1.0 / 6.0, 2.0 / 3.0],
+            [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0],
+        ];
+        self.triangles[p].iter().flat_map(move |&(tri, w)| {
+            let [a, b, c] = triangle(mesh, tri as usize);
+            let quarter = 0.125 * (b - a).cross(c - a).length();
+            CENTRES.iter().map(move |k| {
+                let phi = k[0] * w[0] + k[1] * w[1] + k[2] * w[2];
+                (tri as usize, a * k[0] + b * k[1] + c * k[2], phi * quarter)
             })
+        })
     }
 
     /// Integral of phi_p over the surface.
