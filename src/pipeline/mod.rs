@@ -8,14 +8,17 @@
 //!    atlas, cached the same way.
 //!
 //! A command prints the plan between the two. A material edit in the viewer re-weights what is shown instead where
-//! the geometry stays ([`Prepared::for_material`]). The renderer is handed a [`Prepared`]'s
+//! the geometry stays ([`Prepared::for_material`]); a lamp move weighs the walks made for any
+//! lamp again where the process holds them ([`Prepared::for_lamps`]). The renderer is handed a [`Prepared`]'s
 //! data and prepares nothing.
 
 mod choose;
 pub mod model;
+mod relight;
 mod reweigh;
 
 pub use choose::{choose, choose_at, object_scale};
+pub use relight::KeptLocal;
 pub use reweigh::{same_geometry, KeptReweigher};
 
 use crate::environment::sh;

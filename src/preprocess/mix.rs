@@ -459,17 +459,14 @@ fn surface_weights(
 static LAST: std::sync::Mutex<Option<(u64, std::sync::Arc<Response>)>> =
     std::sync::Mutex::new(None);
 
-/// The light-independent response of `mesh` in `material` ([`super::walk::walk_independent`]),
-/// walked once per process for each mesh, node set, material and walk count in turn: the
-/// viewer's preprocessing for a moved lamp weighs the same walks again instead of walking
-/// (the walks do not depend on the lamps, so the result is a fresh preprocessing's).
-pub fn walked_once(
+/// The key of the response walked in `mesh` for `nodes`, `material` and the walk count.
+fn response_key(
     mesh: &Mesh,
     nodes: &Nodes,
     material: &Material,
-    (paths, min_order): (u32, u32),
-    progress: super::Progress<'_>,
-) -> std::sync::Arc<Response> {
+    paths: u32,
+    min_order: u32,
+) -> u64 {
     let mut h = crate::numeric::hash::Fnv::default();
     for p in &mesh.positions {
         h.write(bytemuck::bytes_of(p));
@@ -483,16 +480,41 @@ pub fn walked_once(
         }
     }
     h.write(format!("{material:?} {paths} {min_order}").as_bytes());
-    let key = h.finish();
-    if let Some((_, response)) = LAST
-        .lock()
+    h.finish()
+}
+
+/// The response [`walked_once`] holds for these arguments, if it holds one: None where it
+/// would have to walk.
+pub fn held(
+    mesh: &Mesh,
+    nodes: &Nodes,
+    material: &Material,
+    (paths, min_order): (u32, u32),
+) -> Option<std::sync::Arc<Response>> {
+    let key = response_key(mesh, nodes, material, paths, min_order);
+    LAST.lock()
         .ok()
         .and_then(|last| last.clone())
         .filter(|(k, _)| *k == key)
-    {
+        .map(|(_, response)| response)
+}
+
+/// The light-independent response of `mesh` in `material` ([`super::walk::walk_independent`]),
+/// walked once per process for each mesh, node set, material and walk count in turn: the
+/// viewer's preprocessing for a moved lamp weighs the same walks again instead of walking
+/// (the walks do not depend on the lamps, so the result is a fresh preprocessing's).
+pub fn walked_once(
+    mesh: &Mesh,
+    nodes: &Nodes,
+    material: &Material,
+    (paths, min_order): (u32, u32),
+    progress: super::Progress<'_>,
+) -> std::sync::Arc<Response> {
+    if let Some(response) = held(mesh, nodes, material, (paths, min_order)) {
         tracing::info!("walks for any lamp: the ones walked before in this run, weighed again");
         return response;
     }
+    let key = response_key(mesh, nodes, material, paths, min_order);
     // The one held goes first: two responses need not fit together.
     if let Ok(mut last) = LAST.lock() {
         *last = None;

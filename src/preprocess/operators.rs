@@ -267,6 +267,43 @@ pub struct Weights {
     pub seconds: [f64; 2],
 }
 
+/// The lowest scattering order the walks carry: single scattering is its own pass wherever
+/// the walks fill F.
+pub const WALK_MIN_ORDER: u32 = 2;
+
+/// The kernels and seam taps of a material before blending balances them against F: what
+/// weighing the walks for moved lamps keeps ([`Weights::for_lamps`]), since the lamps do not
+/// change them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalWeights {
+    /// Per texel, k*k RGB window weights K_t(s) A_s, as [`Operators::kernels`].
+    pub kernels: Vec<[f32; 3]>,
+    /// Seam taps, as [`Operators::seams`].
+    pub seams: Csr,
+    /// Seconds spent on them.
+    pub seconds: f64,
+}
+
+impl LocalWeights {
+    /// The kernels and seam taps of `material` over `atlas`, `kernel_size` texels across.
+    pub fn evaluate(
+        atlas: &Atlas,
+        kernel_size: u32,
+        material: &Material,
+        progress: Progress<'_>,
+    ) -> LocalWeights {
+        let profiles = material.profiles();
+        let clock = std::time::Instant::now();
+        let kernels = local_kernels(atlas, kernel_size, &profiles, progress);
+        let seams = seam_taps(atlas, kernel_size, &profiles);
+        LocalWeights {
+            kernels,
+            seams,
+            seconds: clock.elapsed().as_secs_f64(),
+        }
+    }
+}
+
 impl Weights {
     /// The weights of `material` on the CPU: the kernels and seam taps, and F (random walks
     /// in `mesh` where the model says so, entering from the lamps and `sky`, the profile's
@@ -280,45 +317,35 @@ impl Weights {
         (settings, sky): (&super::settings::Settings, Option<&super::walk::WalkSky>),
         progress: Progress<'_>,
     ) -> Weights {
-        let kernel_size = settings.kernel_size;
+        let local = LocalWeights::evaluate(atlas, settings.kernel_size, material, progress);
         let profiles = material.profiles();
         let clock = std::time::Instant::now();
-        let kernels = local_kernels(atlas, kernel_size, &profiles, progress);
-        let seams = seam_taps(atlas, kernel_size, &profiles);
-        let kernels_s = clock.elapsed().as_secs_f64();
-
-        let clock = std::time::Instant::now();
+        let min_order = WALK_MIN_ORDER;
+        let lamps: Vec<_> = settings.walk_lights.iter().flatten().copied().collect();
+        if material.model.walks() && settings.lamp_independent && sky.is_none() {
+            let response = super::mix::walked_once(
+                mesh,
+                nodes,
+                material,
+                (settings.walk_paths, min_order),
+                progress,
+            );
+            let mut weights = Self::for_lamps(local, &response, (mesh, nodes), material, &lamps);
+            // F's time with the walks'.
+            weights.seconds[1] = clock.elapsed().as_secs_f64();
+            return weights;
+        }
         let (mut rows, walks, exit_slopes, exit_drifts) = if material.model.walks() {
-            // Single scattering is its own pass wherever the walks fill F.
-            let min_order = 2;
-            let lamps: Vec<_> = settings.walk_lights.iter().flatten().copied().collect();
-            if settings.lamp_independent && sky.is_none() {
-                let response = super::mix::walked_once(
-                    mesh,
-                    nodes,
-                    material,
-                    (settings.walk_paths, min_order),
-                    progress,
-                );
-                let walked = response.for_lamps(mesh, nodes, material, &lamps);
-                (
-                    walked.rows,
-                    Some(response.report),
-                    walked.slopes,
-                    walked.drifts,
-                )
-            } else {
-                let (walked, report) = super::walk::walk_response(
-                    mesh,
-                    nodes,
-                    material,
-                    settings.walk_paths,
-                    min_order,
-                    (&lamps, sky),
-                    progress,
-                );
-                (walked.rows, Some(report), walked.slopes, walked.drifts)
-            }
+            let (walked, report) = super::walk::walk_response(
+                mesh,
+                nodes,
+                material,
+                settings.walk_paths,
+                min_order,
+                (&lamps, sky),
+                progress,
+            );
+            (walked.rows, Some(report), walked.slopes, walked.drifts)
         } else {
             let rows = global_rows(atlas, nodes, basis, &profiles, progress);
             (rows, None, Vec::new(), Vec::new())
@@ -330,14 +357,41 @@ impl Weights {
             report
         });
         Weights {
-            kernels,
-            seams,
+            kernels: local.kernels,
+            seams: local.seams,
             rows,
             walks,
             exit_slopes,
             exit_drifts,
             air,
-            seconds: [kernels_s, clock.elapsed().as_secs_f64()],
+            seconds: [local.seconds, clock.elapsed().as_secs_f64()],
+        }
+    }
+
+    /// The weights of `material` under `lamps` from the walks made once for any lamp
+    /// (`response`, [`super::mix::walked_once`]) and its kernels and seam taps (`local`):
+    /// what a preprocessing with the lamps there gives, without walking or evaluating the
+    /// kernels again.
+    pub fn for_lamps(
+        local: LocalWeights,
+        response: &super::mix::Response,
+        (mesh, nodes): (&crate::scene::mesh::Mesh, &Nodes),
+        material: &Material,
+        lamps: &[crate::scene::Light],
+    ) -> Weights {
+        // The models that walk carry no light across the air.
+        debug_assert!(!material.model.crosses_air());
+        let clock = std::time::Instant::now();
+        let walked = response.for_lamps(mesh, nodes, material, lamps);
+        Weights {
+            kernels: local.kernels,
+            seams: local.seams,
+            rows: walked.rows,
+            walks: Some(response.report),
+            exit_slopes: walked.slopes,
+            exit_drifts: walked.drifts,
+            air: None,
+            seconds: [local.seconds, clock.elapsed().as_secs_f64()],
         }
     }
 }

@@ -1,13 +1,16 @@
 //! The viewer's actions applied: the camera and the lights' turn, the material, light and
 //! output requests they stand for, and what the shown image then says about the walks.
 
+use super::requests::Wanted;
 use super::rig::View;
 use super::script::Action;
 use super::{AppSettings, Running};
+use crate::pipeline::Request;
 use crate::preprocess::operators::Blend;
 use crate::scene::Light;
 use anyhow::Result;
 use glam::Vec3;
+use std::sync::Arc;
 use winit::dpi::PhysicalSize;
 
 impl Running {
@@ -122,7 +125,8 @@ impl Running {
             Action::Quit => return Ok(false),
         }
         self.take_view(v);
-        self.walk_for_moved_lights(app);
+        // Looked at once before the next frame, however many actions come first.
+        self.lights_to_check = true;
         Ok(true)
     }
 
@@ -165,14 +169,16 @@ impl Running {
         }
     }
 
-    /// Where the lights differ from those the walks' F was walked for, asks for the walks
-    /// again with the lights where they are now (once they have stayed for `view
+    /// Where the lights differ from those the walks' F was walked for: where the walks were
+    /// made for any lamp and this process holds them, weighs them for the lights where they
+    /// are now at once, so that the next frame shows them ([`Running::relight`]); else asks for
+    /// the walks again with the lights where they are now (once they have stayed for `view
     /// --settle-ms`), and says so in the status: until then the image shows the F walked for
     /// the lights where they were.
-    pub(super) fn walk_for_moved_lights(&mut self, app: &AppSettings) {
+    pub(super) fn walk_for_moved_lights(&mut self, app: &AppSettings) -> Result<()> {
         // The walks' F answers the lamps where they were when it was walked (shown walks only).
         if self.prepared.pre.settings.walk_paths == 0 {
-            return;
+            return Ok(());
         }
         let walked = &self.prepared.pre.settings.walk_lights;
         let lights = self.rig.lights(&self.view);
@@ -190,6 +196,9 @@ impl Running {
             (a, b) => a.is_some() != b.is_some(),
         };
         if sky_moved || walked.iter().zip(&now).any(|(a, b)| moved(a, b)) {
+            if self.relight(&lights, sky, app)? {
+                return Ok(());
+            }
             let asked = self.request_walk_lights((lights, sky), app);
             if asked && self.job.is_none() {
                 self.status = if self.prepared.pre.settings.lamp_independent {
@@ -198,6 +207,57 @@ impl Running {
                     "volume: the lights moved; the walks start again for them once they stay (until then F answers the lights where they were)"
                 }
                 .into();
+            }
+        }
+        Ok(())
+    }
+
+    /// Weighs the shown walks, made for any lamp, for `lights` (with the sky's key `sky`) at
+    /// once and uploads the result, where this process holds them and neither a run nor an
+    /// edit of the material or settings is waiting (those weigh the lamps in their own run):
+    /// the next frame is the image a fresh preprocessing with the lights there gives. True
+    /// where it did.
+    fn relight(&mut self, lights: &[Light], sky: Option<u64>, app: &AppSettings) -> Result<bool> {
+        if !self.prepared.pre.settings.lamp_independent || self.job.is_some() {
+            return Ok(false);
+        }
+        let other_edit = self.queued.as_ref().is_some_and(|w| {
+            Wanted {
+                walk_lights: self.current.walk_lights.clone(),
+                ..w.clone()
+            } != self.current
+        });
+        if other_edit {
+            return Ok(false);
+        }
+        let clock = std::time::Instant::now();
+        let scene = self.scene_for(self.current.material, Some(lights));
+        let request = Request {
+            overrides: self.current.overrides,
+            target_error: app.target_error,
+            cache: app.cache.clone(),
+        };
+        let prepared = self.prepared.clone();
+        let Some(out) = prepared.for_lamps(&scene, &request, &mut self.kept_local, &|_, _, _| {})
+        else {
+            return Ok(false);
+        };
+        match out {
+            Ok((prepared, how)) => {
+                self.prepared = Arc::new(prepared);
+                self.current.walk_lights = Some((lights.to_vec(), sky));
+                // Only the lights could have been waiting: they are weighed.
+                self.queued = None;
+                self.reupload()?;
+                let seconds = clock.elapsed().as_secs_f64();
+                self.status =
+                    format!("volume: F weighed for the moved lights in {seconds:.2} s ({how})");
+                println!("view: the moved lights weighed in {seconds:.2} s, before the next frame ({how})");
+                Ok(true)
+            }
+            Err(e) => {
+                tracing::error!("weighing the walks for the moved lights failed: {e:#}");
+                Ok(false)
             }
         }
     }

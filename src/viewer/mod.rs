@@ -146,6 +146,11 @@ struct Running {
     job: Option<Job>,
     /// The device's re-weighting of the shown geometry, between runs (a run borrows it).
     reweigher: Option<KeptReweigher>,
+    /// The shown atlas's kernels and seam taps before blending, between lamp moves that weigh
+    /// the walks made for any lamp again ([`Prepared::for_lamps`]).
+    kept_local: Option<crate::pipeline::KeptLocal>,
+    /// Whether an action since the last frame may have moved the lights.
+    lights_to_check: bool,
     /// When the latest edit was asked for, until a frame shows it (preview or prepared).
     edit_asked: Option<Instant>,
     /// What the image shows: the material and the settings it was prepared with.
@@ -466,6 +471,11 @@ impl Running {
                 self.turntable = 0.0;
                 self.status = "the turntable stopped: the next turn would enter the object".into();
             }
+        }
+        // Once per frame, however many actions moved the lights since the last one: weighed
+        // for them now where the walks were made for any lamp, else asked for.
+        if std::mem::take(&mut self.lights_to_check) {
+            self.walk_for_moved_lights(app)?;
         }
         let camera = self.rig.camera(&self.view);
         let lights = self.rig.lights(&self.view);

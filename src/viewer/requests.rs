@@ -175,7 +175,11 @@ impl Running {
     /// The scene with `material`, as a run for it sees it: without the scene file's settings,
     /// which the wanted overrides hold already (and may have dropped).
     /// With `lights` where given (moved in the viewer), for the walks to enter along.
-    fn scene_for(&self, material: Material, lights: Option<&[crate::scene::Light]>) -> Scene {
+    pub(super) fn scene_for(
+        &self,
+        material: Material,
+        lights: Option<&[crate::scene::Light]>,
+    ) -> Scene {
         let mut scene = self.scene.clone();
         scene.material = material;
         scene.settings = SettingsOverrides::default();
@@ -339,7 +343,7 @@ impl Running {
             self.take_job()?;
             self.update_preview();
             // The lights may have moved on while it ran.
-            self.walk_for_moved_lights(app);
+            self.walk_for_moved_lights(app)?;
         }
         self.start_settled(app);
         Ok(())

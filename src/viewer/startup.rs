@@ -176,6 +176,8 @@ fn assemble(
         both_blend,
         job: None,
         reweigher: None,
+        kept_local: None,
+        lights_to_check: false,
         edit_asked: None,
         current,
         queued: None,

@@ -1028,3 +1028,55 @@ fn moved_lamps_are_walked_for_again() {
         "the walks for the moved lamp changed little: {off}"
     );
 }
+
+/// With the walks made for any lamp, a lamp moved in the viewer is weighed for at once, before
+/// the next frame: that frame is a fresh render of the saved scene (the lamp where it was
+/// moved) to 0.1 %, with no preprocessing run, and differs from the frame before the move.
+#[test]
+fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer-any-lamp");
+    let cache = dir.join("cache");
+    std::fs::write(
+        dir.join("scene.toml"),
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.5]\n\
+         [material]\npreset = \"ketchup\"\neta = 1.3\nmodel = \"volume\"\n\
+         [settings]\nwalk_paths = 256\nlamp_independent = true\n\
+         [output]\nwidth = 96\nheight = 96\n",
+    )
+    .unwrap();
+    // No `wait`: the frame right after the move is the one compared.
+    let script = "frames 2; screenshot before; light 60 0; frames 1; screenshot next\n\
+                  save-scene moved; quit";
+    let mut view = scripted_view(&x, script, &cache, &dir);
+    view.arg(dir.join("scene.toml"));
+    let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
+    assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
+    assert!(
+        stdout.contains(
+            "before the next frame (weighed for the lamps from the walks made for any lamp"
+        ),
+        "the moved lamp was not weighed for at once:\n{stdout}"
+    );
+    assert!(
+        !stdout.contains("after it was asked for"),
+        "a preprocessing ran:\n{stdout}"
+    );
+    render_into(
+        &cache,
+        &dir.join("render"),
+        Some(&dir.join("moved.toml")),
+        &[],
+    );
+    assert_same_image(
+        &dir.join("next.exr"),
+        &dir.join("render/render.exr"),
+        "the frame after the move and a fresh render",
+    );
+    let read = |name: &str| translucent::output::read_exr(&dir.join(name)).unwrap().2;
+    let off = translucent::metrics::compare(&read("before.exr"), &read("next.exr"), None)
+        .0
+        .rel_rms;
+    assert!(off > 0.01, "the move changed little: {off}");
+}
