@@ -157,3 +157,44 @@ pub fn choose_at(
     }
     Ok(choice)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene(lights: &str) -> Scene {
+        let text = format!(
+            "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n{lights}\n\
+             [material]\npreset = \"skimmilk\"\neta = 1.3\nmodel = \"volume\"\n\
+             [settings]\nlamp_independent = true\n"
+        );
+        Scene::from_desc(
+            crate::scene::desc::SceneDesc::parse(&text).unwrap(),
+            std::path::Path::new(""),
+            &crate::scene::Overrides::default(),
+        )
+        .unwrap()
+    }
+
+    /// Walks for any lamp are taken under lamps, and refused, with the reason said, where
+    /// the walks also enter from an environment's map (which they would be made for).
+    #[test]
+    fn walks_for_any_lamp_are_refused_under_a_sky() {
+        let o = SettingsOverrides::default();
+        let lamp = "[[lights]]\nkind = \"directional\"\ndirection = [0.0, -1.0, 0.0]";
+        let c = choose(&scene(lamp), &o, 0.02).unwrap();
+        assert!(c.settings.lamp_independent);
+        assert!(c.sky.is_none());
+        let sky = "[[lights]]\nkind = \"environment\"";
+        let c = choose(&scene(sky), &o, 0.02).unwrap();
+        assert!(c.sky.is_some());
+        assert!(!c.settings.lamp_independent);
+        assert!(
+            c.reasons
+                .iter()
+                .any(|r| r.starts_with("walks for any lamp given, not used")),
+            "{:?}",
+            c.reasons
+        );
+    }
+}
