@@ -76,13 +76,15 @@ impl Prepared {
             walk_lights: [None; crate::scene::MAX_LIGHTS],
             ..*k
         };
-        let local = match kept.take() {
-            Some((k, m, local)) if geometry(&k) == geometry(s) && m == *material => local,
+        let (local, evaluated) = match kept.take() {
+            Some((k, m, local)) if geometry(&k) == geometry(s) && m == *material => (local, false),
             _ => {
                 progress("kernels", 0, 1);
-                LocalWeights::evaluate(&shown.atlas, s.kernel_size, material, progress)
+                let local = LocalWeights::evaluate(&shown.atlas, s.kernel_size, material, progress);
+                (local, true)
             }
         };
+        let kernels_s = clock.elapsed().as_secs_f64();
         let lamps: Vec<_> = s.walk_lights.iter().flatten().copied().collect();
         let weights = Weights::for_lamps(
             local.clone(),
@@ -92,12 +94,18 @@ impl Prepared {
             &lamps,
         );
         *kept = Some((*s, *material, local));
-        let weighed_s = weights.seconds[1];
+        let weighed_s = clock.elapsed().as_secs_f64() - kernels_s;
         let ops =
             Operators::from_weights(&shown.atlas, &shown.nodes, material, s, weights, progress);
         let operators_s = clock.elapsed().as_secs_f64();
+        let kernels = if evaluated {
+            format!("kernels {kernels_s:.2} s, ")
+        } else {
+            String::new()
+        };
         let how = format!(
-            "weighed for the lamps from the walks made for any lamp: F {weighed_s:.2} s, operators {operators_s:.2} s"
+            "weighed for the lamps from the walks made for any lamp: {kernels}F {weighed_s:.2} s, pruned, fitted and blended {:.2} s",
+            operators_s - kernels_s - weighed_s
         );
         let pre = Preprocessed {
             settings: *s,
