@@ -1080,3 +1080,104 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
         .rel_rms;
     assert!(off > 0.01, "the move changed little: {off}");
 }
+
+/// With the walks made for any lamp, a lamp dragged with the right button is weighed for
+/// once, when the button lets go (weighing holds the frame, so it does not run at every
+/// frame of the drag): while the button is held no weighing has run and the frames show the
+/// response weighed for the lamp where it was; after the release one has, and the image
+/// changed.
+#[test]
+fn a_dragged_lamp_is_weighed_for_when_the_button_lets_go() {
+    let x = Xvfb::start();
+    let dir = common::temp_dir("viewer-drag-any-lamp");
+    std::fs::write(
+        dir.join("scene.toml"),
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.5]\n\
+         [material]\npreset = \"ketchup\"\neta = 1.3\nmodel = \"volume\"\n\
+         [settings]\nwalk_paths = 256\nlamp_independent = true\n",
+    )
+    .unwrap();
+    let mut viewer = common::bin()
+        .env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["--validate", "view", "--no-cache", "--out"])
+        .arg(&dir)
+        .arg(dir.join("scene.toml"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = viewer.stdout.take().unwrap();
+    let lines = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let seen = lines.clone();
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if line.starts_with("view: ") {
+                let _ = ready_tx.send(());
+            }
+            seen.lock().unwrap().push(line);
+        }
+    });
+    ready_rx
+        .recv_timeout(Duration::from_secs(180))
+        .expect("the viewer never came up");
+    let weighings = || {
+        lines
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.starts_with("view: the moved lights weighed in"))
+            .count()
+    };
+    let d = x.display.as_str();
+    let window = xdotool(d, &["search", "--sync", "--name", "translucent"]);
+    let window = window.lines().next().unwrap().trim().to_string();
+    xdotool(d, &["windowfocus", "--sync", &window]);
+    let start = screenshot(d, &["p"], &dir, &mut viewer);
+    // Right of the panel, which takes the pointer where it lies; several steps, each given
+    // time to reach frames.
+    let mut press = vec![
+        "mousemove",
+        "--window",
+        &window,
+        "370",
+        "250",
+        "mousedown",
+        "3",
+    ];
+    let steps: Vec<String> = (1..=4).map(|i| (370 + 25 * i).to_string()).collect();
+    for s in &steps {
+        press.extend_from_slice(&["sleep", "0.3", "mousemove", "--window", &window, s, "255"]);
+    }
+    xdotool(d, &press);
+    let held = screenshot(d, &["p"], &dir, &mut viewer);
+    let held_exr = shots(&dir).last().unwrap().with_extension("exr");
+    assert_ne!(
+        start["light_yaw_deg"], held["light_yaw_deg"],
+        "the drag moved no light"
+    );
+    assert_eq!(weighings(), 0, "weighed during the drag");
+    xdotool(d, &["mouseup", "3"]);
+    let released = screenshot(d, &["p"], &dir, &mut viewer);
+    let released_exr = shots(&dir).last().unwrap().with_extension("exr");
+    assert_eq!(held["light_yaw_deg"], released["light_yaw_deg"]);
+    // The line is printed before the frame the shot is taken from; its reader may lag.
+    let waited = Instant::now();
+    while weighings() == 0 && waited.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(weighings(), 1, "not weighed once after the release");
+    xdotool(d, &["key", "q"]);
+    let status = viewer.wait().unwrap();
+    reader.join().unwrap();
+    assert!(status.success(), "the viewer failed");
+    // The frame after the release shows the response weighed for the moved lamp: not the
+    // one held during the drag.
+    let exr = |p: &Path| translucent::output::read_exr(p).unwrap().2;
+    let off = translucent::metrics::compare(&exr(&held_exr), &exr(&released_exr), None)
+        .0
+        .rel_rms;
+    assert!(off > 0.002, "the weighing changed nothing: {off}");
+}
