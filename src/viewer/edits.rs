@@ -232,6 +232,9 @@ impl Running {
         }
         let clock = std::time::Instant::now();
         let scene = self.scene_for(self.current.material, Some(lights));
+        // Not pinned to the shown settings: derived as a fresh render of the saved scene
+        // derives them. Where a resized window changed them (a texel set by the image's
+        // pixel), the weighing is refused and the scene is prepared again for them.
         let request = Request {
             overrides: self.current.overrides,
             target_error: app.target_error,
@@ -246,8 +249,10 @@ impl Running {
             Ok((prepared, how)) => {
                 self.prepared = Arc::new(prepared);
                 self.current.walk_lights = Some((lights.to_vec(), sky));
-                // Only the lights could have been waiting: they are weighed.
+                // Only the lights could have been waiting: they are weighed, and no edit waits
+                // for a frame to show it.
                 self.queued = None;
+                self.edit_asked = None;
                 self.reupload()?;
                 let seconds = clock.elapsed().as_secs_f64();
                 self.status =

@@ -125,6 +125,12 @@ impl ApplicationHandler for App {
                 running.size_changed = true;
                 None
             }
+            // A button let go of while the window had no focus never reports its release:
+            // no drag outlives the focus (a lamp moved meanwhile is weighed for then).
+            WindowEvent::Focused(false) => {
+                running.drag = None;
+                None
+            }
             WindowEvent::ModifiersChanged(m) => {
                 running.shift = m.state().shift_key();
                 None

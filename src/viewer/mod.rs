@@ -474,10 +474,10 @@ impl Running {
         }
         // Once per frame, however many actions moved the lights since the last one: weighed
         // for them now where the walks were made for any lamp, else asked for. Weighing holds
-        // the frame (about a second on the default scene on 2 cores), so lights dragged with
-        // the pointer (in the view or on the panel's disc) are weighed for once it lets go;
-        // the frames of the drag light the object through the light passes with F weighed
-        // for where the lights were.
+        // the frame (a whole pruning, fit and blending of F), so lights dragged with the
+        // pointer (in the view or on the panel's disc) are weighed for once it lets go; the
+        // frames of the drag light the object through the light passes with F weighed for
+        // where the lights were.
         let dragging = self.drag.is_some() || self.egui.egui_is_using_pointer();
         let deferred = dragging && self.prepared.pre.settings.lamp_independent;
         if !deferred && std::mem::take(&mut self.lights_to_check) {

@@ -342,8 +342,9 @@ impl Running {
         if self.job.as_ref().is_some_and(|j| j.handle.is_finished()) {
             self.take_job()?;
             self.update_preview();
-            // The lights may have moved on while it ran.
-            self.walk_for_moved_lights(app)?;
+            // The lights may have moved on while it ran: looked at before the next frame,
+            // where a drag defers the weighing.
+            self.lights_to_check = true;
         }
         self.start_settled(app);
         Ok(())

@@ -1046,9 +1046,10 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
          [output]\nwidth = 96\nheight = 96\n",
     )
     .unwrap();
-    // No `wait`: the frame right after the move is the one compared.
-    let script = "frames 2; screenshot before; light 60 0; frames 1; screenshot next\n\
-                  save-scene moved; quit";
+    // No `wait`: the frame right after the move is the one compared. The window resized
+    // first (the texel stays the profile's, so the settings do).
+    let script = "frames 2; resize 128 112; frames 3; screenshot before; light 60 0; frames 1\n\
+                  screenshot next; save-scene moved; quit";
     let mut view = scripted_view(&x, script, &cache, &dir);
     view.arg(dir.join("scene.toml"));
     let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
