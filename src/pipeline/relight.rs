@@ -72,12 +72,9 @@ impl Prepared {
         let material = &scene.material;
         let s = &choice.settings;
         let clock = Instant::now();
-        let geometry = |k: &Settings| Settings {
-            walk_lights: [None; crate::scene::MAX_LIGHTS],
-            ..*k
-        };
+        // The kernels and seam taps belong to the atlas and the material alone.
         let (local, evaluated) = match kept.take() {
-            Some((k, m, local)) if geometry(&k) == geometry(s) && m == *material => (local, false),
+            Some((k, m, local)) if super::same_geometry(&k, s) && m == *material => (local, false),
             _ => {
                 progress("kernels", 0, 1);
                 let local = LocalWeights::evaluate(&shown.atlas, s.kernel_size, material, progress);

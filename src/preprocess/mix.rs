@@ -491,7 +491,11 @@ pub fn held(
     material: &Material,
     (paths, min_order): (u32, u32),
 ) -> Option<std::sync::Arc<Response>> {
-    let key = response_key(mesh, nodes, material, paths, min_order);
+    held_for(response_key(mesh, nodes, material, paths, min_order))
+}
+
+/// The response held for `key` ([`response_key`]), if it is the one held.
+fn held_for(key: u64) -> Option<std::sync::Arc<Response>> {
     LAST.lock()
         .ok()
         .and_then(|last| last.clone())
@@ -510,11 +514,11 @@ pub fn walked_once(
     (paths, min_order): (u32, u32),
     progress: super::Progress<'_>,
 ) -> std::sync::Arc<Response> {
-    if let Some(response) = held(mesh, nodes, material, (paths, min_order)) {
+    let key = response_key(mesh, nodes, material, paths, min_order);
+    if let Some(response) = held_for(key) {
         tracing::info!("walks for any lamp: the ones walked before in this run, weighed again");
         return response;
     }
-    let key = response_key(mesh, nodes, material, paths, min_order);
     // The one held goes first: two responses need not fit together.
     if let Ok(mut last) = LAST.lock() {
         *last = None;

@@ -972,6 +972,34 @@ fn a_saved_scene_keeps_the_shown_sample_rate() {
     );
 }
 
+/// Writes `dir/scene.toml`: a 10 mm ketchup sphere behind `eta` under `volume` (256 walks per
+/// node and channel, `settings` besides) lit by a directional lamp, with `output`.
+fn write_walked_sphere(dir: &Path, eta: f64, settings: &str, output: &str) {
+    let text = format!(
+        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n\
+         [[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.5]\n\
+         [material]\npreset = \"ketchup\"\neta = {eta:?}\nmodel = \"volume\"\n\
+         [settings]\nwalk_paths = 256\n{settings}{output}"
+    );
+    std::fs::write(dir.join("scene.toml"), text).unwrap();
+}
+
+/// Renders the scene the viewer saved as `dir/SCENE.toml` fresh into `dir/render` and asserts
+/// that the viewer's screenshot `dir/SHOT.exr` is that image ([`assert_same_image`]).
+fn assert_saved_scene_renders(cache: &Path, dir: &Path, (scene, shot): (&str, &str), what: &str) {
+    render_into(
+        cache,
+        &dir.join("render"),
+        Some(&dir.join(format!("{scene}.toml"))),
+        &[],
+    );
+    assert_same_image(
+        &dir.join(format!("{shot}.exr")),
+        &dir.join("render/render.exr"),
+        what,
+    );
+}
+
 /// Under `volume` the walks enter along the lamps where they are: after a lamp is moved in the
 /// viewer, once it stays, they are walked again for it, and the image then is a fresh render
 /// of the saved scene (the lamp where it was moved) to 0.1 %. Before that the frame shows the
@@ -981,14 +1009,7 @@ fn moved_lamps_are_walked_for_again() {
     let x = Xvfb::start();
     let dir = common::temp_dir("viewer-walks");
     let cache = dir.join("cache");
-    std::fs::write(
-        dir.join("scene.toml"),
-        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n\
-         [[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.5]\n\
-         [material]\npreset = \"ketchup\"\neta = 1.0\nmodel = \"volume\"\n\
-         [settings]\nwalk_paths = 256\n[output]\nwidth = 96\nheight = 96\n",
-    )
-    .unwrap();
+    write_walked_sphere(&dir, 1.0, "", "[output]\nwidth = 96\nheight = 96\n");
     // Turned in the view (the rig's lights, not the scene's), so that the walks can only
     // follow it through the lights the viewer hands them.
     let script = "frames 2; light 60 0; frames 1; screenshot stale\n\
@@ -1002,15 +1023,10 @@ fn moved_lamps_are_walked_for_again() {
         stdout.contains("s after it was asked for (preprocessed)"),
         "the walks were not made again:\n{stdout}"
     );
-    render_into(
+    assert_saved_scene_renders(
         &cache,
-        &dir.join("render"),
-        Some(&dir.join("moved.toml")),
-        &[],
-    );
-    assert_same_image(
-        &dir.join("moved.exr"),
-        &dir.join("render/render.exr"),
+        &dir,
+        ("moved", "moved"),
         "the viewer after the walks and a fresh render",
     );
     let fresh = translucent::output::read_exr(&dir.join("render/render.exr"))
@@ -1037,15 +1053,12 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
     let x = Xvfb::start();
     let dir = common::temp_dir("viewer-any-lamp");
     let cache = dir.join("cache");
-    std::fs::write(
-        dir.join("scene.toml"),
-        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n\
-         [[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.5]\n\
-         [material]\npreset = \"ketchup\"\neta = 1.3\nmodel = \"volume\"\n\
-         [settings]\nwalk_paths = 256\nlamp_independent = true\n\
-         [output]\nwidth = 96\nheight = 96\n",
-    )
-    .unwrap();
+    write_walked_sphere(
+        &dir,
+        1.3,
+        "lamp_independent = true\n",
+        "[output]\nwidth = 96\nheight = 96\n",
+    );
     // No `wait`: the frame right after the move is the one compared. The window resized
     // first (the texel stays the profile's, so the settings do).
     let script = "frames 2; resize 128 112; frames 3; screenshot before; light 60 0; frames 1\n\
@@ -1064,15 +1077,10 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
         !stdout.contains("after it was asked for"),
         "a preprocessing ran:\n{stdout}"
     );
-    render_into(
+    assert_saved_scene_renders(
         &cache,
-        &dir.join("render"),
-        Some(&dir.join("moved.toml")),
-        &[],
-    );
-    assert_same_image(
-        &dir.join("next.exr"),
-        &dir.join("render/render.exr"),
+        &dir,
+        ("moved", "next"),
         "the frame after the move and a fresh render",
     );
     let read = |name: &str| translucent::output::read_exr(&dir.join(name)).unwrap().2;
@@ -1091,14 +1099,7 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
 fn a_dragged_lamp_is_weighed_for_when_the_button_lets_go() {
     let x = Xvfb::start();
     let dir = common::temp_dir("viewer-drag-any-lamp");
-    std::fs::write(
-        dir.join("scene.toml"),
-        "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 32\n\
-         [[lights]]\nkind = \"directional\"\ndirection = [-1.0, -0.3, -0.5]\n\
-         [material]\npreset = \"ketchup\"\neta = 1.3\nmodel = \"volume\"\n\
-         [settings]\nwalk_paths = 256\nlamp_independent = true\n",
-    )
-    .unwrap();
+    write_walked_sphere(&dir, 1.3, "lamp_independent = true\n", "");
     let mut viewer = common::bin()
         .env("DISPLAY", &x.display)
         .env_remove("WAYLAND_DISPLAY")
