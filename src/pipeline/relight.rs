@@ -72,8 +72,15 @@ impl Prepared {
         let material = &scene.material;
         let s = &choice.settings;
         let clock = Instant::now();
-        // The kernels and seam taps belong to the atlas and the material alone.
-        let (local, evaluated) = match kept.take() {
+        // The kernels and seam taps belong to the atlas and the material alone: those kept
+        // from an earlier move, else the shown preprocessing's own.
+        let held = kept.take().or_else(|| {
+            shown
+                .local
+                .clone()
+                .map(|(m, local)| (shown.settings, m, local))
+        });
+        let (local, evaluated) = match held {
             Some((k, m, local)) if super::same_geometry(&k, s) && m == *material => (local, false),
             _ => {
                 progress("kernels", 0, 1);
@@ -114,6 +121,8 @@ impl Prepared {
                 operators_s,
                 ..Default::default()
             },
+            // Kept by the caller (`kept`) from here on.
+            local: None,
         };
         (
             Prepared {
@@ -162,9 +171,10 @@ mod tests {
         )
     }
 
-    /// A moved lamp weighed from the walks made for any lamp, with the kernels kept from the
-    /// move before, gives the operators a fresh preprocessing with the lamp there gives; a
-    /// preparation whose walks entered along the lamps is not weighed again.
+    /// A moved lamp weighed from the walks made for any lamp, with the kernels the shown
+    /// preprocessing kept (on the first move) or the move before kept, gives the operators a
+    /// fresh preprocessing with the lamp there gives, and evaluates no kernels; a preparation
+    /// whose walks entered along the lamps is not weighed again.
     #[test]
     fn a_moved_lamp_gives_a_fresh_preprocessings_operators() {
         let request = Request {
@@ -190,8 +200,23 @@ mod tests {
             (shown.pre.settings.walk_paths, WALK_MIN_ORDER),
             nothing,
         );
+        // The shown preprocessing holds its kernels as evaluated, before blending balanced
+        // them.
+        let (material, local) = shown.pre.local.as_ref().expect("kernels kept");
+        assert_eq!(*material, first.material);
+        let evaluated = LocalWeights::evaluate(
+            &shown.pre.atlas,
+            shown.pre.settings.kernel_size,
+            &first.material,
+            nothing,
+        );
+        assert_eq!(
+            (&local.kernels, &local.seams),
+            (&evaluated.kernels, &evaluated.seams)
+        );
         let mut kept = None;
-        let (relit, _) = shown.weighed(&moved, choose(&moved), &response, &mut kept, nothing);
+        let (relit, how) = shown.weighed(&moved, choose(&moved), &response, &mut kept, nothing);
+        assert!(!how.contains("kernels"), "{how}");
         let fresh = prepare(&moved);
         assert_eq!(relit.pre.settings, fresh.pre.settings);
         assert_eq!(drawn(&relit), drawn(&fresh));
@@ -203,6 +228,7 @@ mod tests {
         assert!(kept.is_some());
         let (back, how) = relit.weighed(&first, choose(&first), &response, &mut kept, nothing);
         assert_eq!(drawn(&back), drawn(&shown), "{how}");
+        assert!(!how.contains("kernels"), "{how}");
         // Walks that entered along the lamps answer those lamps only.
         let mut walked = shown.clone();
         walked.pre.settings.lamp_independent = false;

@@ -106,7 +106,7 @@ impl Prepared {
                     );
                     (ops, how)
                 } else {
-                    let ops = Operators::build(
+                    let (ops, _) = Operators::build(
                         &scene.mesh,
                         &shown.atlas,
                         &shown.nodes,
@@ -130,6 +130,7 @@ impl Prepared {
                         operators_s: clock.elapsed().as_secs_f64(),
                         ..Default::default()
                     },
+                    local: None,
                 };
                 let outcome = CacheOutcome::Built {
                     stored: None,

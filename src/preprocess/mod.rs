@@ -70,6 +70,12 @@ pub struct Preprocessed {
     pub ops: Operators,
     /// Time per stage (of the run that built this, not of a cache load).
     pub times: StageTimes,
+    /// The material and its kernels and seam taps before blending balanced them, where F was
+    /// weighed from walks made for any lamp: what a moved lamp's weighing needs besides the
+    /// walks ([`operators::LocalWeights`]). Not cached: a session started from the cache holds
+    /// no walks either.
+    #[serde(skip)]
+    pub local: Option<(Material, operators::LocalWeights)>,
 }
 
 /// What a preprocessing run will produce and cost, estimated from the mesh and the settings
@@ -562,7 +568,7 @@ impl Preprocessed {
         let nodes = Nodes::build(mesh, s.node_spacing_mm);
         progress("nodes", 1, 1);
         let t2 = Instant::now();
-        let ops = Operators::build(
+        let (ops, local) = Operators::build(
             mesh,
             &atlas,
             &nodes,
@@ -582,6 +588,7 @@ impl Preprocessed {
                 nodes_s: (t2 - t1).as_secs_f64(),
                 operators_s: (t3 - t2).as_secs_f64(),
             },
+            local: local.map(|l| (*material, l)),
         }
     }
 }

@@ -265,6 +265,9 @@ pub struct Weights {
     pub air: Option<super::air::AirReport>,
     /// Seconds spent on the kernels and seam taps, and on F (the air's own in its report).
     pub seconds: [f64; 2],
+    /// The kernels and seam taps as evaluated, kept where F was weighed from walks made for
+    /// any lamp: a moved lamp is weighed with them again ([`Weights::for_lamps`]).
+    pub local: Option<LocalWeights>,
 }
 
 /// The lowest scattering order the walks carry: single scattering is its own pass wherever
@@ -330,7 +333,9 @@ impl Weights {
                 (settings.walk_paths, min_order),
                 progress,
             );
+            let kept = local.clone();
             let mut weights = Self::for_lamps(local, &response, (mesh, nodes), material, &lamps);
+            weights.local = Some(kept);
             // F's time with the walks'.
             weights.seconds[1] = clock.elapsed().as_secs_f64();
             return weights;
@@ -365,6 +370,7 @@ impl Weights {
             exit_drifts,
             air,
             seconds: [local.seconds, clock.elapsed().as_secs_f64()],
+            local: None,
         }
     }
 
@@ -392,6 +398,7 @@ impl Weights {
             exit_drifts: walked.drifts,
             air: None,
             seconds: [local.seconds, clock.elapsed().as_secs_f64()],
+            local: None,
         }
     }
 }
@@ -765,7 +772,8 @@ impl Operators {
 
     /// Builds all operators, one stage after another: the texel <-> node basis, the local
     /// kernels and seam taps, the global F, then [`Operators::from_weights`]'s pruning, fit
-    /// and direct terms.
+    /// and direct terms; with them the kernels and seam taps before balancing where F was
+    /// weighed from walks made for any lamp ([`Weights::local`]).
     pub fn build(
         mesh: &crate::scene::mesh::Mesh,
         atlas: &Atlas,
@@ -773,10 +781,10 @@ impl Operators {
         material: &Material,
         (settings, sky): (&super::settings::Settings, Option<&super::walk::WalkSky>),
         progress: Progress<'_>,
-    ) -> Operators {
+    ) -> (Operators, Option<LocalWeights>) {
         let basis = Basis::new(atlas, nodes);
         progress("basis", 1, 1);
-        let weights = Weights::evaluate(
+        let mut weights = Weights::evaluate(
             mesh,
             atlas,
             nodes,
@@ -785,7 +793,9 @@ impl Operators {
             (settings, sky),
             progress,
         );
-        Self::assemble(atlas, nodes, basis, material, settings, weights, progress)
+        let local = weights.local.take();
+        let ops = Self::assemble(atlas, nodes, basis, material, settings, weights, progress);
+        (ops, local)
     }
 
     /// The operators from the material's weights of the kernels, seam taps and F however they
