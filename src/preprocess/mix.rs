@@ -10,7 +10,13 @@
 //! (sigma_t / mu) e^(-sigma_t z / mu), at y + z tan(theta) along the surface in the direction
 //! the refracted light travels. The walks that entered along the normal at that point and
 //! collided at depth z therefore stand for it, weighed by the ratio of the two depth
-//! densities. Per source p, with its light landing on nodes p' and depth bin d:
+//! densities. On a curved surface the refracted ray's way in bends away from the plane: a
+//! point s along it lies less deep than s mu below the surface (on a ball of radius R by about
+//! s^2 sin^2(theta) / (2 R), most of the depth for a free path of a few mm under a 10 mm
+//! radius). The depth is therefore measured, at a few distances along the lamp's refracted
+//! ray from each node, as the way out of the object along the node's normal (the walks'
+//! depth), and the bins' probabilities and mean paths are those of that depth, linear between
+//! the samples (`bins_along`). Per source p, with its light landing on nodes p' and depth bin d:
 //!
 //!   F_pq(lamps) = sum over p', d of r_d (A_p / A_p') phi_p'(x_p + o + s_d a) B_p'dq,
 //!
@@ -135,7 +141,10 @@ impl Response {
             .collect();
         let incidence: Vec<Incidence> = (0..n)
             .into_par_iter()
-            .map(|p| incidence(mesh, &surface, lamps, medium.sigma_t, p))
+            .map(|p| {
+                let node = (nodes.positions[p].as_dvec3(), normals[p]);
+                incidence(mesh, &surface, lamps, medium.sigma_t, (p, node))
+            })
             .collect();
         // Where each source's light first collides, per bin and channel: the landing nodes
         // with phi there, times the bin's weight; then per landing node, the sources whose
@@ -234,7 +243,7 @@ fn incidence(
     surface: &Surface,
     lamps: &[Light],
     sigma_t: [f64; 3],
-    p: usize,
+    (p, (at, normal)): (usize, (DVec3, DVec3)),
 ) -> Incidence {
     let mut out = Incidence {
         lamps: Vec::new(),
@@ -267,12 +276,35 @@ fn incidence(
             lamps.len()
         ]
     });
+    // Per lamp, how the surface bends away from the node's tangent plane along the lamp's
+    // way in there: the same for every point of the support.
+    let thinnest = sigma_t.iter().cloned().fold(f64::INFINITY, f64::min);
+    let bends: Vec<Deficit> = lamps
+        .iter()
+        .map(|lamp| {
+            let travel = -lamp.towards(at).0;
+            if normal == DVec3::ZERO || travel.dot(normal) >= 0.0 {
+                return [(0.0, 0.0); DEFICIT_SAMPLES + 1];
+            }
+            let (d, mu) = inside(travel, normal, eta);
+            let chord = surface
+                .bvh
+                .intersect(at - normal * surface.eps, d, f64::INFINITY)
+                .map_or(f64::INFINITY, |h| h.t);
+            deficit(mesh, surface, (at, normal), (d, mu), chord, thinnest)
+        })
+        .collect();
     let mut centroid = DVec3::ZERO;
     for (tri, x, weight) in surface.sources.support_points(mesh, p) {
         centroid += weight * x;
         let n = surface.outward_normal(mesh, tri);
+        // Per lamp, once for both passes: where its refracted ray and the walks' own ray
+        // along the normal leave the object (light that has not collided by then collides
+        // in no bin, and the walks' bins already hold their own ray's).
+        let mut ways: Vec<Option<(f64, f64)>> = vec![None; lamps.len()];
         for (pass, shadows) in [true, false].into_iter().enumerate() {
-            for (sum, lamp) in sums[pass].iter_mut().zip(lamps) {
+            let lit = sums[pass].iter_mut().zip(lamps).zip(&mut ways).zip(&bends);
+            for (((sum, lamp), way), deficit) in lit {
                 let (towards, distance, factor) = lamp.towards(x);
                 let e = weight * surface.entering(factor, (x, n), towards, distance, shadows);
                 if e <= 0.0 {
@@ -285,25 +317,23 @@ fn incidence(
                 sum.4 += e * x;
                 let (inside, mu) = inside(-towards, n, eta);
                 let along = inside + n * mu;
-                // Where the refracted ray leaves the object, and where the normal-entry
-                // walks' ray does: light that has not collided by then collides in no bin,
-                // and the walks' bins already hold their own ray's.
-                let chord = |d: DVec3| {
-                    surface
-                        .bvh
-                        .intersect(x - n * surface.eps, d, f64::INFINITY)
-                        .map_or(f64::INFINITY, |h| h.t)
-                };
-                let (along_ray, along_normal) = (chord(inside), chord(-n));
+                let (along_ray, along_normal) = *way.get_or_insert_with(|| {
+                    let chord = |d: DVec3| {
+                        surface
+                            .bvh
+                            .intersect(x - n * surface.eps, d, f64::INFINITY)
+                            .map_or(f64::INFINITY, |h| h.t)
+                    };
+                    (chord(inside), chord(-n))
+                });
                 for c in 0..3 {
-                    let deepest = sigma_t[c] * along_ray * mu;
                     let walked = sigma_t[c] * along_normal;
-                    for d in 0..DEPTH_BINS {
-                        let (p_mu, mean) = bin_at(mu, d, deepest);
+                    let bins = bins_along(sigma_t[c], mu, along_ray, deficit);
+                    for (d, &(p_mu, path)) in bins.iter().enumerate() {
                         let p_1 = bin_at(1.0, d, walked).0;
                         let r = if p_1 > 1e-12 { p_mu / p_1 } else { 0.0 };
                         sum.2[c][d] += e * r;
-                        sum.3[c][d] += along * (e * r * mean / mu);
+                        sum.3[c][d] += along * (e * r * path);
                     }
                 }
             }
@@ -354,6 +384,128 @@ fn incidence(
         };
     }
     out
+}
+
+/// Distances along a lamp's refracted ray at which [`deficit`] measures the surface's bend.
+const DEFICIT_SAMPLES: usize = 8;
+
+/// Optical free paths of the thinnest channel beyond which [`deficit`] stops measuring: the
+/// light that gets that far uncollided (e^-12) is left out of its bends.
+const DEFICIT_REACH: f64 = 12.0;
+
+/// How much shallower than on a node's tangent plane a lamp's light lies on its way in, at
+/// distances (mm) along its refracted ray from the node: (s, s mu - depth), the depth being
+/// the way from there out of the object along the node's outward normal (the walks' depth: a
+/// walk that entered along the normal and flew s collides s below the surface), through
+/// faces turned more than [`BEND_FACING`] away from it (the other side of an edge). Zero on a
+/// plane; on a ball of radius R about s^2 sin^2(theta) / (2 R), which for a 4 mm free path
+/// under a 10 mm radius is most of the depth.
+type Deficit = [(f64, f64); DEFICIT_SAMPLES + 1];
+
+/// The smallest cosine between a node's normal and a face that [`deficit`] measures the
+/// depth to; the way out passes through the others (an edge's other side).
+const BEND_FACING: f64 = 0.5;
+
+/// The [`Deficit`] of light entering at `x` (outward normal `n`) along the refracted
+/// direction `inside` of cosine `mu` to the inward normal, measured up to `chord` (where that
+/// ray leaves the object) or [`DEFICIT_REACH`] free paths of extinction `thinnest`, the
+/// samples denser near the entry, where most light collides. Where the way out along `n`
+/// meets no face turned towards `n` (next to an edge, or where the ray leaves through the
+/// far side), a sample keeps the bend of the one before.
+fn deficit(
+    mesh: &Mesh,
+    surface: &Surface,
+    (x, n): (DVec3, DVec3),
+    (inside, mu): (DVec3, f64),
+    chord: f64,
+    thinnest: f64,
+) -> Deficit {
+    let mut out = [(0.0, 0.0); DEFICIT_SAMPLES + 1];
+    let reach = chord.min(DEFICIT_REACH / thinnest.max(1e-300));
+    if !(reach.is_finite() && reach > 0.0) {
+        return out;
+    }
+    let from = x - n * surface.eps;
+    let mut bend = 0.0;
+    for (j, slot) in out.iter_mut().enumerate().skip(1) {
+        let f = j as f64 / DEFICIT_SAMPLES as f64;
+        let s = reach * f * f * (1.0 - 1e-6);
+        // From the node's own plane: the ray starts eps below it.
+        let mut o = from + inside * s;
+        let mut way = -surface.eps;
+        let mut depth = None;
+        for _ in 0..4 {
+            let Some(hit) = surface.bvh.intersect(o, n, f64::INFINITY) else {
+                break;
+            };
+            way += hit.t;
+            if surface.outward_normal(mesh, hit.triangle as usize).dot(n) >= BEND_FACING {
+                depth = Some(way);
+                break;
+            }
+            o += n * (hit.t + surface.eps);
+            way += surface.eps;
+        }
+        *slot = (s, depth.map_or(bend, |depth| s * mu - depth));
+        bend = slot.1;
+    }
+    out
+}
+
+/// Per depth bin, the probability that light entering at refracted cosine `mu` first collides
+/// there before its ray leaves the object (`chord` mm in), at extinction `sigma_t`, and the
+/// mean optical length of its way in to those collisions: a collision s along the ray lies
+/// at depth s mu less the surface's bend there (`deficit`, linear between its samples and
+/// constant beyond the last). On a plane, [`bin_at`]'s.
+fn bins_along(sigma_t: f64, mu: f64, chord: f64, deficit: &Deficit) -> [(f64, f64); DEPTH_BINS] {
+    let mut out = [(0.0, 0.0); DEPTH_BINS];
+    // Pieces on which the optical depth is linear in s: between samples, then beyond.
+    for j in 0..=DEFICIT_SAMPLES {
+        let (s0, d0) = deficit[j];
+        let (s1, d1) = if j < DEFICIT_SAMPLES {
+            deficit[j + 1]
+        } else {
+            (f64::INFINITY, d0)
+        };
+        let (s0, s1) = (s0, s1.min(chord));
+        if s1 <= s0 {
+            continue;
+        }
+        let depth0 = sigma_t * (s0 * mu - d0);
+        // Optical depth per mm along the ray on this piece.
+        let slope = if j < DEFICIT_SAMPLES && deficit[j + 1].0 > s0 {
+            sigma_t * (mu - (d1 - d0) / (deficit[j + 1].0 - s0))
+        } else {
+            sigma_t * mu
+        };
+        for (d, bin) in out.iter_mut().enumerate() {
+            // Shallower than the first edge (a bend above the plane's depth) counts as the
+            // first bin.
+            let lo = if d == 0 {
+                f64::NEG_INFINITY
+            } else {
+                DEPTH_EDGES[d]
+            };
+            let hi = DEPTH_EDGES[d + 1];
+            let (a, b) = if slope.abs() > 1e-300 {
+                let (x, y) = (s0 + (lo - depth0) / slope, s0 + (hi - depth0) / slope);
+                (x.min(y).max(s0), x.max(y).min(s1))
+            } else if depth0 >= lo && depth0 < hi {
+                (s0, s1)
+            } else {
+                continue;
+            };
+            if b <= a || b.is_nan() || a.is_nan() {
+                continue;
+            }
+            let (ta, tb) = (sigma_t * a, sigma_t * b);
+            let (ea, eb) = ((-ta).exp(), if tb.is_finite() { (-tb).exp() } else { 0.0 });
+            let moment = (ta + 1.0) * ea - if tb.is_finite() { (tb + 1.0) * eb } else { 0.0 };
+            bin.0 += ea - eb;
+            bin.1 += moment;
+        }
+    }
+    out.map(|(p, moment)| (p, if p > 1e-300 { moment / p } else { 0.0 }))
 }
 
 /// The refracted direction inside of light travelling along `travel` into the surface of
@@ -750,5 +902,145 @@ mod tests {
         // must fail by far.
         assert!(lit > 0.3 && normal.abs() < 0.5 * lit, "{lit}, {normal}");
         assert!((mixed - lit).abs() < 0.25 * lit, "{mixed} vs {lit}");
+    }
+
+    /// Without a bend the bins along the ray are the plane's, cut where the ray leaves; on a
+    /// depth that is linear in pieces they are the exponential's integral over where it falls
+    /// in each bin (against a fine sum), and they sum to what collides before the cut.
+    #[test]
+    fn the_bins_along_a_bent_way_in_are_the_collisions_at_each_depth() {
+        let flat = [(0.0, 0.0); DEFICIT_SAMPLES + 1];
+        for (mu, chord) in [(1.0, f64::INFINITY), (0.6, 3.0), (0.25, 0.8)] {
+            let sigma_t = 1.7;
+            let bins = bins_along(sigma_t, mu, chord, &flat);
+            for (d, &(p, path)) in bins.iter().enumerate() {
+                let (q, mean) = bin_at(mu, d, sigma_t * chord * mu);
+                assert!((p - q).abs() < 1e-12, "mu {mu} bin {d}: {p} vs {q}");
+                if q > 1e-9 {
+                    assert!(
+                        (path - mean / mu).abs() < 1e-9 * (1.0 + path),
+                        "{path} vs {mean}"
+                    );
+                }
+            }
+        }
+        // A bend that takes the light back up towards the surface and beyond the plane's
+        // depth: s mu - (0.3 s^2 sampled, linear between).
+        let (sigma_t, mu, chord) = (2.0, 0.7, 2.5);
+        let mut bent = [(0.0, 0.0); DEFICIT_SAMPLES + 1];
+        for (j, b) in bent.iter_mut().enumerate() {
+            let s = 2.4 * (j as f64 / DEFICIT_SAMPLES as f64).powi(2);
+            *b = (s, 0.3 * s * s);
+        }
+        let depth = |s: f64| {
+            let j = bent.partition_point(|b| b.0 <= s).clamp(1, DEFICIT_SAMPLES);
+            let ((s0, d0), (s1, d1)) = (bent[j - 1], bent[j]);
+            let d = if s >= bent[DEFICIT_SAMPLES].0 {
+                bent[DEFICIT_SAMPLES].1
+            } else {
+                d0 + (d1 - d0) * (s - s0) / (s1 - s0)
+            };
+            sigma_t * (s * mu - d)
+        };
+        let steps = 400_000;
+        let mut want = [(0.0f64, 0.0f64); DEPTH_BINS];
+        for k in 0..steps {
+            let s = chord * (k as f64 + 0.5) / steps as f64;
+            let mass = sigma_t * (-sigma_t * s).exp() * chord / steps as f64;
+            let z = depth(s);
+            let d = DEPTH_EDGES[1..DEPTH_BINS]
+                .iter()
+                .take_while(|&&e| z >= e)
+                .count();
+            want[d].0 += mass;
+            want[d].1 += mass * sigma_t * s;
+        }
+        let got = bins_along(sigma_t, mu, chord, &bent);
+        for d in 0..DEPTH_BINS {
+            let (p, path) = got[d];
+            assert!(
+                (p - want[d].0).abs() < 1e-5,
+                "bin {d}: {p} vs {}",
+                want[d].0
+            );
+            if want[d].0 > 1e-3 {
+                let mean = want[d].1 / want[d].0;
+                assert!(
+                    (path - mean).abs() < 1e-3 * mean,
+                    "bin {d}: {path} vs {mean}"
+                );
+            }
+        }
+        let total: f64 = got.iter().map(|b| b.0).sum();
+        assert!(
+            (total - (1.0 - (-sigma_t * chord).exp())).abs() < 1e-12,
+            "{total}"
+        );
+        // The bend moves light up: the first bin holds more than on the plane.
+        let plane = bins_along(sigma_t, mu, chord, &flat);
+        assert!(
+            got[4].0 < 0.5 * plane[4].0,
+            "{:?} vs {:?}",
+            got[4],
+            plane[4]
+        );
+    }
+
+    /// On a plane the way in has no bend; on a ball of radius R it falls away from the
+    /// tangent plane by about s^2 sin^2(theta) / (2 R) (the sphere's faceting aside); across
+    /// a box's edge the face beyond is passed through.
+    #[test]
+    fn the_way_in_bends_as_the_surface_does() {
+        let (mesh, nodes) = slab();
+        let surface = Surface::new(&mesh, &nodes);
+        let top = (0..nodes.positions.len())
+            .find(|&p| {
+                let x = nodes.positions[p];
+                x.z > 5.9 && x.x.abs() < 4.0 && x.y.abs() < 4.0
+            })
+            .expect("a node on the top face");
+        let (x, n) = (
+            nodes.positions[top].as_dvec3(),
+            surface.node_normal(&mesh, top),
+        );
+        let travel = DVec3::new(0.8, 0.0, -0.6);
+        let (d, mu) = inside(travel, n, 1.0);
+        for (s, bend) in deficit(&mesh, &surface, (x, n), (d, mu), 6.0, 1.0) {
+            assert!(bend.abs() < 1e-6, "a plane bends {bend} at {s}");
+        }
+        let radius = 10.0;
+        let ball = Mesh::sphere(radius as f32, 96);
+        let nodes = Nodes::build(&ball, 1.0);
+        let surface = Surface::new(&ball, &nodes);
+        let (x, n) = (nodes.positions[0].as_dvec3(), surface.node_normal(&ball, 0));
+        let tangent = n.any_orthonormal_vector();
+        let travel = (tangent * 0.6 - n * 0.8).normalize();
+        let (d, mu) = inside(travel, n, 1.0);
+        let chord = surface
+            .bvh
+            .intersect(x, d, f64::INFINITY)
+            .expect("a chord")
+            .t;
+        let bends = deficit(&ball, &surface, (x, n), (d, mu), chord, 0.5);
+        for &(s, bend) in bends[1..].iter().filter(|b| b.0 < 0.9 * chord) {
+            // The ball's own depth along n of the point s along the ray, h with
+            // |y + h n| = R.
+            let y = x + d * s;
+            let b = y.dot(n);
+            let h = -b + (b * b - (y.length_squared() - radius * radius)).sqrt();
+            let want = s * mu - h;
+            assert!(
+                (bend - want).abs() < 0.02 * want.abs() + 0.01,
+                "at {s}: {bend} vs {want}"
+            );
+            assert!(bend > 0.0);
+        }
+        // Where the ray leaves through the far side the last bend is kept.
+        assert!(bends[DEFICIT_SAMPLES].1 >= bends[DEFICIT_SAMPLES - 1].1);
+        assert!(
+            bends[DEFICIT_SAMPLES].1 > 1.0,
+            "{:?}",
+            bends[DEFICIT_SAMPLES]
+        );
     }
 }
