@@ -407,7 +407,6 @@ impl Reweigher {
                 exit_slopes: Vec::new(),
                 exit_drifts: Vec::new(),
                 air: None,
-                local: None,
                 // One submit times the taps and F together: all of it is counted with F.
                 seconds: [0.0, device_ms * 1e-3],
             },

@@ -46,7 +46,7 @@ impl Prepared {
             walk_lights: shown.settings.walk_lights,
             ..*s
         } == shown.settings;
-        if !(same && s.lamp_independent) {
+        if !same {
             return None;
         }
         let response = mix::held(
@@ -73,16 +73,18 @@ impl Prepared {
         let s = &choice.settings;
         let clock = Instant::now();
         // The kernels and seam taps belong to the atlas and the material alone: those kept
-        // from an earlier move, else the shown preprocessing's own.
-        let held = kept.take().or_else(|| {
+        // from an earlier move where they fit, else the shown preprocessing's own.
+        let fits = |(k, m, _): &KeptLocal| super::same_geometry(k, s) && m == material;
+        let held = kept.take().filter(fits).or_else(|| {
             shown
                 .local
                 .clone()
                 .map(|(m, local)| (shown.settings, m, local))
+                .filter(fits)
         });
         let (local, evaluated) = match held {
-            Some((k, m, local)) if super::same_geometry(&k, s) && m == *material => (local, false),
-            _ => {
+            Some((_, _, local)) => (local, false),
+            None => {
                 progress("kernels", 0, 1);
                 let local = LocalWeights::evaluate(&shown.atlas, s.kernel_size, material, progress);
                 (local, true)
@@ -225,7 +227,6 @@ mod tests {
             "the lamp changed nothing"
         );
         // Back, from the kernels the move kept.
-        assert!(kept.is_some());
         let (back, how) = relit.weighed(&first, choose(&first), &response, &mut kept, nothing);
         assert_eq!(drawn(&back), drawn(&shown), "{how}");
         assert!(!how.contains("kernels"), "{how}");

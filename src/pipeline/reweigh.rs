@@ -79,7 +79,7 @@ impl Prepared {
             (None, Some((on_device, gpu, kept))) => {
                 let clock = Instant::now();
                 let s = &shown.settings;
-                let (ops, how) = if on_device {
+                let (ops, local, how) = if on_device {
                     let mut r = match kept.take() {
                         Some((k, r)) if same_geometry(&k, s) => r,
                         _ => {
@@ -104,9 +104,9 @@ impl Prepared {
                         w.device_ms,
                         clock.elapsed().as_secs_f64()
                     );
-                    (ops, how)
+                    (ops, None, how)
                 } else {
-                    let (ops, _) = Operators::build(
+                    let (ops, local) = Operators::build(
                         &scene.mesh,
                         &shown.atlas,
                         &shown.nodes,
@@ -118,7 +118,7 @@ impl Prepared {
                         "re-weighted on the CPU: operators {:.2} s",
                         clock.elapsed().as_secs_f64()
                     );
-                    (ops, how)
+                    (ops, local, how)
                 };
                 let pre = Preprocessed {
                     settings: choice.settings,
@@ -130,7 +130,7 @@ impl Prepared {
                         operators_s: clock.elapsed().as_secs_f64(),
                         ..Default::default()
                     },
-                    local: None,
+                    local: local.map(|l| (*material, l)),
                 };
                 let outcome = CacheOutcome::Built {
                     stored: None,

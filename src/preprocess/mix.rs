@@ -12,8 +12,8 @@
 //! collided at depth z therefore stand for it, weighed by the ratio of the two depth
 //! densities. On a curved surface the refracted ray's way in bends away from the plane: a
 //! point s along it lies less deep than s mu below the surface (on a ball of radius R by about
-//! s^2 sin^2(theta) / (2 R), most of the depth for a free path of a few mm under a 10 mm
-//! radius). The depth is therefore measured, at a few distances along the lamp's refracted
+//! s^2 sin^2(theta) / (2 R), which matters where the free path is not small against R). The
+//! depth is therefore measured, at a few distances along the lamp's refracted
 //! ray from each node, as the way out of the object along the node's normal (the walks'
 //! depth), and the bins' probabilities and mean paths are those of that depth, linear between
 //! the samples (`bins_along`). Per source p, with its light landing on nodes p' and depth bin d:
@@ -255,27 +255,8 @@ fn incidence(
         return out;
     }
     let eta = surface.eta();
-    // Per pass (shadowed, not) and lamp: the entering irradiance per channel, and the sums of
-    // the bin ratios and the shifts per channel weighted by it (the lamp's colour aside).
-    type Sums = (
-        [f64; 3],
-        f64,
-        [[f64; DEPTH_BINS]; 3],
-        [[DVec3; DEPTH_BINS]; 3],
-        DVec3,
-    );
-    let mut sums: [Vec<Sums>; 2] = std::array::from_fn(|_| {
-        vec![
-            (
-                [0.0; 3],
-                0.0,
-                [[0.0; DEPTH_BINS]; 3],
-                [[DVec3::ZERO; DEPTH_BINS]; 3],
-                DVec3::ZERO,
-            );
-            lamps.len()
-        ]
-    });
+    let mut sums: [Vec<Entered>; 2] =
+        std::array::from_fn(|_| vec![Entered::default(); lamps.len()]);
     // Per lamp, how the surface bends away from the node's tangent plane along the lamp's
     // way in there: the same for every point of the support.
     let thinnest = sigma_t.iter().cloned().fold(f64::INFINITY, f64::min);
@@ -287,10 +268,7 @@ fn incidence(
                 return [(0.0, 0.0); DEFICIT_SAMPLES + 1];
             }
             let (d, mu) = inside(travel, normal, eta);
-            let chord = surface
-                .bvh
-                .intersect(at - normal * surface.eps, d, f64::INFINITY)
-                .map_or(f64::INFINITY, |h| h.t);
+            let chord = chord(surface, (at, normal), d);
             deficit(mesh, surface, (at, normal), (d, mu), chord, thinnest)
         })
         .collect();
@@ -298,49 +276,54 @@ fn incidence(
     for (tri, x, weight) in surface.sources.support_points(mesh, p) {
         centroid += weight * x;
         let n = surface.outward_normal(mesh, tri);
-        // Per lamp, once for both passes: where its refracted ray and the walks' own ray
-        // along the normal leave the object (light that has not collided by then collides
-        // in no bin, and the walks' bins already hold their own ray's).
-        let mut ways: Vec<Option<(f64, f64)>> = vec![None; lamps.len()];
-        for (pass, shadows) in [true, false].into_iter().enumerate() {
-            let lit = sums[pass].iter_mut().zip(lamps).zip(&mut ways).zip(&bends);
-            for (((sum, lamp), way), deficit) in lit {
-                let (towards, distance, factor) = lamp.towards(x);
-                let e = weight * surface.entering(factor, (x, n), towards, distance, shadows);
+        // Where the walks' own ray along the normal leaves the object: their bins already
+        // hold their own ray's cut. Cast once per point, where a lamp enters there.
+        let mut along_normal = None;
+        for ((l, lamp), deficit) in lamps.iter().enumerate().zip(&bends) {
+            let (towards, distance, factor) = lamp.towards(x);
+            // Entering with the shadow ray and without it (the two passes).
+            let e = [true, false].map(|shadows| {
+                weight * surface.entering(factor, (x, n), towards, distance, shadows)
+            });
+            if e.iter().all(|&e| e <= 0.0) {
+                continue;
+            }
+            let (inside, mu) = inside(-towards, n, eta);
+            let along = inside + n * mu;
+            // Light that has not collided where its refracted ray leaves collides in no bin.
+            let along_ray = chord(surface, (x, n), inside);
+            let along_normal = *along_normal.get_or_insert_with(|| chord(surface, (x, n), -n));
+            // Per channel and bin: the bin's ratio and its mean optical path at this point.
+            let mut bins = [[(0.0, 0.0); DEPTH_BINS]; 3];
+            for (c, bins) in bins.iter_mut().enumerate() {
+                let walked = sigma_t[c] * along_normal;
+                let along = bins_along(sigma_t[c], mu, along_ray, deficit);
+                for (d, (bin, &(p_mu, path))) in bins.iter_mut().zip(&along).enumerate() {
+                    let p_1 = bin_at(1.0, d, walked).0;
+                    *bin = (if p_1 > 1e-12 { p_mu / p_1 } else { 0.0 }, path);
+                }
+            }
+            for (sums, e) in sums.iter_mut().zip(e) {
                 if e <= 0.0 {
                     continue;
                 }
+                let sum = &mut sums[l];
                 for c in 0..3 {
-                    sum.0[c] += e * lamp.radiance[c] as f64;
+                    sum.radiance[c] += e * lamp.radiance[c] as f64;
                 }
-                sum.1 += e;
-                sum.4 += e * x;
-                let (inside, mu) = inside(-towards, n, eta);
-                let along = inside + n * mu;
-                let (along_ray, along_normal) = *way.get_or_insert_with(|| {
-                    let chord = |d: DVec3| {
-                        surface
-                            .bvh
-                            .intersect(x - n * surface.eps, d, f64::INFINITY)
-                            .map_or(f64::INFINITY, |h| h.t)
-                    };
-                    (chord(inside), chord(-n))
-                });
+                sum.total += e;
+                sum.entered += e * x;
                 for c in 0..3 {
-                    let walked = sigma_t[c] * along_normal;
-                    let bins = bins_along(sigma_t[c], mu, along_ray, deficit);
-                    for (d, &(p_mu, path)) in bins.iter().enumerate() {
-                        let p_1 = bin_at(1.0, d, walked).0;
-                        let r = if p_1 > 1e-12 { p_mu / p_1 } else { 0.0 };
-                        sum.2[c][d] += e * r;
-                        sum.3[c][d] += along * (e * r * path);
+                    for (d, &(r, path)) in bins[c].iter().enumerate() {
+                        sum.ratio[c][d] += e * r;
+                        sum.shift[c][d] += along * (e * r * path);
                     }
                 }
             }
         }
     }
     let totals: [[f64; 3]; 2] = std::array::from_fn(|pass| {
-        std::array::from_fn(|c| sums[pass].iter().map(|s| s.0[c]).sum())
+        std::array::from_fn(|c| sums[pass].iter().map(|s| s.radiance[c]).sum())
     });
     for c in 0..3 {
         out.lobe[c] = totals[0][c] / area;
@@ -349,7 +332,7 @@ fn incidence(
         let share: [f64; 3] = std::array::from_fn(|c| {
             let pass = if totals[0][c] > 0.0 { 0 } else { 1 };
             if totals[pass][c] > 0.0 {
-                sums[pass][l].0[c] / totals[pass][c]
+                sums[pass][l].radiance[c] / totals[pass][c]
             } else {
                 0.0
             }
@@ -359,8 +342,14 @@ fn incidence(
         }
         // The lamp's own means, from the pass its channels took (the shadowed one where it
         // reaches the support at all).
-        let pass = if sums[0][l].1 > 0.0 { 0 } else { 1 };
-        let (_, e, ratio, shift, at) = &sums[pass][l];
+        let pass = if sums[0][l].total > 0.0 { 0 } else { 1 };
+        let Entered {
+            total: e,
+            ratio,
+            shift,
+            entered,
+            ..
+        } = &sums[pass][l];
         out.lamps.push(LampEntry {
             ratio: ratio.map(|r| r.map(|r| r / e)),
             shift: std::array::from_fn(|c| {
@@ -373,7 +362,7 @@ fn incidence(
                 })
             }),
             share,
-            offset: *at / *e - centroid / area,
+            offset: *entered / *e - centroid / area,
         });
     }
     for c in 0..3 {
@@ -390,16 +379,15 @@ fn incidence(
 const DEFICIT_SAMPLES: usize = 8;
 
 /// Optical free paths of the thinnest channel beyond which [`deficit`] stops measuring: the
-/// light that gets that far uncollided (e^-12) is left out of its bends.
+/// light that gets that far uncollided (e^-DEFICIT_REACH of it) is left out of its bends.
 const DEFICIT_REACH: f64 = 12.0;
 
 /// How much shallower than on a node's tangent plane a lamp's light lies on its way in, at
 /// distances (mm) along its refracted ray from the node: (s, s mu - depth), the depth being
 /// the way from there out of the object along the node's outward normal (the walks' depth: a
 /// walk that entered along the normal and flew s collides s below the surface), through
-/// faces turned more than [`BEND_FACING`] away from it (the other side of an edge). Zero on a
-/// plane; on a ball of radius R about s^2 sin^2(theta) / (2 R), which for a 4 mm free path
-/// under a 10 mm radius is most of the depth.
+/// faces whose normal's cosine to it is below [`BEND_FACING`] (the other side of an edge).
+/// Zero on a plane; on a ball of radius R about s^2 sin^2(theta) / (2 R).
 type Deficit = [(f64, f64); DEFICIT_SAMPLES + 1];
 
 /// The smallest cosine between a node's normal and a face that [`deficit`] measures the
@@ -462,22 +450,19 @@ fn bins_along(sigma_t: f64, mu: f64, chord: f64, deficit: &Deficit) -> [(f64, f6
     // Pieces on which the optical depth is linear in s: between samples, then beyond.
     for j in 0..=DEFICIT_SAMPLES {
         let (s0, d0) = deficit[j];
-        let (s1, d1) = if j < DEFICIT_SAMPLES {
+        let (next, d1) = if j < DEFICIT_SAMPLES {
             deficit[j + 1]
         } else {
             (f64::INFINITY, d0)
         };
-        let (s0, s1) = (s0, s1.min(chord));
+        let s1 = next.min(chord);
         if s1 <= s0 {
             continue;
         }
         let depth0 = sigma_t * (s0 * mu - d0);
-        // Optical depth per mm along the ray on this piece.
-        let slope = if j < DEFICIT_SAMPLES && deficit[j + 1].0 > s0 {
-            sigma_t * (mu - (d1 - d0) / (deficit[j + 1].0 - s0))
-        } else {
-            sigma_t * mu
-        };
+        // Optical depth per mm along the ray on this piece (beyond the last sample the bend
+        // stays: (d1 - d0) / infinity = 0).
+        let slope = sigma_t * (mu - (d1 - d0) / (next - s0));
         for (d, bin) in out.iter_mut().enumerate() {
             // Shallower than the first edge (a bend above the plane's depth) counts as the
             // first bin.
@@ -506,6 +491,28 @@ fn bins_along(sigma_t: f64, mu: f64, chord: f64, deficit: &Deficit) -> [(f64, f6
         }
     }
     out.map(|(p, moment)| (p, if p > 1e-300 { moment / p } else { 0.0 }))
+}
+
+/// One lamp's light entering a node's support, summed over the support's points, in one pass
+/// (with the shadow ray or without): the entering irradiance per channel and alone (the
+/// lamp's colour aside), and weighted by that, the bins' ratios, their shifts (optical) and
+/// where the light entered.
+#[derive(Clone, Default)]
+struct Entered {
+    radiance: [f64; 3],
+    total: f64,
+    ratio: [[f64; DEPTH_BINS]; 3],
+    shift: [[DVec3; DEPTH_BINS]; 3],
+    entered: DVec3,
+}
+
+/// How far the ray from just under the surface at `x` (outward normal `n`) along `d` runs
+/// inside the object before it leaves: infinite where it meets no face.
+fn chord(surface: &Surface, (x, n): (DVec3, DVec3), d: DVec3) -> f64 {
+    surface
+        .bvh
+        .intersect(x - n * surface.eps, d, f64::INFINITY)
+        .map_or(f64::INFINITY, |h| h.t)
 }
 
 /// The refracted direction inside of light travelling along `travel` into the surface of
@@ -948,10 +955,7 @@ mod tests {
             let s = chord * (k as f64 + 0.5) / steps as f64;
             let mass = sigma_t * (-sigma_t * s).exp() * chord / steps as f64;
             let z = depth(s);
-            let d = DEPTH_EDGES[1..DEPTH_BINS]
-                .iter()
-                .take_while(|&&e| z >= e)
-                .count();
+            let d = super::super::walk::depth_bin(z);
             want[d].0 += mass;
             want[d].1 += mass * sigma_t * s;
         }
@@ -976,7 +980,7 @@ mod tests {
             (total - (1.0 - (-sigma_t * chord).exp())).abs() < 1e-12,
             "{total}"
         );
-        // The bend moves light up: the first bin holds more than on the plane.
+        // The bend moves light up: the deepest bin holds under half of the plane's.
         let plane = bins_along(sigma_t, mu, chord, &flat);
         assert!(
             got[4].0 < 0.5 * plane[4].0,
@@ -1036,7 +1040,7 @@ mod tests {
             assert!(bend > 0.0);
         }
         // Where the ray leaves through the far side the last bend is kept.
-        assert!(bends[DEFICIT_SAMPLES].1 >= bends[DEFICIT_SAMPLES - 1].1);
+        assert_eq!(bends[DEFICIT_SAMPLES].1, bends[DEFICIT_SAMPLES - 1].1);
         assert!(
             bends[DEFICIT_SAMPLES].1 > 1.0,
             "{:?}",

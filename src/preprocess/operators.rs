@@ -265,9 +265,16 @@ pub struct Weights {
     pub air: Option<super::air::AirReport>,
     /// Seconds spent on the kernels and seam taps, and on F (the air's own in its report).
     pub seconds: [f64; 2],
-    /// The kernels and seam taps as evaluated, kept where F was weighed from walks made for
-    /// any lamp: a moved lamp is weighed with them again ([`Weights::for_lamps`]).
-    pub local: Option<LocalWeights>,
+}
+
+/// Whether `material`'s F is weighed from walks made once for any lamp (`settings` ask for
+/// them, and no sky enters the walks, which they are not made for).
+pub fn walks_for_any_lamp(
+    material: &Material,
+    settings: &super::settings::Settings,
+    sky: Option<&super::walk::WalkSky>,
+) -> bool {
+    material.model.walks() && settings.lamp_independent && sky.is_none()
 }
 
 /// The lowest scattering order the walks carry: single scattering is its own pass wherever
@@ -321,11 +328,10 @@ impl Weights {
         progress: Progress<'_>,
     ) -> Weights {
         let local = LocalWeights::evaluate(atlas, settings.kernel_size, material, progress);
-        let profiles = material.profiles();
         let clock = std::time::Instant::now();
         let min_order = WALK_MIN_ORDER;
         let lamps: Vec<_> = settings.walk_lights.iter().flatten().copied().collect();
-        if material.model.walks() && settings.lamp_independent && sky.is_none() {
+        if walks_for_any_lamp(material, settings, sky) {
             let response = super::mix::walked_once(
                 mesh,
                 nodes,
@@ -333,9 +339,7 @@ impl Weights {
                 (settings.walk_paths, min_order),
                 progress,
             );
-            let kept = local.clone();
             let mut weights = Self::for_lamps(local, &response, (mesh, nodes), material, &lamps);
-            weights.local = Some(kept);
             // F's time with the walks'.
             weights.seconds[1] = clock.elapsed().as_secs_f64();
             return weights;
@@ -352,7 +356,7 @@ impl Weights {
             );
             (walked.rows, Some(report), walked.slopes, walked.drifts)
         } else {
-            let rows = global_rows(atlas, nodes, basis, &profiles, progress);
+            let rows = global_rows(atlas, nodes, basis, &material.profiles(), progress);
             (rows, None, Vec::new(), Vec::new())
         };
         let air = material.model.crosses_air().then(|| {
@@ -370,7 +374,6 @@ impl Weights {
             exit_drifts,
             air,
             seconds: [local.seconds, clock.elapsed().as_secs_f64()],
-            local: None,
         }
     }
 
@@ -398,7 +401,6 @@ impl Weights {
             exit_drifts: walked.drifts,
             air: None,
             seconds: [local.seconds, clock.elapsed().as_secs_f64()],
-            local: None,
         }
     }
 }
@@ -773,7 +775,8 @@ impl Operators {
     /// Builds all operators, one stage after another: the texel <-> node basis, the local
     /// kernels and seam taps, the global F, then [`Operators::from_weights`]'s pruning, fit
     /// and direct terms; with them the kernels and seam taps before balancing where F was
-    /// weighed from walks made for any lamp ([`Weights::local`]).
+    /// weighed from walks made for any lamp ([`walks_for_any_lamp`]: a moved lamp is weighed
+    /// again with them).
     pub fn build(
         mesh: &crate::scene::mesh::Mesh,
         atlas: &Atlas,
@@ -784,7 +787,7 @@ impl Operators {
     ) -> (Operators, Option<LocalWeights>) {
         let basis = Basis::new(atlas, nodes);
         progress("basis", 1, 1);
-        let mut weights = Weights::evaluate(
+        let weights = Weights::evaluate(
             mesh,
             atlas,
             nodes,
@@ -793,7 +796,11 @@ impl Operators {
             (settings, sky),
             progress,
         );
-        let local = weights.local.take();
+        let local = walks_for_any_lamp(material, settings, sky).then(|| LocalWeights {
+            kernels: weights.kernels.clone(),
+            seams: weights.seams.clone(),
+            seconds: weights.seconds[0],
+        });
         let ops = Self::assemble(atlas, nodes, basis, material, settings, weights, progress);
         (ops, local)
     }

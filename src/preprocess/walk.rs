@@ -681,7 +681,7 @@ pub const DEPTH_BINS: usize = 5;
 pub const DEPTH_EDGES: [f64; DEPTH_BINS + 1] = [0.0, 0.12, 0.35, 0.9, 1.8, f64::INFINITY];
 
 /// The depth bin of a first flight of optical length `tau`.
-fn depth_bin(tau: f64) -> usize {
+pub(super) fn depth_bin(tau: f64) -> usize {
     DEPTH_EDGES[1..DEPTH_BINS]
         .iter()
         .take_while(|&&e| tau >= e)

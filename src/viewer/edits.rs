@@ -240,8 +240,9 @@ impl Running {
             target_error: app.target_error,
             cache: app.cache.clone(),
         };
-        let prepared = self.prepared.clone();
-        let Some(out) = prepared.for_lamps(&scene, &request, &mut self.kept_local, &|_, _, _| {})
+        let Some(out) =
+            self.prepared
+                .for_lamps(&scene, &request, &mut self.kept_local, &|_, _, _| {})
         else {
             return Ok(false);
         };
