@@ -181,10 +181,11 @@ pub struct PreprocessArgs {
     /// Random walks per node and channel filling F (model volume).
     #[arg(long)]
     pub walk_paths: Option<u32>,
-    /// Make the walks once for any lamp (model volume under lamps): they enter along the
-    /// normal and are weighed for the lamps where they are, so a moved lamp needs no new walks.
-    #[arg(long)]
-    pub lamp_independent: bool,
+    /// Whether the walks are made once for any lamp (model volume under lamps; the default):
+    /// they enter along the normal and are weighed for the lamps where they are, so a moved
+    /// lamp needs no new walks. `--lamp-independent false` walks along the lamps instead.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub lamp_independent: Option<bool>,
     /// Target relative error of the render.
     #[arg(long, default_value_t = preprocess::DEFAULT_TARGET_ERROR)]
     pub target_error: f64,
@@ -204,7 +205,7 @@ impl PreprocessArgs {
             node_spacing_mm: self.node_spacing_mm,
             prune_tolerance: self.prune,
             walk_paths: self.walk_paths,
-            lamp_independent: self.lamp_independent.then_some(true),
+            lamp_independent: self.lamp_independent,
         }
     }
 

@@ -65,7 +65,14 @@ pub fn choose_at(
         choice.settings.walk_sky = choice.sky.as_ref().map(|s| s.key());
         if choice.settings.lamp_independent && choice.sky.is_some() {
             choice.settings.lamp_independent = false;
-            choice.reasons.push("walks for any lamp given, not used: the walks also enter from the environment's map, which they are made for".into());
+            choice
+                .reasons
+                .retain(|r| !r.starts_with("walks made once for any lamp"));
+            choice.reasons.push(if overrides.lamp_independent == Some(true) {
+                "walks for any lamp given, not used: the walks also enter from the environment's map, which they are made for".into()
+            } else {
+                "walks along the lights, not made for any lamp: they also enter from the environment's map, which they are made for".into()
+            });
         }
         choice.reasons.push(if choice.settings.lamp_independent {
             crate::preprocess::mix::entry_reason(&choice.settings.walk_lights)
@@ -162,11 +169,11 @@ pub fn choose_at(
 mod tests {
     use super::*;
 
-    fn scene(lights: &str) -> Scene {
+    fn scene(lights: &str, settings: &str) -> Scene {
         let text = format!(
             "[mesh]\nbuiltin = \"sphere\"\nradius = 10.0\nsegments = 16\n{lights}\n\
              [material]\npreset = \"skimmilk\"\neta = 1.3\nmodel = \"volume\"\n\
-             [settings]\nlamp_independent = true\n"
+             [settings]\n{settings}\n"
         );
         Scene::from_desc(
             crate::scene::desc::SceneDesc::parse(&text).unwrap(),
@@ -176,23 +183,31 @@ mod tests {
         .unwrap()
     }
 
-    /// Walks for any lamp are taken under lamps, and refused, with the reason said, where
-    /// the walks also enter from an environment's map (which they would be made for).
+    /// Walks for any lamp are the default under lamps and refused, with the reason said,
+    /// where the walks also enter from an environment's map (which they would be made for);
+    /// `lamp_independent = false` walks along the lamps.
     #[test]
-    fn walks_for_any_lamp_are_refused_under_a_sky() {
+    fn walks_for_any_lamp_are_the_default_under_lamps_and_refused_under_a_sky() {
         let o = SettingsOverrides::default();
         let lamp = "[[lights]]\nkind = \"directional\"\ndirection = [0.0, -1.0, 0.0]";
-        let c = choose(&scene(lamp), &o, 0.02).unwrap();
+        let sky = "[[lights]]\nkind = \"environment\"";
+        let said = |c: &Choice, start: &str| c.reasons.iter().any(|r| r.starts_with(start));
+        let c = choose(&scene(lamp, ""), &o, 0.02).unwrap();
         assert!(c.settings.lamp_independent);
         assert!(c.sky.is_none());
-        let sky = "[[lights]]\nkind = \"environment\"";
-        let c = choose(&scene(sky), &o, 0.02).unwrap();
+        assert!(said(&c, "walks made once for any lamp"), "{:?}", c.reasons);
+        let c = choose(&scene(lamp, "lamp_independent = false"), &o, 0.02).unwrap();
+        assert!(!c.settings.lamp_independent);
+        assert!(said(&c, "walks along the lamps where they are: given"));
+        let c = choose(&scene(sky, ""), &o, 0.02).unwrap();
         assert!(c.sky.is_some());
         assert!(!c.settings.lamp_independent);
+        assert!(!said(&c, "walks made once for any lamp"), "{:?}", c.reasons);
+        assert!(said(&c, "walks along the lights, not made for any lamp"));
+        let c = choose(&scene(sky, "lamp_independent = true"), &o, 0.02).unwrap();
+        assert!(!c.settings.lamp_independent);
         assert!(
-            c.reasons
-                .iter()
-                .any(|r| r.starts_with("walks for any lamp given, not used")),
+            said(&c, "walks for any lamp given, not used"),
             "{:?}",
             c.reasons
         );

@@ -618,6 +618,10 @@ fn surface_weights(
 static LAST: std::sync::Mutex<Option<(u64, std::sync::Arc<Response>)>> =
     std::sync::Mutex::new(None);
 
+/// Held while [`walked_once`] looks for and makes its walks: a second caller for the same
+/// walks waits for the first's and weighs them, rather than walking them again beside it.
+static WALKING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// The key of the response walked in `mesh` for `nodes`, `material` and the walk count.
 fn response_key(
     mesh: &Mesh,
@@ -674,6 +678,9 @@ pub fn walked_once(
     progress: super::Progress<'_>,
 ) -> std::sync::Arc<Response> {
     let key = response_key(mesh, nodes, material, paths, min_order);
+    let _walking = WALKING
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     if let Some(response) = held_for(key) {
         tracing::info!("walks for any lamp: the ones walked before in this run, weighed again");
         return response;
@@ -693,6 +700,27 @@ pub fn walked_once(
         *last = Some((key, response.clone()));
     }
     response
+}
+
+/// [`walked_once`] on a thread of its own, where this process does not hold those walks (a
+/// preparation read from the cache holds F, not the walks it was weighed from): a later
+/// [`held`] finds them, and a preparation that needs them meanwhile waits for these rather
+/// than walking beside them. None where they are held already (or no thread could start).
+pub fn walk_in_background(
+    mesh: Mesh,
+    nodes: Nodes,
+    material: Material,
+    (paths, min_order): (u32, u32),
+) -> Option<std::thread::JoinHandle<()>> {
+    if held(&mesh, &nodes, &material, (paths, min_order)).is_some() {
+        return None;
+    }
+    std::thread::Builder::new()
+        .name("walks for any lamp".into())
+        .spawn(move || {
+            walked_once(&mesh, &nodes, &material, (paths, min_order), &|_, _, _| {});
+        })
+        .ok()
 }
 
 /// The line that says how the walks enter when they are made for any lamp, under `lamps`

@@ -63,7 +63,7 @@ impl Settings {
             node_spacing_mm: Some(self.node_spacing_mm),
             prune_tolerance: Some(self.prune_tolerance),
             walk_paths: (self.walk_paths > 0).then_some(self.walk_paths),
-            lamp_independent: self.lamp_independent.then_some(true),
+            lamp_independent: (self.walk_paths > 0).then_some(self.lamp_independent),
         }
     }
 }
@@ -238,7 +238,10 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
         n
     };
 
-    let lamp_independent = o.lamp_independent == Some(true) && walk_paths > 0;
+    // Under lamps the walks are made once for any lamp unless the scene asks for walks along
+    // its lamps: the same model in `render` and in the viewer, where a moved lamp is weighed
+    // for before the next frame ([`crate::preprocess::mix`]).
+    let lamp_independent = o.lamp_independent != Some(false) && walk_paths > 0;
     match o.lamp_independent {
         Some(true) if lamp_independent => reasons.push(
             "walks made once for any lamp: given (along the normal, weighed for the lamps where they are)".into(),
@@ -247,6 +250,12 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
             "walks for any lamp given, not used: model {} fills F without walks",
             material.model.name()
         )),
+        Some(false) if walk_paths > 0 => reasons.push(
+            "walks along the lamps where they are: given (lamp_independent = false; a moved lamp needs new walks)".into(),
+        ),
+        None if lamp_independent => reasons.push(
+            "walks made once for any lamp (along the normal, weighed for the lamps where they are), the default: a moved lamp needs no new walks (lamp_independent = false walks along the lamps)".into(),
+        ),
         _ => {}
     }
     Choice {
@@ -319,10 +328,10 @@ mod tests {
         }
     }
 
-    /// Walks for any lamp are made where they are given and the model walks, and said either
-    /// way.
+    /// Walks for any lamp are made where the model walks, by default or given, and not where
+    /// `lamp_independent = false` is given; said either way, and pinned as chosen.
     #[test]
-    fn walks_for_any_lamp_where_given_and_the_model_walks() {
+    fn walks_for_any_lamp_where_the_model_walks_unless_refused() {
         let given = SettingsOverrides {
             lamp_independent: Some(true),
             ..Default::default()
@@ -338,13 +347,22 @@ mod tests {
             .iter()
             .any(|r| r.starts_with("walks made once for any lamp: given")));
         assert_eq!(c.settings.pinned().lamp_independent, Some(true));
-        assert!(
-            !derive(&volume, &scale(), &Default::default())
-                .settings
-                .lamp_independent
-        );
+        let default = derive(&volume, &scale(), &Default::default());
+        assert!(default.settings.lamp_independent);
+        assert!(default
+            .reasons
+            .iter()
+            .any(|r| r.starts_with("walks made once for any lamp") && r.contains("the default")));
+        let along = SettingsOverrides {
+            lamp_independent: Some(false),
+            ..Default::default()
+        };
+        let c = derive(&volume, &scale(), &along);
+        assert!(!c.settings.lamp_independent);
+        assert_eq!(c.settings.pinned().lamp_independent, Some(false));
         let dipole = derive(&Material::preset("skimmilk").unwrap(), &scale(), &given);
         assert!(!dipole.settings.lamp_independent);
+        assert_eq!(dipole.settings.pinned().lamp_independent, None);
         assert!(dipole.reasons.iter().any(|r| r.contains("not used")));
     }
 

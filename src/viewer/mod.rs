@@ -149,6 +149,10 @@ struct Running {
     /// The shown atlas's kernels and seam taps before blending, between lamp moves that weigh
     /// the walks made for any lamp again ([`Prepared::for_lamps`]).
     kept_local: Option<crate::pipeline::KeptLocal>,
+    /// The walks made for any lamp, walked on a thread of their own where the shown
+    /// preparation came from the cache without them: moved lamps are weighed from them once
+    /// they are done ([`crate::preprocess::mix::walk_in_background`]).
+    background_walks: Option<std::thread::JoinHandle<()>>,
     /// Whether an action since the last frame may have moved the lights.
     lights_to_check: bool,
     /// When the latest edit was asked for, until a frame shows it (preview or prepared).
@@ -565,7 +569,7 @@ impl App {
             return Ok(true);
         };
         if self.waiting {
-            if running.busy() {
+            if running.busy() || running.walking() {
                 return Ok(true);
             }
             self.waiting = false;
@@ -584,7 +588,7 @@ impl App {
                     println!("script done: the window is yours (q or Esc closes it)");
                 }
                 Step::Wait => {
-                    if running.busy() {
+                    if running.busy() || running.walking() {
                         self.waiting = true;
                         return Ok(true);
                     }

@@ -403,4 +403,11 @@ impl Running {
     pub(super) fn busy(&self) -> bool {
         self.job.is_some() || self.queued.is_some()
     }
+
+    /// Whether the walks for any lamp are still being made on their own thread.
+    pub(super) fn walking(&self) -> bool {
+        self.background_walks
+            .as_ref()
+            .is_some_and(|walks| !walks.is_finished())
+    }
 }

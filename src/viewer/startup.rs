@@ -156,6 +156,27 @@ fn assemble(
         _ => Blend::Optimized,
     };
     let backdrop = config.scene.environment.is_some();
+    // A preparation from the cache holds F, not the walks made for any lamp it was weighed
+    // from: they are walked again beside the frames, so that moved lamps are weighed for.
+    let pre = &config.prepared.pre;
+    let background_walks = (pre.settings.lamp_independent && config.scene.material.model.walks())
+        .then(|| {
+            crate::preprocess::mix::walk_in_background(
+                config.scene.mesh.clone(),
+                pre.nodes.clone(),
+                config.scene.material,
+                (
+                    pre.settings.walk_paths,
+                    crate::preprocess::operators::WALK_MIN_ORDER,
+                ),
+            )
+        })
+        .flatten();
+    if background_walks.is_some() {
+        println!(
+            "walks for any lamp: made again in the background (the cache holds F, not its walks); a lamp moved before they are done waits for them"
+        );
+    }
     let current = Wanted {
         preset: config.scene.resolved.material.preset.clone(),
         material: config.scene.material,
@@ -177,6 +198,7 @@ fn assemble(
         job: None,
         reweigher: None,
         kept_local: None,
+        background_walks,
         lights_to_check: false,
         edit_asked: None,
         current,

@@ -23,6 +23,15 @@ fn walks(n: u32) -> SettingsOverrides {
     }
 }
 
+/// `n` walks per node and channel entering along the lamps where they are, not made once for
+/// any lamp (the default).
+fn along_the_lamps(n: u32) -> SettingsOverrides {
+    SettingsOverrides {
+        lamp_independent: Some(false),
+        ..walks(n)
+    }
+}
+
 fn case(name: &str, model: Model, bounds: [f64; 3]) {
     case_with(name, model, SettingsOverrides::default(), bounds)
 }
@@ -244,7 +253,7 @@ fn bunnies_behind_a_boundary_with_walks() {
         1.3,
         "bunny-skimmilk-eta1.3",
         Model::Volume,
-        walks(1024),
+        along_the_lamps(1024),
         [0.05, 0.058, 0.081],
     );
     refractive(
@@ -252,8 +261,55 @@ fn bunnies_behind_a_boundary_with_walks() {
         1.3,
         "bunny-marble-eta1.3",
         Model::Volume,
-        walks(1024),
+        along_the_lamps(1024),
         [0.077, 0.082, 0.084],
+    );
+}
+
+/// The default under a lamp, walks made once for any lamp along the normal and weighed for the
+/// lamp where it is, on the bunnies at eta 1 and behind a boundary of eta 1.3, with fewer walks
+/// than derived (1024 per node and channel; the bounds about 15 % above the figures at that
+/// count). At 64x64 marble's nodes are 6 mm apart, and the light pushed from where it enters
+/// to where it first collides lands on nodes far coarser than that shift: marble is further
+/// off than along the lamps (above). docs/results/models.md measures the derived counts at
+/// 128x128, where the two are within a point.
+#[test]
+fn bunnies_with_walks_for_any_lamp() {
+    for name in ["bunny-skimmilk", "bunny-marble"] {
+        let scene = common::truth_scene(name, None, Some(Model::Volume));
+        let choice = translucent::pipeline::choose(&scene, &walks(1024), 0.02).unwrap();
+        assert!(
+            choice.settings.lamp_independent,
+            "{name}: not the default's walks"
+        );
+    }
+    case_with(
+        "bunny-skimmilk",
+        Model::Volume,
+        walks(1024),
+        [0.059, 0.072, 0.085],
+    );
+    case_with(
+        "bunny-marble",
+        Model::Volume,
+        walks(1024),
+        [0.112, 0.116, 0.129],
+    );
+    refractive(
+        "bunny-skimmilk",
+        1.3,
+        "bunny-skimmilk-eta1.3",
+        Model::Volume,
+        walks(1024),
+        [0.051, 0.072, 0.089],
+    );
+    refractive(
+        "bunny-marble",
+        1.3,
+        "bunny-marble-eta1.3",
+        Model::Volume,
+        walks(1024),
+        [0.095, 0.105, 0.104],
     );
 }
 
@@ -411,13 +467,13 @@ fn bunnies_with_walks() {
     case_with(
         "bunny-skimmilk",
         Model::Volume,
-        walks(1024),
+        along_the_lamps(1024),
         [0.052, 0.055, 0.062],
     );
     case_with(
         "bunny-marble",
         Model::Volume,
-        walks(1024),
+        along_the_lamps(1024),
         [0.075, 0.083, 0.085],
     );
 }

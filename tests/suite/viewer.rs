@@ -1000,8 +1000,8 @@ fn assert_saved_scene_renders(cache: &Path, dir: &Path, (scene, shot): (&str, &s
     );
 }
 
-/// Under `volume` the walks enter along the lamps where they are: after a lamp is moved in the
-/// viewer, once it stays, they are walked again for it, and the image then is a fresh render
+/// Under `volume` with `lamp_independent = false` the walks enter along the lamps where they
+/// are: after a lamp is moved in the viewer, once it stays, they are walked again for it, and the image then is a fresh render
 /// of the saved scene (the lamp where it was moved) to 0.1 %. Before that the frame shows the
 /// F walked for the lamp where it was, further off.
 #[test]
@@ -1009,7 +1009,12 @@ fn moved_lamps_are_walked_for_again() {
     let x = Xvfb::start();
     let dir = common::temp_dir("viewer-walks");
     let cache = dir.join("cache");
-    write_walked_sphere(&dir, 1.0, "", "[output]\nwidth = 96\nheight = 96\n");
+    write_walked_sphere(
+        &dir,
+        1.0,
+        "lamp_independent = false\n",
+        "[output]\nwidth = 96\nheight = 96\n",
+    );
     // Turned in the view (the rig's lights, not the scene's), so that the walks can only
     // follow it through the lights the viewer hands them.
     let script = "frames 2; light 60 0; frames 1; screenshot stale\n\
@@ -1047,7 +1052,8 @@ fn moved_lamps_are_walked_for_again() {
 
 /// With the walks made for any lamp, a lamp moved in the viewer is weighed for at once, before
 /// the next frame: that frame is a fresh render of the saved scene (the lamp where it was
-/// moved) to 0.1 %, with no preprocessing run, and differs from the frame before the move.
+/// moved) to 0.1 %, with no preprocessing run, and differs from the frame before the move;
+/// the same where the scene was read from the cache and the walks made again beside it.
 #[test]
 fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
     let x = Xvfb::start();
@@ -1088,6 +1094,32 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
         .0
         .rel_rms;
     assert!(off > 0.01, "the move changed little: {off}");
+
+    // Opened again, the scene comes from the cache, which holds F but not the walks: they
+    // are made again beside the frames, and a lamp moved once they are done is weighed for
+    // before the next frame as above.
+    let script =
+        "frames 1; wait; light -40 10; frames 1; screenshot next2; save-scene moved2; quit";
+    let mut view = scripted_view(&x, script, &cache, &dir);
+    view.arg(dir.join("scene.toml"));
+    let (ok, stdout, stderr) = run_with_limit(view, Duration::from_secs(300));
+    assert!(ok, "the viewer failed:\n{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("walks for any lamp: made again in the background"),
+        "the cached scene's walks were not made again:\n{stdout}"
+    );
+    assert!(
+        stdout.contains(
+            "before the next frame (weighed for the lamps from the walks made for any lamp"
+        ),
+        "the lamp moved after a cached start was not weighed for at once:\n{stdout}"
+    );
+    assert_saved_scene_renders(
+        &cache,
+        &dir,
+        ("moved2", "next2"),
+        "the frame after a move from a cached start and a fresh render",
+    );
 }
 
 /// With the walks made for any lamp, a lamp dragged with the right button is weighed for
