@@ -34,7 +34,7 @@
 //!   (2/3) (1 - ln 2) = 20.5 % at albedo 1 and more at lower albedos, so the rule takes the pass
 //!   out only under a coarse target.
 //! - **A closed mesh lit by lamps (eta = 1): `volume`** ([`volume_reason`]): F from
-//!   random walks inside the mesh entering along the lamps' light and from the environment's
+//!   random walks inside the mesh for the lamps' light (made once for any lamp and weighed for them) and from the environment's
 //!   map, the composite's oblique exit lobe and the walks' drift; the most accurate model
 //!   against the volumetric truth (docs/results/models.md, environment.md).
 //! - **Otherwise `halfspace-single`**: the half-space profile of orders >= 2 and per-frame
@@ -169,14 +169,14 @@ fn volume_seconds(scene: &Scene, target_error: f64) -> Option<f64> {
     Some(estimate.work.reference_seconds())
 }
 
-/// What the walks of `scene` are, entering along its `lamps` lamps or, where `sky`, from its
+/// What the walks of `scene` are, for the light of its `lamps` lamps or, where `sky`, from its
 /// environment's map: the reasons' common part.
 fn walks_description(scene: &Scene, lamps: usize, sky: bool) -> String {
     let entering = if sky {
         "entering from the environment's map and its sun".to_string()
     } else {
         format!(
-            "along the light of its {lamps} lamp{}",
+            "for the light of its {lamps} lamp{}",
             if lamps == 1 { "" } else { "s" }
         )
     };
@@ -260,7 +260,7 @@ mod tests {
         let sphere = "builtin = \"sphere\"\nradius = 10.0\nsegments = 16";
         let lamp = "[[lights]]\nkind = \"directional\"\ndirection = [0.0, -1.0, 0.0]";
         let why = volume_reason(&scene(text(sphere, lamp, ""))).expect("a lit sphere");
-        assert!(why.contains("along the light of its 1 lamp"), "{why}");
+        assert!(why.contains("for the light of its 1 lamp"), "{why}");
         // A model given is kept.
         let given = scene(text(sphere, lamp, "model = \"halfspace-single\""));
         assert!(volume_reason(&given).is_none());

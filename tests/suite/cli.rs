@@ -917,7 +917,7 @@ fn the_default_model_is_a_function_of_the_scene() {
     let (stdout, passes, written, idle) = run("idle", &quick);
     assert!(
         stdout.contains(
-            "model volume: F from random walks inside the mesh along the light of its 1 lamp"
+            "model volume: F from random walks inside the mesh for the light of its 1 lamp"
         ),
         "{stdout}"
     );
