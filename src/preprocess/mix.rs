@@ -702,16 +702,18 @@ pub fn walked_once(
     response
 }
 
-/// [`walked_once`] on a thread of its own, where this process does not hold those walks (a
-/// preparation read from the cache holds F, not the walks it was weighed from): a later
-/// [`held`] finds them, and a preparation that needs them meanwhile waits for these rather
-/// than walking beside them. None where they are held already (or no thread could start).
-pub fn walk_in_background(
+/// [`walked_once`] on a thread of its own, then `then` there, where this process does not hold
+/// those walks (a preparation read from the cache holds F, not the walks it was weighed from):
+/// a later [`held`] finds them, and a preparation that needs them meanwhile waits for these
+/// rather than walking beside them. The thread returns what `then` does. None where the walks
+/// are held already (or no thread could start).
+pub fn walk_in_background<T: Send + 'static>(
     mesh: Mesh,
     nodes: Nodes,
     material: Material,
     (paths, min_order): (u32, u32),
-) -> Option<std::thread::JoinHandle<()>> {
+    then: impl FnOnce() -> T + Send + 'static,
+) -> Option<std::thread::JoinHandle<T>> {
     if held(&mesh, &nodes, &material, (paths, min_order)).is_some() {
         return None;
     }
@@ -719,6 +721,7 @@ pub fn walk_in_background(
         .name("walks for any lamp".into())
         .spawn(move || {
             walked_once(&mesh, &nodes, &material, (paths, min_order), &|_, _, _| {});
+            then()
         })
         .ok()
 }

@@ -231,6 +231,7 @@ impl Running {
             return Ok(false);
         }
         let clock = std::time::Instant::now();
+        self.collect_background_walks();
         let scene = self.scene_for(self.current.material, Some(lights));
         // Not pinned to the shown settings: derived as a fresh render of the saved scene
         // derives them. Where a resized window changed them (a texel set by the image's

@@ -150,9 +150,10 @@ struct Running {
     /// the walks made for any lamp again ([`Prepared::for_lamps`]).
     kept_local: Option<crate::pipeline::KeptLocal>,
     /// The walks made for any lamp, walked on a thread of their own where the shown
-    /// preparation came from the cache without them: moved lamps are weighed from them once
-    /// they are done ([`crate::preprocess::mix::walk_in_background`]).
-    background_walks: Option<std::thread::JoinHandle<()>>,
+    /// preparation came from the cache without them, and the kernels it lacks too: moved
+    /// lamps are weighed from them once they are done
+    /// ([`crate::preprocess::mix::walk_in_background`]).
+    background_walks: Option<std::thread::JoinHandle<Option<crate::pipeline::KeptLocal>>>,
     /// Whether an action since the last frame may have moved the lights.
     lights_to_check: bool,
     /// When the latest edit was asked for, until a frame shows it (preview or prepared).

@@ -410,4 +410,18 @@ impl Running {
             .as_ref()
             .is_some_and(|walks| !walks.is_finished())
     }
+
+    /// Takes the kernels the background walks' thread evaluated, once it is done, as those
+    /// kept between lamp moves (where none are kept yet).
+    pub(super) fn collect_background_walks(&mut self) {
+        if self.walking() {
+            return;
+        }
+        if let Some(walks) = self.background_walks.take() {
+            match walks.join() {
+                Ok(local) => self.kept_local = self.kept_local.take().or(local),
+                Err(_) => tracing::error!("the background walks for any lamp failed"),
+            }
+        }
+    }
 }

@@ -157,18 +157,32 @@ fn assemble(
     };
     let backdrop = config.scene.environment.is_some();
     // A preparation from the cache holds F, not the walks made for any lamp it was weighed
-    // from: they are walked again beside the frames, so that moved lamps are weighed for.
+    // from, nor the kernels before blending: both are made again beside the frames, so that
+    // moved lamps are weighed for as after a fresh preparation.
     let pre = &config.prepared.pre;
     let background_walks = (pre.settings.lamp_independent && config.scene.material.model.walks())
         .then(|| {
+            let (settings, material) = (pre.settings, config.scene.material);
+            let atlas = pre.local.is_none().then(|| pre.atlas.clone());
             crate::preprocess::mix::walk_in_background(
                 config.scene.mesh.clone(),
                 pre.nodes.clone(),
-                config.scene.material,
+                material,
                 (
-                    pre.settings.walk_paths,
+                    settings.walk_paths,
                     crate::preprocess::operators::WALK_MIN_ORDER,
                 ),
+                move || {
+                    atlas.map(|atlas| {
+                        let local = crate::preprocess::operators::LocalWeights::evaluate(
+                            &atlas,
+                            settings.kernel_size,
+                            &material,
+                            &|_, _, _| {},
+                        );
+                        (settings, material, local)
+                    })
+                },
             )
         })
         .flatten();
