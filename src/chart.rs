@@ -91,7 +91,8 @@ pub fn sweep(
         node_spacing_mm: Some(auto.node_spacing_mm),
         prune_tolerance: Some(auto.prune_tolerance),
         walk_paths: (auto.walk_paths > 0).then_some(auto.walk_paths),
-        lamp_independent: (auto.walk_paths > 0).then_some(auto.lamp_independent),
+        lamp_independent: (auto.walk_paths > 0 && auto.walk_sky.is_none())
+            .then_some(auto.lamp_independent),
     };
     let mut out = vec![("auto".to_string(), base)];
     let kernels: &[u32] = if quick { &[5] } else { &[5, 7, 9, 11] };

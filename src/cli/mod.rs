@@ -184,7 +184,7 @@ pub struct PreprocessArgs {
     /// Whether the walks are made once for any lamp (model volume under lamps; the default):
     /// they enter along the normal and are weighed for the lamps where they are, so a moved
     /// lamp needs no new walks. `--lamp-independent false` walks along the lamps instead.
-    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    #[arg(long, value_name = "BOOL")]
     pub lamp_independent: Option<bool>,
     /// Target relative error of the render.
     #[arg(long, default_value_t = preprocess::DEFAULT_TARGET_ERROR)]
@@ -461,5 +461,36 @@ pub fn main() -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn render_args(args: &[&str]) -> Result<PreprocessArgs, clap::Error> {
+        let cli = Cli::try_parse_from(["translucent", "render"].iter().chain(args))?;
+        match cli.command {
+            Some(Command::Render(r)) => Ok(r.pre),
+            other => panic!("not a render: {other:?}"),
+        }
+    }
+
+    /// `--lamp-independent` takes its value, true or false, and never the scene after it; left
+    /// out, the settings decide.
+    #[test]
+    fn lamp_independent_takes_a_value() {
+        let given = render_args(&["--lamp-independent", "false", "scene.toml"]).unwrap();
+        assert_eq!(given.overrides().lamp_independent, Some(false));
+        let given = render_args(&["--lamp-independent", "true"]).unwrap();
+        assert_eq!(given.overrides().lamp_independent, Some(true));
+        assert_eq!(
+            render_args(&["scene.toml"])
+                .unwrap()
+                .overrides()
+                .lamp_independent,
+            None
+        );
+        assert!(render_args(&["--lamp-independent", "scene.toml"]).is_err());
     }
 }

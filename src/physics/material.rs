@@ -135,7 +135,7 @@ impl Model {
     /// Whether the composite gives orders >= 2 the half-space's exit lobe of the incidence at
     /// which the lamps' light enters at each pixel (`physics::incidence::HFunction::
     /// multiple_lobe`), keeping of the walks' measured lobe what goes beyond the half-space's
-    /// slope there: `volume`, whose walks enter along the lamps but measure one linear lobe
+    /// slope there: `volume`, whose walks answer the lamps but measure one linear lobe
     /// per node. Measured on the truth bunnies and the stability cases (docs/results); the
     /// half-space models keep the profile's lobe, which their reference computes.
     pub fn oblique_exit(self) -> bool {

@@ -202,6 +202,8 @@ mod tests {
         let c = choose(&scene(sky, ""), &o, 0.02).unwrap();
         assert!(c.sky.is_some());
         assert!(!c.settings.lamp_independent);
+        // Not pinned: a saved scene takes the default again where its map goes.
+        assert_eq!(c.settings.pinned().lamp_independent, None);
         assert!(!said(&c, "walks made once for any lamp"), "{:?}", c.reasons);
         assert!(said(&c, "walks along the lights, not made for any lamp"));
         let c = choose(&scene(sky, "lamp_independent = true"), &o, 0.02).unwrap();

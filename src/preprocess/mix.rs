@@ -618,9 +618,26 @@ fn surface_weights(
 static LAST: std::sync::Mutex<Option<(u64, std::sync::Arc<Response>)>> =
     std::sync::Mutex::new(None);
 
-/// Held while [`walked_once`] looks for and makes its walks: a second caller for the same
-/// walks waits for the first's and weighs them, rather than walking them again beside it.
-static WALKING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+/// The keys ([`response_key`]) of the walks [`walked_once`] is making, and the signal that one
+/// is done: a second caller for the same walks waits for the first's and weighs them, rather
+/// than walking them again beside it; callers for other walks do not wait.
+static WALKING: (std::sync::Mutex<Vec<u64>>, std::sync::Condvar) =
+    (std::sync::Mutex::new(Vec::new()), std::sync::Condvar::new());
+
+/// A key in [`WALKING`], taken out (and the waiters woken) when it drops, a walk that panics
+/// included.
+struct Walking(u64);
+
+impl Drop for Walking {
+    fn drop(&mut self) {
+        let (keys, done) = &WALKING;
+        let mut keys = keys
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        keys.retain(|k| *k != self.0);
+        done.notify_all();
+    }
+}
 
 /// The key of the response walked in `mesh` for `nodes`, `material` and the walk count.
 fn response_key(
@@ -678,13 +695,22 @@ pub fn walked_once(
     progress: super::Progress<'_>,
 ) -> std::sync::Arc<Response> {
     let key = response_key(mesh, nodes, material, paths, min_order);
-    let _walking = WALKING
+    let (keys, done) = &WALKING;
+    let mut walking = keys
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
+    while walking.contains(&key) {
+        walking = done
+            .wait(walking)
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+    }
     if let Some(response) = held_for(key) {
         tracing::info!("walks for any lamp: the ones walked before in this run, weighed again");
         return response;
     }
+    walking.push(key);
+    drop(walking);
+    let _walking = Walking(key);
     // The one held goes first: two responses need not fit together.
     if let Ok(mut last) = LAST.lock() {
         *last = None;

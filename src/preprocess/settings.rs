@@ -63,7 +63,8 @@ impl Settings {
             node_spacing_mm: Some(self.node_spacing_mm),
             prune_tolerance: Some(self.prune_tolerance),
             walk_paths: (self.walk_paths > 0).then_some(self.walk_paths),
-            lamp_independent: (self.walk_paths > 0).then_some(self.lamp_independent),
+            lamp_independent: (self.walk_paths > 0 && self.walk_sky.is_none())
+                .then_some(self.lamp_independent),
         }
     }
 }

@@ -45,7 +45,7 @@
 //! node_spacing_mm = 3.5
 //! prune = 0.005
 //! walk_paths = 4096          # model "volume" only
-//! lamp_independent = true    # model "volume" under lamps: walks made once for any lamp
+//! lamp_independent = false   # model "volume" under lamps: walk along them, not once for any
 //! ```
 
 use serde::{Deserialize, Serialize};

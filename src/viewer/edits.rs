@@ -204,7 +204,7 @@ impl Running {
                 self.status = if self.prepared.pre.settings.lamp_independent {
                     "volume: the lights moved; F is weighed for them once they stay, from the walks made for any lamp (until then F answers the lights where they were)"
                 } else {
-                    "volume: the lights moved; the walks along them start again once they stay (until then F answers the lights where they were; walks made once for any lamp, the default, are weighed for them before the next frame)"
+                    "volume: the lights moved; the walks along them start again once they stay (until then F answers the lights where they were)"
                 }
                 .into();
             }

@@ -267,7 +267,7 @@ fn vs_truth(name: &str, scene: &Scene, o: SettingsOverrides) -> [[f64; 3]; 5] {
 
 /// Walks per node and channel of the two `volume` columns: a half to a tenth of the derived
 /// counts (which hold each node's noise to the target error), so that the suite stays quick;
-/// the walks' bounds are measured at this count, about 30 % above the figures.
+/// the walks' bounds are measured at this count, a margin above the figures.
 const STABILITY_WALKS: u32 = 1024;
 
 const LIGHT_ABOVE: &str = "[[lights]]\nkind = \"directional\"\ndirection = [0.3, -1.0, -0.2]\n";

@@ -1059,12 +1059,8 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
     let x = Xvfb::start();
     let dir = common::temp_dir("viewer-any-lamp");
     let cache = dir.join("cache");
-    write_walked_sphere(
-        &dir,
-        1.3,
-        "lamp_independent = true\n",
-        "[output]\nwidth = 96\nheight = 96\n",
-    );
+    // The default's walks, made once for any lamp.
+    write_walked_sphere(&dir, 1.3, "", "[output]\nwidth = 96\nheight = 96\n");
     // No `wait`: the frame right after the move is the one compared. The window resized
     // first (the texel stays the profile's, so the settings do).
     let script = "frames 2; resize 128 112; frames 3; screenshot before; light 60 0; frames 1\n\
@@ -1133,7 +1129,7 @@ fn a_moved_lamp_is_weighed_for_before_the_next_frame() {
 fn a_dragged_lamp_is_weighed_for_when_the_button_lets_go() {
     let x = Xvfb::start();
     let dir = common::temp_dir("viewer-drag-any-lamp");
-    write_walked_sphere(&dir, 1.3, "lamp_independent = true\n", "");
+    write_walked_sphere(&dir, 1.3, "", "");
     let mut viewer = common::bin()
         .env("DISPLAY", &x.display)
         .env_remove("WAYLAND_DISPLAY")
