@@ -55,25 +55,18 @@ pub fn choose_at(
             scene.material.model.name()
         );
     }
-    let mut choice = crate::preprocess::settings::derive(&scene.material, scale, overrides);
+    // The sky the walks enter from besides the lamps, if they walk: what they are made for.
+    let sky = scene
+        .environment_light()
+        .filter(|_| scene.material.model.walks())
+        .and_then(|(env, light)| crate::preprocess::walk::WalkSky::new(env, light));
+    let mut choice =
+        crate::preprocess::settings::derive(&scene.material, scale, overrides, sky.is_some());
     if scene.material.model.walks() {
         choice.settings.walk_lights =
             crate::preprocess::walk::entry_lights(&scene.lights, scene.environment.as_deref());
-        choice.sky = scene
-            .environment_light()
-            .and_then(|(env, light)| crate::preprocess::walk::WalkSky::new(env, light));
+        choice.sky = sky;
         choice.settings.walk_sky = choice.sky.as_ref().map(|s| s.key());
-        if choice.settings.lamp_independent && choice.sky.is_some() {
-            choice.settings.lamp_independent = false;
-            choice
-                .reasons
-                .retain(|r| !r.starts_with("walks made once for any lamp"));
-            choice.reasons.push(if overrides.lamp_independent == Some(true) {
-                "walks for any lamp given, not used: the walks also enter from the environment's map, which they are made for".into()
-            } else {
-                "walks along the lights, not made for any lamp: they also enter from the environment's map, which they are made for".into()
-            });
-        }
         choice.reasons.push(if choice.settings.lamp_independent {
             crate::preprocess::mix::entry_reason(&choice.settings.walk_lights)
         } else {

@@ -35,8 +35,9 @@
 //!   out only under a coarse target.
 //! - **A closed mesh lit by lamps (eta = 1): `volume`** ([`volume_reason`]): F from
 //!   random walks inside the mesh for the lamps' light (made once for any lamp and weighed
-//!   for them) and from the environment's map, the composite's oblique exit lobe and the walks' drift; the most accurate model
-//!   against the volumetric truth (docs/results/models.md, environment.md).
+//!   for them) and from the environment's map, the composite's oblique exit lobe and the
+//!   walks' drift; the most accurate model against the volumetric truth
+//!   (docs/results/models.md, environment.md).
 //! - **Otherwise `halfspace-single`**: the half-space profile of orders >= 2 and per-frame
 //!   single scattering (an open mesh has no inside to walk in).
 //!
@@ -192,9 +193,9 @@ fn walks_description(scene: &Scene, lamps: usize, sky: bool) -> String {
 }
 
 /// Why the default is `volume`: the mesh is closed (the walks need an inside) and an
-/// environment's map lights it, or lamps do at eta = 1 (the walks are made for the lamps' light,
-/// once for any lamp by default, and enter from the environment's map, `preprocess::walk`). None where one of these fails or the
-/// model is given.
+/// environment's map lights it, or lamps do at eta = 1 (the walks are made for the lamps'
+/// light, once for any lamp by default, and enter from the environment's map,
+/// `preprocess::walk`). None where one of these fails or the model is given.
 pub fn volume_reason(scene: &Scene) -> Option<String> {
     let lamps = lamps(scene);
     let sky = scene

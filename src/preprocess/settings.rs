@@ -93,8 +93,14 @@ pub struct Choice {
     pub sky: Option<crate::preprocess::walk::WalkSky>,
 }
 
-/// Derives the settings for `material` on an object of `scale` (see the module docs).
-pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -> Choice {
+/// Derives the settings for `material` on an object of `scale` (see the module docs); `sky`
+/// where the walks also enter from an environment's map, which they are then made for.
+pub fn derive(
+    material: &Material,
+    scale: &ObjectScale,
+    o: &SettingsOverrides,
+    sky: bool,
+) -> Choice {
     let dipoles = material.dipoles();
     let names = ["red", "green", "blue"];
     let mut reasons = Vec::new();
@@ -241,11 +247,15 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
 
     // Under lamps the walks are made once for any lamp unless the scene asks for walks along
     // its lamps: the same model in `render` and in the viewer, where a moved lamp is weighed
-    // for before the next frame ([`crate::preprocess::mix`]).
-    let lamp_independent = o.lamp_independent != Some(false) && walk_paths > 0;
+    // for before the next frame ([`crate::preprocess::mix`]). Not under a sky, whose map
+    // the walks enter from.
+    let lamp_independent = o.lamp_independent != Some(false) && walk_paths > 0 && !sky;
     match o.lamp_independent {
         Some(true) if lamp_independent => reasons.push(
             "walks made once for any lamp: given (along the normal, weighed for the lamps where they are)".into(),
+        ),
+        Some(true) if walk_paths > 0 => reasons.push(
+            "walks for any lamp given, not used: the walks also enter from the environment's map, which they are made for".into(),
         ),
         Some(true) => reasons.push(format!(
             "walks for any lamp given, not used: model {} fills F without walks",
@@ -256,6 +266,9 @@ pub fn derive(material: &Material, scale: &ObjectScale, o: &SettingsOverrides) -
         ),
         None if lamp_independent => reasons.push(
             "walks made once for any lamp (along the normal, weighed for the lamps where they are), the default: a moved lamp needs no new walks (lamp_independent = false walks along the lamps)".into(),
+        ),
+        None if walk_paths > 0 => reasons.push(
+            "walks along the lights, not made for any lamp: they also enter from the environment's map, which they are made for".into(),
         ),
         _ => {}
     }
@@ -341,14 +354,14 @@ mod tests {
             .unwrap()
             .with_model(crate::physics::Model::Volume)
             .unwrap();
-        let c = derive(&volume, &scale(), &given);
+        let c = derive(&volume, &scale(), &given, false);
         assert!(c.settings.lamp_independent);
         assert!(c
             .reasons
             .iter()
             .any(|r| r.starts_with("walks made once for any lamp: given")));
         assert_eq!(c.settings.pinned().lamp_independent, Some(true));
-        let default = derive(&volume, &scale(), &Default::default());
+        let default = derive(&volume, &scale(), &Default::default(), false);
         assert!(default.settings.lamp_independent);
         assert!(default
             .reasons
@@ -358,10 +371,15 @@ mod tests {
             lamp_independent: Some(false),
             ..Default::default()
         };
-        let c = derive(&volume, &scale(), &along);
+        let c = derive(&volume, &scale(), &along, false);
         assert!(!c.settings.lamp_independent);
         assert_eq!(c.settings.pinned().lamp_independent, Some(false));
-        let dipole = derive(&Material::preset("skimmilk").unwrap(), &scale(), &given);
+        let dipole = derive(
+            &Material::preset("skimmilk").unwrap(),
+            &scale(),
+            &given,
+            false,
+        );
         assert!(!dipole.settings.lamp_independent);
         assert_eq!(dipole.settings.pinned().lamp_independent, None);
         assert!(dipole.reasons.iter().any(|r| r.contains("not used")));
@@ -373,18 +391,21 @@ mod tests {
             &Material::preset("skimmilk").unwrap(),
             &scale(),
             &Default::default(),
+            false,
         )
         .settings;
         let ketchup = derive(
             &Material::preset("ketchup").unwrap(),
             &scale(),
             &Default::default(),
+            false,
         )
         .settings;
         let cream = derive(
             &Material::preset("cream").unwrap(),
             &scale(),
             &Default::default(),
+            false,
         )
         .settings;
         // Texel = smallest z_r: skim milk blue 1/1.914, ketchup blue 1/1.48.
@@ -398,6 +419,7 @@ mod tests {
             &Material::custom([1.0; 3], [5.0; 3], 1.3).unwrap(),
             &scale(),
             &Default::default(),
+            false,
         )
         .settings;
         let relative = |s: &Settings| s.node_spacing_mm / (s.texel_mm * s.kernel_size as f64);
@@ -421,6 +443,7 @@ mod tests {
             &Material::preset("skimmilk").unwrap(),
             &tight,
             &Default::default(),
+            false,
         )
         .settings;
         assert!((s.texel_mm - (2.0 * 8000.0 / 1000.0f64).sqrt()).abs() < 1e-9);
@@ -432,7 +455,7 @@ mod tests {
             walk_paths: None,
             lamp_independent: None,
         };
-        let s = derive(&Material::preset("skimmilk").unwrap(), &scale(), &o).settings;
+        let s = derive(&Material::preset("skimmilk").unwrap(), &scale(), &o, false).settings;
         assert_eq!(
             (
                 s.texel_mm,

@@ -425,3 +425,42 @@ impl Running {
         }
     }
 }
+
+/// A thread that makes the walks for any lamp of `pre` again, and the kernels it lacks, where
+/// `pre` was read from the cache (which holds F, not the walks it was weighed from, nor the
+/// kernels before blending), so that moved lamps are weighed for as after a fresh preparation;
+/// said when it starts. None where the walks are not made for any lamp or are held.
+pub(super) fn walks_again(
+    scene: &Scene,
+    pre: &crate::preprocess::Preprocessed,
+) -> Option<JoinHandle<Option<pipeline::KeptLocal>>> {
+    if !(pre.settings.lamp_independent && scene.material.model.walks()) {
+        return None;
+    }
+    let (settings, material) = (pre.settings, scene.material);
+    let atlas = pre.local.is_none().then(|| pre.atlas.clone());
+    let walks = crate::preprocess::mix::walk_in_background(
+        scene.mesh.clone(),
+        pre.nodes.clone(),
+        material,
+        (
+            settings.walk_paths,
+            crate::preprocess::operators::WALK_MIN_ORDER,
+        ),
+        move || {
+            atlas.map(|atlas| {
+                let local = crate::preprocess::operators::LocalWeights::evaluate(
+                    &atlas,
+                    settings.kernel_size,
+                    &material,
+                    &|_, _, _| {},
+                );
+                (settings, material, local)
+            })
+        },
+    )?;
+    println!(
+        "walks for any lamp: made again in the background (the cache holds F, not its walks); a lamp moved before they are done waits for them"
+    );
+    Some(walks)
+}

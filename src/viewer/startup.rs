@@ -156,41 +156,7 @@ fn assemble(
         _ => Blend::Optimized,
     };
     let backdrop = config.scene.environment.is_some();
-    // A preparation from the cache holds F, not the walks made for any lamp it was weighed
-    // from, nor the kernels before blending: both are made again beside the frames, so that
-    // moved lamps are weighed for as after a fresh preparation.
-    let pre = &config.prepared.pre;
-    let background_walks = (pre.settings.lamp_independent && config.scene.material.model.walks())
-        .then(|| {
-            let (settings, material) = (pre.settings, config.scene.material);
-            let atlas = pre.local.is_none().then(|| pre.atlas.clone());
-            crate::preprocess::mix::walk_in_background(
-                config.scene.mesh.clone(),
-                pre.nodes.clone(),
-                material,
-                (
-                    settings.walk_paths,
-                    crate::preprocess::operators::WALK_MIN_ORDER,
-                ),
-                move || {
-                    atlas.map(|atlas| {
-                        let local = crate::preprocess::operators::LocalWeights::evaluate(
-                            &atlas,
-                            settings.kernel_size,
-                            &material,
-                            &|_, _, _| {},
-                        );
-                        (settings, material, local)
-                    })
-                },
-            )
-        })
-        .flatten();
-    if background_walks.is_some() {
-        println!(
-            "walks for any lamp: made again in the background (the cache holds F, not its walks); a lamp moved before they are done waits for them"
-        );
-    }
+    let background_walks = super::requests::walks_again(&config.scene, &config.prepared.pre);
     let current = Wanted {
         preset: config.scene.resolved.material.preset.clone(),
         material: config.scene.material,

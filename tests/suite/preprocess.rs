@@ -44,7 +44,7 @@ fn build(mesh: &Mesh, material: &Material, o: &SettingsOverrides) -> Preprocesse
         max_texels: 1e6,
         target_error: 0.02,
     };
-    let choice = settings::derive(material, &scale, o);
+    let choice = settings::derive(material, &scale, o, false);
     Preprocessed::build(mesh, material, &choice, &quiet)
 }
 
@@ -67,7 +67,7 @@ fn semi_infinite_slab(material: &Material) -> (Preprocessed, [f32; 3]) {
         max_texels: 2e5,
         target_error: 0.02,
     };
-    let rule = settings::derive(material, &scale, &SettingsOverrides::default()).settings;
+    let rule = settings::derive(material, &scale, &SettingsOverrides::default(), false).settings;
     let p = slab(
         material,
         size,
@@ -298,7 +298,7 @@ fn cache_round_trips_and_rejects_corrupt_or_stale_files() {
         max_texels: 1e5,
         target_error: 0.02,
     };
-    let choice = settings::derive(&m, &scale, &SettingsOverrides::default());
+    let choice = settings::derive(&m, &scale, &SettingsOverrides::default(), false);
     let p = Preprocessed::build(&mesh, &m, &choice, &quiet);
     let dir = std::env::temp_dir().join(format!("translucent-cache-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

@@ -32,6 +32,24 @@ fn along_the_lamps(n: u32) -> SettingsOverrides {
     }
 }
 
+/// The bunnies in skim milk and in marble under `volume` with `overrides`, at eta 1 (None) or
+/// behind a boundary of `eta`, each channel under its bound.
+fn bunnies(eta: Option<f64>, overrides: SettingsOverrides, bounds: [[f64; 3]; 2]) {
+    for (name, bounds) in ["bunny-skimmilk", "bunny-marble"].into_iter().zip(bounds) {
+        match eta {
+            None => case_with(name, Model::Volume, overrides, bounds),
+            Some(eta) => refractive(
+                name,
+                eta,
+                &format!("{name}-eta{eta}"),
+                Model::Volume,
+                overrides,
+                bounds,
+            ),
+        }
+    }
+}
+
 fn case(name: &str, model: Model, bounds: [f64; 3]) {
     case_with(name, model, SettingsOverrides::default(), bounds)
 }
@@ -248,21 +266,10 @@ fn small_and_thin_behind_a_boundary_with_walks() {
 /// `tests/truth-data/bunny-*-eta1.3-128`.
 #[test]
 fn bunnies_behind_a_boundary_with_walks() {
-    refractive(
-        "bunny-skimmilk",
-        1.3,
-        "bunny-skimmilk-eta1.3",
-        Model::Volume,
+    bunnies(
+        Some(1.3),
         along_the_lamps(1024),
-        [0.05, 0.058, 0.081],
-    );
-    refractive(
-        "bunny-marble",
-        1.3,
-        "bunny-marble-eta1.3",
-        Model::Volume,
-        along_the_lamps(1024),
-        [0.077, 0.082, 0.084],
+        [[0.05, 0.058, 0.081], [0.077, 0.082, 0.084]],
     );
 }
 
@@ -283,33 +290,15 @@ fn bunnies_with_walks_for_any_lamp() {
             "{name}: not the default's walks"
         );
     }
-    case_with(
-        "bunny-skimmilk",
-        Model::Volume,
+    bunnies(
+        None,
         walks(1024),
-        [0.059, 0.072, 0.085],
+        [[0.059, 0.072, 0.085], [0.112, 0.116, 0.129]],
     );
-    case_with(
-        "bunny-marble",
-        Model::Volume,
+    bunnies(
+        Some(1.3),
         walks(1024),
-        [0.112, 0.116, 0.129],
-    );
-    refractive(
-        "bunny-skimmilk",
-        1.3,
-        "bunny-skimmilk-eta1.3",
-        Model::Volume,
-        walks(1024),
-        [0.051, 0.072, 0.089],
-    );
-    refractive(
-        "bunny-marble",
-        1.3,
-        "bunny-marble-eta1.3",
-        Model::Volume,
-        walks(1024),
-        [0.095, 0.105, 0.104],
+        [[0.051, 0.072, 0.089], [0.095, 0.105, 0.104]],
     );
 }
 
@@ -467,17 +456,10 @@ fn ketchup_sphere_with_walks() {
 /// lamp are much further off. The walks' draws are seeded: the errors repeat to the digit.
 #[test]
 fn bunnies_with_walks() {
-    case_with(
-        "bunny-skimmilk",
-        Model::Volume,
+    bunnies(
+        None,
         along_the_lamps(1024),
-        [0.052, 0.055, 0.062],
-    );
-    case_with(
-        "bunny-marble",
-        Model::Volume,
-        along_the_lamps(1024),
-        [0.075, 0.083, 0.085],
+        [[0.052, 0.055, 0.062], [0.075, 0.083, 0.085]],
     );
 }
 

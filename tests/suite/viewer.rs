@@ -1001,8 +1001,8 @@ fn assert_saved_scene_renders(cache: &Path, dir: &Path, (scene, shot): (&str, &s
 }
 
 /// Under `volume` with `lamp_independent = false` the walks enter along the lamps where they
-/// are: after a lamp is moved in the viewer, once it stays, they are walked again for it, and the image then is a fresh render
-/// of the saved scene (the lamp where it was moved) to 0.1 %. Before that the frame shows the
+/// are: after a lamp is moved in the viewer, once it stays, they are walked again for it, and
+/// the image then is a fresh render of the saved scene (the lamp where it was moved) to 0.1 %. Before that the frame shows the
 /// F walked for the lamp where it was, further off.
 #[test]
 fn moved_lamps_are_walked_for_again() {
